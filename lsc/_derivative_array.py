@@ -1,0 +1,188 @@
+"""The derivative array ``J w = -F x + g`` of a linear DAE.
+
+Row block ``i`` (``i = 0..k``) is ``D^i (A x' + B x - f) = 0`` with
+``D = d/dt`` (standard) or ``D = d/dt + lam`` (stabilized). Because
+``D(u v) = (D u) v + u v'``, the coefficient of ``x^(m)`` (``m >= 1``) in row
+block ``i`` is ``C(i, m-1) D^(i-m+1) A + C(i, m) D^(i-m) B``; ``F`` has blocks
+``D^i B`` and ``g`` has blocks ``D^i f`` (thesis (1.13), (3.4), (5.5) and
+ERRATA item 1).
+
+Everything is computed on *jets* (arrays of derivatives), which makes the
+same code exact for constant and time-varying coefficients and for constant
+and time-varying ``lam``. The forcing ``g`` is linear in ``f, f', ...``, so it
+is also produced as a matrix ``L`` with ``g = L @ [f; f'; ...; f^(p)]``: a
+constant-coefficient completion then evaluates its forcing with one
+matrix-vector product.
+"""
+
+from math import comb
+
+import numpy as np
+
+from ._timefunc import TimeFunction
+
+__all__ = ["DerivativeArray", "derivative_array"]
+
+
+def _jet_times(a, u):
+    """Jet of the product ``a u`` (``a`` scalar jet, ``u`` any jet), Leibniz rule."""
+    length = min(len(a), len(u))
+    out = np.zeros((length,) + u.shape[1:])
+    for m in range(length):
+        for j in range(m + 1):
+            if a[j] != 0.0:
+                out[m] += comb(m, j) * a[j] * u[m - j]
+    return out
+
+
+def _apply_D(u, lam_jet):
+    """Jet of ``D u`` (one order shorter than ``u``)."""
+    if lam_jet is None:
+        return u[1:]
+    return u[1:] + _jet_times(lam_jet, u[:-1])
+
+
+def _powers(jet, k, lam_jet):
+    """``[jet of D^0 u, jet of D^1 u, ..., jet of D^k u]``."""
+    out = [jet]
+    for _ in range(k):
+        out.append(_apply_D(out[-1], lam_jet))
+    return out
+
+
+def lam_jet(lam, t, order):
+    """Derivatives ``0..order`` of ``lam`` at ``t`` (None for the standard array)."""
+    if lam is None:
+        return None
+    if isinstance(lam, TimeFunction):
+        return lam.jet(t, order)
+    out = np.zeros(order + 1)
+    out[0] = lam
+    return out
+
+
+def stabilization_jets(k, q, lj):
+    """Scalar coefficients of stabilized differentiation, and q derivatives.
+
+    ``D^i u = sum_j Lam[0][i, j] u^(j)`` for any u (``i = 0..k``), so the
+    stabilized array is ``(Lam[0] kron I)`` times the standard one, row for
+    row; ``Lam[0]`` is unit lower triangular (binomials times powers of
+    ``lam`` for constant ``lam``, thesis (3.5)). Shape
+    ``(q + 1, k + 1, k + q + 1)``: ``Lam[d]`` is the d-th time derivative.
+    Found by letting D act on the jet of unit vectors: entry m of the jet
+    of ``u`` is the selector of ``u^(m)``.
+    """
+    p = k + q
+    selectors = np.eye(p + 1)[:, None, :]
+    powers = _powers(selectors, k, lj)
+    Lam = np.zeros((q + 1, k + 1, p + 1))
+    for i in range(k + 1):
+        Lam[:, i] = powers[i][: q + 1, 0]
+    return Lam
+
+
+class _ArrayJets:
+    """Derivatives ``0..q`` of J, F and of the forcing map L of one array.
+
+    ``J[d]`` is the d-th time derivative of J (shape (N, N), N = (k+1) n),
+    ``F[d]`` of F (N, n) and ``L[d]`` of the forcing map (N, (k+q+1) n): the
+    d-th derivative of ``g`` is ``L[d] @ fstack`` with
+    ``fstack = [f, f', ..., f^(k+q)]``. ``Lam`` is `stabilization_jets`.
+    """
+
+    def __init__(self, J, F, L, Lam, k, q, n):
+        self.J, self.F, self.L, self.Lam, self.k, self.q, self.n = J, F, L, Lam, k, q, n
+
+
+def array_jets(dae, k, t, lam=None, q=0):
+    """Build the derivative array with k differentiations and its first q derivatives."""
+    n = dae.n
+    order = k + q
+    lj = lam_jet(lam, t, order)
+    A_pow = _powers(dae.A.jet(t, order), k, lj)
+    B_pow = _powers(dae.B.jet(t, order), k, lj)
+    Lam = stabilization_jets(k, q, lj)
+    N = (k + 1) * n
+    J = np.zeros((q + 1, N, N))
+    F = np.zeros((q + 1, N, n))
+    L = np.stack([np.kron(Lam[d], np.eye(n)) for d in range(q + 1)])
+    for i in range(k + 1):
+        rows = slice(i * n, (i + 1) * n)
+        F[:, rows] = B_pow[i][: q + 1]
+        for m in range(1, i + 2):
+            block = comb(i, m - 1) * A_pow[i - m + 1][: q + 1]
+            if m <= i:
+                block = block + comb(i, m) * B_pow[i - m][: q + 1]
+            J[:, rows, (m - 1) * n : m * n] = block
+    return _ArrayJets(J, F, L, Lam, k, q, n)
+
+
+class DerivativeArray:
+    """The derivative array ``J w = -F x + g`` at one time.
+
+    Attributes
+    ----------
+    J : ndarray, shape ((k+1) n, (k+1) n)
+        Jacobian with respect to ``w = [x', x'', ..., x^(k+1)]``.
+    F : ndarray, shape ((k+1) n, n)
+        Coefficient of ``x``.
+    g : ndarray, shape ((k+1) n,)
+        Forcing ``[f, D f, ..., D^k f]``.
+    k : int
+        Number of differentiations.
+    t : float
+        Time at which the array was evaluated.
+    lam : float or None
+        Stabilization rate (None: standard differentiation).
+    """
+
+    def __init__(self, J, F, g, k, t, lam):
+        self.J, self.F, self.g, self.k, self.t, self.lam = J, F, g, k, t, lam
+
+    def __repr__(self):
+        return f"DerivativeArray(k={self.k}, t={self.t!r}, lam={self.lam!r}, J.shape={self.J.shape})"
+
+
+def derivative_array(dae, k, t=0.0, lam=None):
+    """The derivative array of `dae` with `k` differentiations at time `t`.
+
+    Parameters
+    ----------
+    dae : LinearDAE
+        The system ``A x' + B x = f``.
+    k : int
+        Number of differentiations (``k >= 0``); the array has ``k + 1``
+        block rows.
+    t : float, optional
+        Time at which to evaluate (irrelevant for constant data).
+    lam : float, optional
+        If given, differentiate with ``D = d/dt + lam`` (stabilized array).
+
+    Returns
+    -------
+    DerivativeArray
+        With ``J``, ``F``, ``g`` such that ``J w = -F x + g`` for every
+        solution, ``w = [x', ..., x^(k+1)]``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lsc import LinearDAE, derivative_array
+    >>> dae = LinearDAE([[0, 1], [0, 0]], np.eye(2))
+    >>> arr = derivative_array(dae, 1, lam=2.0)
+    >>> arr.J
+    array([[0., 1., 0., 0.],
+           [0., 0., 0., 0.],
+           [1., 2., 0., 1.],
+           [0., 1., 0., 0.]])
+    """
+    from ._validate import check_dae, check_k, check_lam_value, check_time
+
+    check_dae(dae)
+    k = check_k(k)
+    t = check_time("t", t)
+    if lam is not None:
+        lam = check_lam_value(lam)
+    jets = array_jets(dae, k, t, lam)
+    fstack = dae.f_jet(t, k).reshape(-1)
+    return DerivativeArray(jets.J[0], jets.F[0], jets.L[0] @ fstack, k, t, lam)

@@ -1,0 +1,116 @@
+"""The problem object: a linear DAE ``A x' + B x = f(t)``."""
+
+import numpy as np
+
+from ._exceptions import DimensionError
+from ._timefunc import _as_float_array, _contains_sympy, _shape_str, as_time_function
+
+__all__ = ["LinearDAE"]
+
+
+class LinearDAE:
+    """A linear differential-algebraic equation ``A x' + B x = f(t)``.
+
+    Parameters
+    ----------
+    A, B : array_like, shape (n, n)
+        Real, finite, square coefficient matrices of equal shape. ``A`` may be
+        singular (that is what makes it a DAE).
+    f : None, array_like, sympy expression or callable, optional
+        The forcing. ``None`` means zero; a constant vector of length ``n``;
+        a sympy column/row vector (or list of expressions) in the symbol
+        ``t``, differentiated symbolically and compiled once; or a callable
+        ``f(t, d)`` returning the d-th time derivative, shape ``(n,)``. A
+        completion of index ``k`` needs derivatives up to order ``k + 1``.
+
+    Attributes
+    ----------
+    n : int
+        Number of unknowns.
+    is_constant : bool
+        True when ``A`` and ``B`` do not depend on ``t`` (``f`` may).
+    A, B, f : TimeFunction
+        The coefficients; call ``dae.f(t)`` for a value or
+        ``dae.f.jet(t, order)`` for derivatives ``0..order``.
+
+    Examples
+    --------
+    The index-2 system ``x2' + x1 = 0, x2 = sin t``:
+
+    >>> import numpy as np, sympy
+    >>> from lsc import LinearDAE
+    >>> t = sympy.Symbol("t")
+    >>> dae = LinearDAE([[0, 1], [0, 0]], [[1, 0], [0, 1]], [0, sympy.sin(t)])
+    >>> dae.n, dae.is_constant
+    (2, True)
+    >>> x = np.array([-np.cos(1.0), np.sin(1.0)])
+    >>> xdot = np.array([np.sin(1.0), np.cos(1.0)])
+    >>> np.allclose(dae.residual(1.0, x, xdot), 0)
+    True
+    """
+
+    def __init__(self, A, B, f=None):
+        A_is_array = not (callable(A) or _contains_sympy(A))
+        B_is_array = not (callable(B) or _contains_sympy(B))
+        if A_is_array:
+            A = _as_float_array("A", A)
+            if A.ndim != 2 or A.shape[0] != A.shape[1]:
+                raise DimensionError(f"`A` must be a square matrix: expected (n, n), got {_shape_str(A.shape)}.")
+        if B_is_array:
+            B = _as_float_array("B", B)
+            if B.ndim != 2 or B.shape[0] != B.shape[1]:
+                raise DimensionError(f"`B` must be a square matrix: expected (n, n), got {_shape_str(B.shape)}.")
+        if A_is_array and B_is_array and A.shape != B.shape:
+            raise DimensionError(
+                f"`A` and `B` must have the same shape: expected B of shape {_shape_str(A.shape)}, "
+                f"got {_shape_str(B.shape)}."
+            )
+        if not (A_is_array and B_is_array):
+            raise NotImplementedError("time-varying `A` or `B` are not supported yet; give constant arrays.")
+        n = A.shape[0]
+        self.n = n
+        self.A = as_time_function("A", A, (n, n))
+        self.B = as_time_function("B", B, (n, n))
+        self.f = None if f is None else as_time_function("f", f, (n,))
+        self.is_constant = self.A.is_constant and self.B.is_constant
+
+    def __repr__(self):
+        kind = "constant" if self.is_constant else "time-varying"
+        forcing = "none" if self.f is None else type(self.f).__name__.replace("Function", "").lower()
+        return f"LinearDAE(n={self.n}, {kind} coefficients, forcing={forcing})"
+
+    def f_jet(self, t, order):
+        """Derivatives ``f, f', ..., f^(order)`` at `t`, shape ``(order + 1, n)``."""
+        if self.f is None:
+            return np.zeros((order + 1, self.n))
+        return self.f.jet(t, order)
+
+    def residual(self, t, x, xdot):
+        """The residual ``A xdot + B x - f(t)``.
+
+        Parameters
+        ----------
+        t : float
+            Time.
+        x, xdot : array_like, shape (n,)
+            State and its derivative.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            Zero (to rounding) exactly when ``(x, xdot)`` satisfies the DAE at `t`.
+        """
+        x = _vector("x", x, self.n)
+        xdot = _vector("xdot", xdot, self.n)
+        r = self.A(t) @ xdot + self.B(t) @ x
+        if self.f is not None:
+            r = r - self.f(t)
+        return r
+
+
+def _vector(name, value, n):
+    """A float vector of length n, or a DimensionError naming `name`."""
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (n,):
+        raise DimensionError(f"`{name}` has the wrong shape: expected ({n},), got {_shape_str(arr.shape)}.")
+    return arr

@@ -1,0 +1,206 @@
+"""Functions of time with exact derivatives: the coefficients of a DAE.
+
+A coefficient (``A``, ``B`` or ``f``) is given as a constant array, a sympy
+expression in ``t`` or a callable ``h(t, d)`` returning the d-th derivative.
+All three are wrapped in a `TimeFunction` whose single job is `jet`: the
+derivatives of orders ``0..order`` at one time, stacked along a new first axis.
+Sympy input is differentiated and compiled once per order, so no symbolic work
+happens per time step.
+"""
+
+import numbers
+
+import numpy as np
+
+from ._exceptions import DimensionError
+
+__all__ = ["TimeFunction", "as_time_function"]
+
+
+def _shape_str(shape):
+    return "(" + ", ".join(str(s) for s in shape) + (",)" if len(shape) == 1 else ")")
+
+
+def _is_sympy(obj):
+    # Imported lazily: sympy costs ~0.3 s to import and is only needed for
+    # symbolic input.
+    mod = type(obj).__module__ or ""
+    return mod.startswith("sympy")
+
+
+class TimeFunction:
+    """Base class: a function of ``t`` with derivatives of every order.
+
+    Subclasses implement ``jet(t, order)``, returning an array of shape
+    ``(order + 1,) + shape`` whose entry ``d`` is the d-th derivative at ``t``.
+    """
+
+    is_constant = False
+
+    def __init__(self, name, shape):
+        self.name = name
+        self.shape = tuple(shape)
+
+    def __call__(self, t):
+        return self.jet(t, 0)[0]
+
+    def jet(self, t, order):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class ConstantFunction(TimeFunction):
+    """A constant array (all derivatives of positive order vanish)."""
+
+    is_constant = True
+
+    def __init__(self, name, value):
+        super().__init__(name, value.shape)
+        self.value = value
+
+    def jet(self, t, order):
+        out = np.zeros((order + 1,) + self.shape)
+        out[0] = self.value
+        return out
+
+
+class SympyFunction(TimeFunction):
+    """A sympy matrix or vector expression in the symbol ``t``."""
+
+    def __init__(self, name, expr, shape, t_symbol):
+        super().__init__(name, shape)
+        self.expr = expr
+        self._t = t_symbol
+        self._derivs = [expr]
+        self._compiled = {}
+
+    def _compile(self, order):
+        import sympy
+
+        while len(self._derivs) <= order:
+            self._derivs.append(self._derivs[-1].diff(self._t))
+        flat = [sympy.Matrix(d).reshape(1, int(np.prod(self.shape)))[:] for d in self._derivs[: order + 1]]
+        entries = [e for row in flat for e in row]
+        fn = sympy.lambdify(self._t, entries, modules="numpy")
+        full_shape = (order + 1,) + self.shape
+
+        def jet(t):
+            # lambdify returns a list whose constant entries are Python
+            # numbers; np.array broadcasts nothing, so this is exact.
+            return np.array(fn(t), dtype=float).reshape(full_shape)
+
+        self._compiled[order] = jet
+        return jet
+
+    def jet(self, t, order):
+        fn = self._compiled.get(order)
+        if fn is None:
+            fn = self._compile(order)
+        out = fn(float(t))
+        if not np.all(np.isfinite(out)):
+            raise ValueError(f"`{self.name}` is not finite at t={t!r}: derivatives of order 0..{order} are {out.tolist()}.")
+        return out
+
+
+class CallableFunction(TimeFunction):
+    """A user callable ``h(t, d)`` returning the d-th derivative."""
+
+    def __init__(self, name, fn, shape):
+        super().__init__(name, shape)
+        self.fn = fn
+
+    def jet(self, t, order):
+        out = np.empty((order + 1,) + self.shape)
+        for d in range(order + 1):
+            value = np.asarray(self.fn(t, d), dtype=float)
+            if value.shape != self.shape:
+                raise DimensionError(
+                    f"`{self.name}(t, d)` must return shape {_shape_str(self.shape)}: "
+                    f"expected {_shape_str(self.shape)}, got {_shape_str(value.shape)} at t={t!r}, d={d}."
+                )
+            if not np.all(np.isfinite(value)):
+                raise ValueError(f"`{self.name}(t, d)` returned non-finite values at t={t!r}, d={d}: {value.tolist()}.")
+            out[d] = value
+        return out
+
+
+def _sympy_matrix(name, obj, shape):
+    """Convert sympy input (or a list containing sympy) to a Matrix of `shape`."""
+    import sympy
+
+    try:
+        if isinstance(obj, (list, tuple)):
+            mat = sympy.Matrix(obj)
+        else:
+            mat = sympy.Matrix(sympy.sympify(obj))
+    except (TypeError, ValueError, sympy.SympifyError) as exc:
+        raise TypeError(f"`{name}` could not be read as a sympy matrix: {exc}") from None
+    want_rows, want_cols = (shape[0], 1) if len(shape) == 1 else shape
+    if len(shape) == 1 and mat.shape == (1, want_rows):
+        mat = mat.T
+    if mat.shape != (want_rows, want_cols):
+        got = (mat.rows,) if (len(shape) == 1 and mat.cols == 1) else mat.shape
+        raise DimensionError(f"`{name}` has the wrong shape: expected {_shape_str(shape)}, got {_shape_str(got)}.")
+    symbols = mat.free_symbols
+    others = sorted(str(s) for s in symbols if s.name != "t")
+    if others:
+        raise ValueError(f"`{name}` may depend on the symbol t only; found other symbols {others}.")
+    t_symbol = next(iter(symbols)) if symbols else sympy.Symbol("t")
+    return mat, t_symbol
+
+
+def _contains_sympy(obj):
+    if _is_sympy(obj):
+        return True
+    if isinstance(obj, (list, tuple)):
+        return any(_contains_sympy(o) for o in obj)
+    return False
+
+
+def as_time_function(name, obj, shape):
+    """Wrap `obj` as a `TimeFunction` of the given `shape`, validating it.
+
+    Parameters
+    ----------
+    name : str
+        Argument name used in error messages.
+    obj : array_like, sympy expression or callable
+        Constant value, sympy expression in ``t`` or callable ``obj(t, d)``.
+    shape : tuple of int
+        Required shape of the value.
+    """
+    if isinstance(obj, TimeFunction):
+        if obj.shape != tuple(shape):
+            raise DimensionError(f"`{name}` has the wrong shape: expected {_shape_str(shape)}, got {_shape_str(obj.shape)}.")
+        return obj
+    if _contains_sympy(obj):
+        mat, t_symbol = _sympy_matrix(name, obj, shape)
+        if not mat.free_symbols:
+            return as_time_function(name, np.array(mat.tolist(), dtype=float).reshape(shape), shape)
+        return SympyFunction(name, mat, shape, t_symbol)
+    if callable(obj):
+        return CallableFunction(name, obj, shape)
+    value = _as_float_array(name, obj)
+    if value.shape != tuple(shape):
+        raise DimensionError(f"`{name}` has the wrong shape: expected {_shape_str(shape)}, got {_shape_str(value.shape)}.")
+    return ConstantFunction(name, value)
+
+
+def _as_float_array(name, obj):
+    """A finite float array from array-like input, or a TypeError/ValueError."""
+    if isinstance(obj, (str, bytes)):
+        raise TypeError(f"`{name}` must be array_like of real numbers, got {type(obj).__name__}.")
+    try:
+        value = np.array(obj, dtype=float)
+    except (TypeError, ValueError):
+        try:
+            np.array(obj, dtype=complex)
+        except (TypeError, ValueError):
+            raise TypeError(f"`{name}` must be array_like of real numbers; could not convert {obj!r}.") from None
+        raise TypeError(f"`{name}` must be real; complex coefficients are not supported.") from None
+    if not np.all(np.isfinite(value)):
+        raise ValueError(f"`{name}` must be finite; found NaN or inf entries.")
+    return value
+
+
+def is_real_number(x):
+    return isinstance(x, numbers.Real) and not isinstance(x, bool)

@@ -1,0 +1,354 @@
+"""Linear DAEs with exact solutions, for tests, examples and benchmarks.
+
+Every function returns a `Problem` with the DAE, a time span, a consistent
+initial value and the exact solution (with its derivatives). Forcings are
+either sympy expressions (small problems) or callables with closed-form
+derivatives (large ones), so ``f`` and every derivative a completion needs
+are exact.
+
+Problems built from the Kronecker canonical form use *manufactured*
+solutions: for ``P (E y' + Ab y) = f`` with ``E = diag(I, N)``,
+``Ab = diag(C, I)`` and ``x = Q y``, any smooth ``y*`` is the exact
+solution for ``f = P (E y*' + Ab y*)``.
+
+Examples
+--------
+>>> import numpy as np
+>>> from lsc import gallery
+>>> p = gallery.random_pencil(n=10, blocks=(3, 2), seed=1)
+>>> p.index, p.dae.n
+(3, 10)
+>>> x, xdot = p.exact(0.3), p.exact(0.3, 1)
+>>> bool(np.allclose(p.dae.residual(0.3, x, xdot), 0, atol=1e-10))
+True
+"""
+
+import numpy as np
+
+from ._exceptions import DimensionError
+from ._problem import LinearDAE
+from ._validate import check_k
+
+__all__ = ["Problem", "nilpotent_chain", "random_pencil", "mechanical", "prescribed_path"]
+
+
+class Problem:
+    """A gallery DAE with its exact solution.
+
+    Attributes
+    ----------
+    name : str
+    dae : LinearDAE
+    t_span : tuple of float
+    x0 : ndarray, shape (n,)
+        Consistent initial value ``exact(t_span[0])``.
+    index : int
+        Differentiation index.
+    finite_eigenvalues : ndarray
+        Finite eigenvalues of the pencil (roots of ``det(mu A + B)``).
+    jordan_blocks : tuple of int
+        Sizes of the nilpotent chains (Jordan blocks at infinity), largest
+        first.
+    """
+
+    def __init__(self, name, dae, t_span, exact, index, finite_eigenvalues, jordan_blocks):
+        self.name = name
+        self.dae = dae
+        self.t_span = t_span
+        self._exact = exact
+        self.index = index
+        self.finite_eigenvalues = np.sort_complex(np.asarray(finite_eigenvalues, dtype=complex))
+        if np.all(self.finite_eigenvalues.imag == 0):
+            self.finite_eigenvalues = self.finite_eigenvalues.real
+        self.jordan_blocks = tuple(sorted(jordan_blocks, reverse=True))
+        self.x0 = self.exact(t_span[0])
+
+    def exact(self, t, d=0):
+        """The d-th derivative of the exact solution: shape (n,) or (n, m) for t of shape (m,)."""
+        t_arr = np.asarray(t, dtype=float)
+        out = self._exact(np.atleast_1d(t_arr), d)
+        return out[:, 0] if t_arr.ndim == 0 else out
+
+    def __repr__(self):
+        return f"Problem({self.name!r}, n={self.dae.n}, index={self.index}, t_span={self.t_span})"
+
+
+class _Sinusoids:
+    """``y_j(t) = a_j sin(w_j t + p_j) + b_j`` with exact derivatives, vectorized."""
+
+    def __init__(self, amp, omega, phase, offset):
+        self.amp, self.omega, self.phase, self.offset = (np.asarray(v, dtype=float) for v in (amp, omega, phase, offset))
+
+    def __call__(self, t, d):
+        t = np.asarray(t, dtype=float)
+        arg = np.multiply.outer(self.omega, t) + (self.phase + d * np.pi / 2)[..., None] if t.ndim else self.omega * t + self.phase + d * np.pi / 2
+        scale = self.amp * self.omega**d
+        if t.ndim:
+            out = scale[:, None] * np.sin(arg)
+            if d == 0:
+                out += self.offset[:, None]
+        else:
+            out = scale * np.sin(arg)
+            if d == 0:
+                out = out + self.offset
+        return out
+
+
+def _shift_blocks(blocks):
+    """Block-diagonal nilpotent matrix with single Jordan chains of the given sizes."""
+    a = sum(blocks)
+    N = np.zeros((a, a))
+    start = 0
+    for b in blocks:
+        N[start : start + b, start : start + b] = np.eye(b, k=1)
+        start += b
+    return N
+
+
+def _real_block(spectrum):
+    """A real matrix whose eigenvalues are `spectrum` (conjugate pairs as 2x2 blocks)."""
+    spectrum = list(np.asarray(spectrum, dtype=complex))
+    d = len(spectrum)
+    M = np.zeros((d, d))
+    i = 0
+    used = [False] * d
+    for j, mu in enumerate(spectrum):
+        if used[j]:
+            continue
+        used[j] = True
+        if abs(mu.imag) == 0:
+            M[i, i] = mu.real
+            i += 1
+        else:
+            partner = next((m for m in range(j + 1, d) if not used[m] and np.isclose(spectrum[m], np.conj(mu))), None)
+            if partner is None:
+                raise ValueError(f"`spectrum` must list complex eigenvalues in conjugate pairs; {mu} has no partner.")
+            used[partner] = True
+            M[i : i + 2, i : i + 2] = [[mu.real, mu.imag], [-mu.imag, mu.real]]
+            i += 2
+    return M
+
+
+def _conditioned(rng, n, cond):
+    """A random n x n matrix with singular values log-spaced in [1, cond]."""
+    U = np.linalg.qr(rng.standard_normal((n, n)))[0]
+    V = np.linalg.qr(rng.standard_normal((n, n)))[0]
+    return U @ np.diag(np.logspace(0, np.log10(cond), n)) @ V
+
+
+def _canonical_problem(name, spectrum, blocks, P, Q, t_span, seed):
+    """``P (E y' + Ab y) = f``, ``x = Q y``, with a manufactured sinusoidal ``y*``."""
+    spectrum = np.asarray(spectrum, dtype=complex)
+    d, a = len(spectrum), sum(blocks)
+    n = d + a
+    E = np.zeros((n, n))
+    Ab = np.zeros((n, n))
+    E[:d, :d] = np.eye(d)
+    E[d:, d:] = _shift_blocks(blocks)
+    # Homogeneous ODE part y1' = -C y1: eigenvalues of -C are `spectrum`.
+    Ab[:d, :d] = -_real_block(spectrum)
+    Ab[d:, d:] = np.eye(a)
+    P = np.eye(n) if P is None else P
+    Q = np.eye(n) if Q is None else Q
+    Q_inv = np.linalg.inv(Q)
+    A = P @ E @ Q_inv
+    B = P @ Ab @ Q_inv
+    rng = np.random.default_rng(seed)
+    y_star = _Sinusoids(
+        amp=rng.uniform(0.5, 1.5, n), omega=rng.uniform(0.5, 2.0, n), phase=rng.uniform(0, 2 * np.pi, n),
+        offset=rng.uniform(-1, 1, n),
+    )
+    PE, PAb = P @ E, P @ Ab
+
+    def f(t, deriv):
+        return PE @ y_star(t, deriv + 1) + PAb @ y_star(t, deriv)
+
+    def exact(t, deriv):
+        return Q @ y_star(t, deriv)
+
+    dae = LinearDAE(A, B, f)
+    index = max(blocks) if blocks else 0
+    return Problem(name, dae, t_span, exact, index, spectrum, blocks)
+
+
+def nilpotent_chain(index, ode_dim=2, seed=None, t_span=(0.0, 5.0)):
+    """A nilpotent chain of length `index` beside a small ODE part.
+
+    ``N y2' + y2 = f2`` with ``N`` a single shift of size `index` (so the
+    differentiation index is `index`), plus ``y1' = -C y1 + f1`` of size
+    `ode_dim` with eigenvalues ``-0.5 +- 1j`` (or ``-0.5`` when
+    ``ode_dim == 1``).
+
+    Parameters
+    ----------
+    index : int
+        1 to 6 (or more).
+    ode_dim : int, optional
+        0, 1 or 2.
+    seed : int, optional
+        None: the canonical form itself. An int: mix equations and unknowns
+        with a seeded orthogonal ``P`` and a ``Q`` of condition number 10.
+    t_span : pair of float, optional
+
+    Examples
+    --------
+    >>> from lsc import gallery, differentiation_index
+    >>> p = gallery.nilpotent_chain(4, seed=0)
+    >>> differentiation_index(p.dae) == p.index == 4
+    True
+    """
+    index = check_k(index, "index")
+    if index < 1:
+        raise ValueError(f"`index` must be >= 1 for a nilpotent chain; found {index}.")
+    spectra = {0: [], 1: [-0.5], 2: [-0.5 + 1j, -0.5 - 1j]}
+    if ode_dim not in spectra:
+        raise ValueError(f"`ode_dim` must be 0, 1 or 2; found {ode_dim!r}.")
+    n = ode_dim + index
+    P = Q = None
+    if seed is not None:
+        rng = np.random.default_rng(seed)
+        P = np.linalg.qr(rng.standard_normal((n, n)))[0]
+        Q = _conditioned(rng, n, 10.0)
+    return _canonical_problem(f"nilpotent_chain(index={index})", spectra[ode_dim], (index,), P, Q, t_span, seed or 0)
+
+
+def random_pencil(n=12, blocks=(3, 2), spectrum=None, seed=0, cond=10.0, t_span=(0.0, 5.0)):
+    """A seeded random regular pencil with prescribed structure.
+
+    ``A = P E Q^-1``, ``B = P Ab Q^-1`` with ``E = diag(I_d, N)``,
+    ``Ab = diag(C, I_a)``: ``N`` has Jordan chains of the sizes in `blocks`
+    (the index is their maximum) and ``-C`` has eigenvalues `spectrum`.
+    ``P`` and ``Q`` are random with condition number `cond`.
+
+    Parameters
+    ----------
+    n : int
+        Size, at least ``sum(blocks)``; scales to n = 400 and beyond.
+    blocks : tuple of int
+        Nilpotent chain lengths.
+    spectrum : array_like, optional
+        Finite eigenvalues, ``d = n - sum(blocks)`` of them (complex ones in
+        conjugate pairs). Default: ``d`` seeded values in [-2, -0.1].
+    seed : int
+    cond : float
+        Condition number of ``P`` and ``Q``.
+    t_span : pair of float
+
+    Examples
+    --------
+    >>> from lsc import gallery
+    >>> p = gallery.random_pencil(n=8, blocks=(2, 2, 1), spectrum=[-1, -2, -3])
+    >>> p.index, p.jordan_blocks, p.finite_eigenvalues.tolist()
+    (2, (2, 2, 1), [-3.0, -2.0, -1.0])
+    """
+    blocks = tuple(check_k(b, "blocks[i]") for b in blocks)
+    if any(b < 1 for b in blocks):
+        raise ValueError(f"`blocks` must be positive chain lengths; found {blocks}.")
+    a = sum(blocks)
+    if n < a:
+        raise ValueError(f"`n` must be at least sum(blocks)={a}; found {n}.")
+    rng = np.random.default_rng(seed)
+    d = n - a
+    if spectrum is None:
+        spectrum = -rng.uniform(0.1, 2.0, d)
+    spectrum = np.asarray(spectrum, dtype=complex)
+    if spectrum.shape != (d,):
+        raise DimensionError(f"`spectrum` must hold n - sum(blocks) values: expected ({d},), got {spectrum.shape}.")
+    P = _conditioned(rng, n, cond)
+    Q = _conditioned(rng, n, cond)
+    return _canonical_problem(f"random_pencil(n={n}, blocks={blocks}, seed={seed})", spectrum, blocks, P, Q, t_span, seed)
+
+
+def mechanical(t_span=(0.0, 10.0)):
+    """Two masses on springs with a prescribed relative position: index 3.
+
+    Unknowns ``x = (q1, q2, v1, v2, mu)``::
+
+        q' = v
+        M v' = -K q - D v + G^T mu + u(t)
+        0 = G q - r(t),       G = [1, -1]
+
+    ``mu`` is the Lagrange multiplier (the constraint force). The exact
+    solution is ``q1 = sin t``, ``q2 = sin t - 0.5 cos 2t``, ``mu = cos t``
+    (manufactured: ``u`` and ``r`` are chosen to fit). Finite eigenvalues:
+    one mass-spring-damper mode of the constrained system.
+
+    Examples
+    --------
+    >>> from lsc import gallery, differentiation_index
+    >>> p = gallery.mechanical()
+    >>> p.index, differentiation_index(p.dae)
+    (3, 3)
+    """
+    import sympy
+
+    t = sympy.Symbol("t")
+    m1, m2, k1, k2, kc, d1, d2 = 1.0, 2.0, 4.0, 1.0, 2.0, 0.1, 0.2
+    M = sympy.diag(m1, m2)
+    K = sympy.Matrix([[k1 + kc, -kc], [-kc, k2 + kc]])
+    D = sympy.diag(d1, d2)
+    G = sympy.Matrix([[1, -1]])
+    q = sympy.Matrix([sympy.sin(t), sympy.sin(t) - sympy.cos(2 * t) / 2])
+    mu = sympy.Matrix([sympy.cos(t)])
+    v = q.diff(t)
+    u = M * v.diff(t) + K * q + D * v - G.T * mu
+    r = G * q
+    Z = sympy.zeros
+    A = sympy.diag(sympy.eye(2), M, Z(1, 1))
+    B = sympy.Matrix(sympy.BlockMatrix([[Z(2, 2), -sympy.eye(2), Z(2, 1)], [K, D, -G.T], [G, Z(1, 2), Z(1, 1)]]))
+    f = sympy.Matrix([0, 0, u[0], u[1], -r[0]])
+    # The row "0 = G q - r" reads B x = f with f = -r... keep the sign of B:
+    # B's last row is G q, so f's last entry must be r.
+    f[4] = r[0]
+    x = sympy.Matrix([q, v, mu])
+    exact = _lambdified_exact(x, t)
+    dae = LinearDAE(np.array(A, dtype=float), np.array(B, dtype=float), f)
+    # Constrained motion: q1 = q2 + r, (m1 + m2) q2'' + (d1 + d2) q2' + (k1 + k2) q2 = ...
+    modes = np.roots([m1 + m2, d1 + d2, k1 + k2])
+    return Problem("mechanical", dae, t_span, exact, 3, modes, (3,))
+
+
+def prescribed_path(m=1.0, c=0.5, k=2.0, t_span=(0.0, 10.0)):
+    """Prescribed-path control of a mass-spring-damper: index 3.
+
+    Find the force ``u`` that makes the position follow ``p(t)``; unknowns
+    ``x = (y, v, u)``::
+
+        y' = v
+        m v' = -k y - c v + u
+        0 = y - p(t),         p(t) = sin t + 0.5 sin 3t
+
+    Exact solution ``y = p``, ``v = p'``, ``u = m p'' + c p' + k p``. The
+    solution manifold is a single curve (no finite eigenvalues).
+
+    Examples
+    --------
+    >>> from lsc import gallery
+    >>> p = gallery.prescribed_path()
+    >>> p.index, p.dae.n, p.jordan_blocks
+    (3, 3, (3,))
+    """
+    import sympy
+
+    t = sympy.Symbol("t")
+    p = sympy.sin(t) + sympy.sin(3 * t) / 2
+    A = np.diag([1.0, m, 0.0])
+    B = np.array([[0.0, -1.0, 0.0], [k, c, -1.0], [1.0, 0.0, 0.0]])
+    f = [0, 0, p]
+    x = sympy.Matrix([p, p.diff(t), m * p.diff(t, 2) + c * p.diff(t) + k * p])
+    return Problem("prescribed_path", LinearDAE(A, B, f), t_span, _lambdified_exact(x, t), 3, [], (3,))
+
+
+def _lambdified_exact(x, t):
+    """Vectorized exact solution and derivatives from a sympy column."""
+    import sympy
+
+    cache = {}
+
+    def exact(ts, d):
+        if d not in cache:
+            cache[d] = sympy.lambdify(t, list(x.diff(t, d)) if d else list(x), modules="numpy")
+        values = cache[d](ts)
+        return np.array([np.broadcast_to(np.asarray(v, dtype=float), ts.shape) for v in values])
+
+    return exact
