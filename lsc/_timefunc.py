@@ -80,7 +80,10 @@ class SympyFunction(TimeFunction):
             self._derivs.append(self._derivs[-1].diff(self._t))
         flat = [sympy.Matrix(d).reshape(1, int(np.prod(self.shape)))[:] for d in self._derivs[: order + 1]]
         entries = [e for row in flat for e in row]
-        fn = sympy.lambdify(self._t, entries, modules="numpy")
+        # t is always a Python float here, so the math module (then numpy for
+        # what math lacks) is about twice as fast as numpy on scalars; common
+        # subexpressions of the derivatives are evaluated once.
+        fn = sympy.lambdify(self._t, entries, modules=["math", "numpy"], cse=True)
         full_shape = (order + 1,) + self.shape
 
         def jet(t):

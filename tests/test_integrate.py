@@ -1,0 +1,115 @@
+"""Integration: accuracy against exact solutions, and drift off the manifold."""
+import numpy as np
+import pytest
+import scipy.linalg
+
+from lsc import LinearDAE, complete, eigenanalysis, gallery, solve_completion, solve_dae
+
+from conftest import METHOD_LAMS
+
+
+@pytest.mark.parametrize("name", ["chain4-mixed", "pencil-3-2", "mechanical", "prescribed_path"])
+@pytest.mark.parametrize("method, lam", METHOD_LAMS)
+@pytest.mark.parametrize("solver", ["RK45", "Radau"])
+def test_accuracy_from_consistent_start(name, method, lam, solver):
+    from conftest import CONSTANT_PROBLEMS
+
+    p = CONSTANT_PROBLEMS[name]()
+    c = complete(p.dae, method, lam=lam)
+    t_eval = np.linspace(*p.t_span, 21)
+    res = solve_completion(c, p.t_span, p.x0, method=solver, t_eval=t_eval, rtol=1e-9, atol=1e-11)
+    assert res.success, res.message
+    exact = p.exact(t_eval)
+    # tolerance-scaled error, as scipy's own tests do
+    err = np.abs(res.x - exact) / (1e-11 + 1e-9 * np.abs(exact))
+    assert err.max() < 1e4, err.max()
+    assert res.residual.max() < 1e-6
+
+
+def drift(p, method, lam, delta=1e-3, t_end=8.0):
+    c = complete(p.dae, method, lam=lam)
+    x0 = p.x0 + delta * np.linspace(1.0, -1.0, p.dae.n)
+    t_eval = np.linspace(0.0, t_end, 9)
+    res = solve_completion(c, (0.0, t_end), x0, method="Radau", t_eval=t_eval, rtol=1e-11, atol=1e-14)
+    assert res.success, res.message
+    c_num = c.constraint_residual(res.t, res.x)
+    return c, res, c_num
+
+
+@pytest.mark.parametrize("method, lam", METHOD_LAMS + [("stabilized", 0.7), ("alternative", 0.7)])
+def test_residual_follows_added_dynamics_exactly(method, lam):
+    """For constant coefficients c' = H c: c(t) = expm(H t) c(0), with H from eigenanalysis."""
+    p = gallery.random_pencil(n=9, blocks=(3, 2), seed=11)
+    c, res, c_num = drift(p, method, lam)
+    H = eigenanalysis(c).H
+    for j, t in enumerate(res.t):
+        predicted = scipy.linalg.expm(H * t) @ c_num[:, 0]
+        np.testing.assert_allclose(c_num[:, j], predicted, rtol=1e-6, atol=1e-8 * np.linalg.norm(c_num[:, 0]))
+
+
+def test_standard_drifts_polynomially():
+    p = gallery.prescribed_path()
+    _, res, c_num = drift(p, "standard", None)
+    norms = np.linalg.norm(c_num, axis=0)
+    assert norms[-1] > 10 * norms[0]  # grows ...
+    # ... like a polynomial of degree index - 1 = 2 in t, and not faster
+    coeffs = np.polynomial.polynomial.polyfit(res.t, c_num.T, 2)
+    np.testing.assert_allclose(np.polynomial.polynomial.polyval(res.t, coeffs), c_num, rtol=1e-6, atol=1e-9 * norms[0])
+    assert np.abs(coeffs[2]).max() > 1e-3 * norms[0]
+
+
+@pytest.mark.parametrize("method", ["stabilized", "alternative"])
+def test_stabilized_methods_decay(method):
+    p = gallery.prescribed_path()
+    _, res, c_num = drift(p, method, 2.0)
+    norms = np.linalg.norm(c_num, axis=0)
+    assert norms[-1] < 1e-4 * norms[0]
+    err = np.abs(res.x[:, -1] - p.exact(res.t[-1])).max()
+    assert err < 1e-6  # back on the exact solution of the DAE
+
+
+@pytest.mark.parametrize("lam", [0.3, 1.0, 4.0])
+def test_alternative_residual_decays_exactly_like_exp(lam):
+    p = gallery.mechanical()
+    c = complete(p.dae, "alternative", lam=lam)
+    x0 = p.x0 + 1e-2 * np.array([1.0, -0.5, 0.3, 0.2, -1.0])
+    t_eval = np.arange(0.0, 4.0)
+    res = solve_completion(c, (0.0, 3.0), x0, method="Radau", t_eval=t_eval, rtol=1e-12, atol=1e-15)
+    ratios = res.residual[1:] / res.residual[:-1]
+    np.testing.assert_allclose(ratios, np.exp(-lam), rtol=1e-6)
+
+
+def test_project_starts_on_the_manifold():
+    p = gallery.mechanical()
+    c = complete(p.dae, "standard")
+    res = solve_completion(c, (0.0, 1.0), p.x0 + 0.1, project=True, t_eval=[0.0, 1.0], rtol=1e-10, atol=1e-12)
+    assert res.residual[0] < 1e-12
+    assert res.residual[-1] < 1e-8  # on the manifold the standard LSC does not drift
+
+
+def test_solve_dae_is_complete_then_solve():
+    p = gallery.nilpotent_chain(2, seed=3)
+    kw = dict(t_eval=np.linspace(0, 2, 5), rtol=1e-8, atol=1e-10)
+    r1 = solve_dae(p.dae, (0.0, 2.0), p.x0, completion="stabilized", lam=1.5, **kw)
+    r2 = solve_completion(complete(p.dae, "stabilized", lam=1.5), (0.0, 2.0), p.x0, **kw)
+    np.testing.assert_array_equal(r1.x, r2.x)
+    assert r1.x.shape == (p.dae.n, 5) and r1.nfev == r2.nfev
+
+
+def test_forcing_failure_mid_run_returns_failed_result():
+    def f(t, d):
+        if t > 0.5:
+            return np.array([np.nan, 0.0])
+        return np.array([np.sin(t + d * np.pi / 2), 0.0])
+
+    dae = LinearDAE([[0.0, 1.0], [0.0, 0.0]], np.eye(2), f)
+    res = solve_dae(dae, (0.0, 1.0), [0.0, 0.0], lam=1.0)
+    assert not res.success
+    assert res.status == -2
+    assert "non-finite" in res.message and "t=" in res.message
+
+
+def test_result_reports_counts():
+    p = gallery.nilpotent_chain(1)
+    res = solve_dae(p.dae, p.t_span, p.x0, lam=1.0, method="BDF")
+    assert res.success and res.nfev > 0 and res.nlu > 0 and res.njev == 0  # constant jac: never re-evaluated
