@@ -2,7 +2,7 @@
 from ._completion import COMPLETIONS, AlternativeCompletion, Completion, StabilizedCompletion, StandardCompletion, complete
 from ._derivative_array import DerivativeArray, derivative_array
 from ._exceptions import DimensionError, IndexDeterminationError, RankDecisionWarning
-from ._index import differentiation_index
+from ._index import SolvabilityReport, check_solvability, differentiation_index
 from ._problem import LinearDAE
 from ._analysis import Eigenanalysis, eigenanalysis
 from ._integrate import CompletionResult, solve_completion, solve_dae

@@ -1,30 +1,37 @@
-"""ODE completions ``x' = G x + g(t)`` of a linear DAE ``A x' + B x = f``.
+"""ODE completions ``x' = G(t) x + g(t)`` of a linear DAE ``A x' + B x = f``.
 
-Three methods (thesis chapters 2-4):
+Three methods (thesis chapters 2-6):
 
 - ``'standard'``: the least squares completion (LSC), first block row of
-  ``J^+ (-F x + g)`` for the standard derivative array. Extra eigenvalues 0.
+  ``J^+ (-F x + g)`` for the standard derivative array. For constant
+  coefficients the extra eigenvalues are 0; for time-varying ones the extra
+  dynamics can be anything (thesis Example 3).
 - ``'stabilized'``: the same on the array built with ``D = d/dt + lam``.
   Extra eigenvalues ``-lam``, in Jordan blocks as long as the nilpotent chains.
 - ``'alternative'``: the index-one form ``Z1^T (A x' + B x - f) = 0`` with the
   constraints ``c = Z2^T (F x - g)`` differentiated as ``c' = -lam c``.
-  Extra eigenvalues ``-lam`` with no Jordan blocks.
+  Extra eigenvalues ``-lam`` with no Jordan blocks; for time-varying
+  coefficients the residual decays exactly like ``exp(-int lam)``.
 
 For constant coefficients every completion is computed once, at
 construction: ``rhs`` then costs one matrix-vector product plus the forcing
-``W @ [f; f'; ...]`` (itself one product, or nothing for constant ``f``).
+``W @ [f; f'; ...]``. For time-varying ones the completion is computed at
+each time it is asked for (one SVD of the derivative array), and the last few
+times are cached so `matrices`, `rhs`, `constraint_residual` and `project`
+at one time share one factorization.
 """
+
+from collections import OrderedDict
 
 import numpy as np
 import scipy.linalg
 
 from ._derivative_array import array_jets, lam_jet, stabilization_jets
-from ._exceptions import IndexDeterminationError
-from ._index import array_ranks, determine_index
+from ._exceptions import DimensionError, IndexDeterminationError
+from ._index import array_ranks, check_solvability, determine_index
 from ._linalg import numerical_rank, validate_rcond
-from ._timefunc import _shape_str
-from ._validate import check_dae, check_k, check_lam_value, check_time
-from ._exceptions import DimensionError
+from ._timefunc import TimeFunction, _contains_sympy, _shape_str, as_time_function
+from ._validate import check_dae, check_k, check_lam_value, check_t_span
 
 __all__ = [
     "Completion",
@@ -35,50 +42,108 @@ __all__ = [
     "complete",
 ]
 
+# A derivative array is 1-full when null(J) has no x' component; beyond this
+# sine of the angle between null(J) and {x' = 0} it is not.
+_ONE_FULL_TOL = np.sqrt(np.finfo(float).eps)
+_CACHE_SIZE = 4
 
-class _StandardFactors:
-    """The standard derivative array at one time and its SVD.
+
+class _Factors:
+    """The standard derivative array at one time, factorized once.
 
     Shared by all three methods: the constraints ``c = Z2^T (F x - g)`` are
     always those of the *standard* array, so residuals of different methods
     compare.
+
+    ``fmap`` selects what the forcing quantities are: None (constant
+    coefficients) keeps them as matrices acting on
+    ``fstack = [f, f', ..., f^(k+q)]``, so a completion yields the map
+    ``W``; a vector ``fstack(t)`` turns them into values at ``t``.
     """
 
-    def __init__(self, dae, k, t, q, rcond):
+    def __init__(self, dae, k, t, q, rcond, fmap=None, expected_rank=None):
         n = dae.n
-        self.jets = array_jets(dae, k, t, None, q)
-        J = self.jets.J[0]
+        self.n, self.t = n, t
+        self.jets = jets = array_jets(dae, k, t, None, q)
+        J = jets.J[0]
         self.U, self.s, self.Vt = scipy.linalg.svd(J)
         self.rank = numerical_rank(self.s, J.shape, rcond, what=f"derivative array J (k={k}, t={t:g})")
-        self.Z2 = self.U[:, self.rank :]
-        # C = Z2^T F: the constraint matrix, full row rank a by (A4).
-        self.C = self.Z2.T @ self.jets.F[0]
-        a = self.C.shape[0]
-        Uc, sc, Vct = scipy.linalg.svd(self.C)
-        rank_C = numerical_rank(sc, self.C.shape, rcond, what="constraint matrix Z2^T F")
-        if rank_C != a:
+        if expected_rank is not None and self.rank != expected_rank:
             raise IndexDeterminationError(
-                f"the constraints Z2^T F x = Z2^T g are dependent (rank {rank_C} < {a}) at t={t:g}: "
-                "[J, F] does not have full row rank, so the DAE is not solvable."
+                f"the rank of the derivative array (k={k}) changes at t={t!r}: {self.rank} instead of "
+                f"{expected_rank}. The DAE is not solvable with constant rank here (thesis (A3)); "
+                "the completion would jump."
             )
-        # Orthonormal basis of the homogeneous manifold {x : C x = 0} (thesis T2).
-        self.T2 = Vct[a:].T
-        self.C_pinv = (Vct[:a].T / sc) @ Uc.T
-        self.n = n
+        # 1-fullness: the null space of J must not move x' (x' unique).
+        null_x = np.linalg.norm(self.Vt[self.rank :, :n], 2) if self.rank < J.shape[1] else 0.0
+        if null_x > _ONE_FULL_TOL:
+            raise IndexDeterminationError(
+                f"the derivative array with k={k} differentiations does not determine x' at t={t!r} "
+                f"(not 1-full: its null space moves x' by {null_x:.1e}). Pass t_span to `complete` so k "
+                "is decided over the interval, or a larger k."
+            )
+        self.Z2 = self.U[:, self.rank :]
+        self.C = self.Z2.T @ jets.F[0]
+        if fmap is None:
+            self.Lg = jets.L
+            self.f0 = np.eye(n, jets.L.shape[2])
+        else:
+            self.Lg = jets.L @ fmap
+            self.f0 = fmap[:n]
+        # Constraint residual c = C x - cg.
+        self.cg = self.Z2.T @ self.Lg[0]
+        self._C_svd = None
 
-    def pinv_rows(self, n=None):
-        """The first `n` rows of ``J^+`` (all rows if None)."""
-        return _pinv_rows(self.U, self.s, self.Vt, self.rank, n)
+    def _c_svd(self):
+        if self._C_svd is None:
+            a = self.C.shape[0]
+            Uc, sc, Vct = scipy.linalg.svd(self.C)
+            rank_C = numerical_rank(sc, self.C.shape, None, what="constraint matrix Z2^T F")
+            if rank_C != a:
+                raise IndexDeterminationError(
+                    f"the constraints Z2^T F x = Z2^T g are dependent (rank {rank_C} < {a}) at t={self.t!r}: "
+                    "[J, F] does not have full row rank, so the DAE is not solvable."
+                )
+            self._C_svd = (Uc, sc, Vct)
+        return self._C_svd
+
+    @property
+    def T2(self):
+        """Orthonormal basis of the homogeneous manifold ``{x : C x = 0}`` (thesis T2)."""
+        Uc, sc, Vct = self._c_svd()
+        return Vct[sc.size :].T
+
+    @property
+    def C_pinv(self):
+        Uc, sc, Vct = self._c_svd()
+        return (Vct[: sc.size].T / sc) @ Uc.T
+
+    def pinv_rows(self, n):
+        """The first `n` rows of ``J^+`` (thesis ``V^T J^+``); never the whole."""
+        r = self.rank
+        return (self.Vt[:r, :n].T / self.s[:r]) @ self.U[:, :r].T
+
+    def times_pinv(self, X):
+        """``X @ J^+`` from the SVD factors."""
+        r = self.rank
+        return ((X @ self.Vt[:r].T) / self.s[:r]) @ self.U[:, :r].T
 
 
-def _pinv_rows(U, s, Vt, rank, n=None):
-    """First `n` rows of the pseudo-inverse truncated at `rank`, from an SVD.
+def _as_rate(lam):
+    """A positive constant (float) or a TimeFunction of shape () for lam(t)."""
+    if lam is None or isinstance(lam, TimeFunction):
+        return lam
+    if callable(lam) or _contains_sympy(lam):
+        return as_time_function("lam", lam, ())
+    return check_lam_value(lam)
 
-    The first block row is all a completion needs (thesis ``V^T J^+``), so
-    the full pseudo-inverse is never formed.
-    """
-    V = Vt[:rank].T if n is None else Vt[:rank, :n].T
-    return (V / s[:rank]) @ U[:, :rank].T
+
+def lam_at(lam, t, order=0):
+    """Derivatives ``0..order`` of a rate at `t`, refusing a non-positive value."""
+    jet = lam_jet(lam, t, order)
+    if not jet[0] > 0.0:
+        raise ValueError(f"`lam` must be positive wherever the completion is evaluated; lam({t!r}) = {jet[0]!r}.")
+    return jet
 
 
 class Completion:
@@ -91,18 +156,19 @@ class Completion:
        without ``Completion``).
     2. ``uses_lam``: True if the stabilization rate ``lam`` is required,
        False if it must be None.
-    3. ``extra_order``: how many derivatives of ``f`` beyond ``k`` its
-       forcing needs (the alternative completion differentiates the
-       constraints once more: 1; the others 0).
-    4. ``_maps(self, std, t)``: from the standard array factors `std` at `t`,
-       return ``(G, W)`` with ``x' = G x + W @ fstack`` where
-       ``fstack = [f, f', ..., f^(k + extra_order)]`` stacked, shape
-       ``((k + extra_order + 1) n,)``.
+    3. ``extra_order``: how many derivatives of the arrays beyond ``k`` it
+       needs (the alternative completion differentiates the constraints once
+       more: 1; the others 0).
+    4. ``_maps(self, fac, t)``: from the standard array factors `fac` at `t`
+       (a `_Factors`), return ``(G, W)``: ``x' = G x + W`` where ``W`` is
+       built from ``fac.Lg`` and ``fac.f0`` only linearly, so it is the
+       forcing map (constant coefficients) or the forcing value at `t`.
     5. ``added_eigenvalue``: the value theory assigns to the added dynamics
-       (0 for the standard LSC, ``-lam`` for the stabilized ones).
+       of a constant-coefficient completion.
 
-    Everything else (validation, index determination, ``rhs``, ``jac``,
-    ``matrices``, ``constraint_residual``, ``project``) lives here, once.
+    Everything else (validation, index determination, evaluation, caching,
+    ``rhs``, ``jac``, ``matrices``, ``constraint_residual``, ``project``)
+    lives here, once.
 
     Attributes
     ----------
@@ -111,79 +177,113 @@ class Completion:
         Number of unknowns.
     k : int
         Differentiations used (the differentiation index unless given).
-    lam : float or None
-        Stabilization rate.
+    lam : float, TimeFunction or None
+        Stabilization rate (a TimeFunction for time-varying rates).
     method : str
         Registry key.
     n_constraints : int
         Number of independent constraints (``a`` = corank of J): the
         dimension of the added dynamics.
+    t_span : tuple or None
+        Interval over which ``k`` was decided (time-varying DAEs).
     """
 
     method = None
     uses_lam = False
     extra_order = 0
 
-    def __init__(self, dae, *, lam=None, k=None, rcond=None):
+    def __init__(self, dae, *, lam=None, k=None, rcond=None, t_span=None):
         check_dae(dae)
         self.dae = dae
         self.n = dae.n
-        self.lam = self._check_lam(lam)
         self.rcond = validate_rcond(rcond)
-        if not dae.is_constant:
-            raise NotImplementedError("completions of time-varying DAEs are not supported yet.")
+        self.t_span = None if t_span is None else check_t_span(t_span)
+        self._t_ref = 0.0 if self.t_span is None else min(self.t_span)
+        self.lam = self._check_lam(lam)
         self.k = self._check_k(k)
-        self._t_ref = 0.0
-        self._std = _StandardFactors(dae, self.k, self._t_ref, self.extra_order, self.rcond)
-        self.n_constraints = self._std.C.shape[0]
         self._order = self.k + self.extra_order
-        G, W = self._maps(self._std, self._t_ref)
-        self._G = G
-        self._W = W
-        self._W_c = self._std.Z2.T @ self._std.jets.L[0]
-        self._setup_forcing()
+        self._cache = OrderedDict()
+        if dae.is_constant:
+            fac = _Factors(dae, self.k, self._t_ref, self.extra_order, self.rcond)
+            self._std = fac
+            self._rank = fac.rank
+            self._G, self._W = self._maps(fac, self._t_ref)
+            self._W_c = fac.cg
+            self._setup_forcing()
+        else:
+            fac = self._factors(self._t_ref, check=False)
+            self._rank = fac.rank
+        self.n_constraints = fac.C.shape[0]
 
     # -- validation ---------------------------------------------------------
     def _check_lam(self, lam):
-        if self.uses_lam:
-            if lam is None:
+        if not self.uses_lam:
+            if lam is not None:
                 raise ValueError(
-                    f"`lam` is required for the {self.method!r} completion: a positive finite rate "
-                    "(e.g. lam=1.0); found None."
+                    f"`lam` must be None for the {self.method!r} completion, which has no stabilization; found {lam!r}."
                 )
-            return check_lam_value(lam)
-        if lam is not None:
+            return None
+        if lam is None:
             raise ValueError(
-                f"`lam` must be None for the {self.method!r} completion, which has no stabilization; found {lam!r}."
+                f"`lam` is required for the {self.method!r} completion: a positive finite rate "
+                "(e.g. lam=1.0), a sympy expression in t or a callable lam(t, d); found None."
             )
-        return None
+        lam = _as_rate(lam)
+        if isinstance(lam, TimeFunction):
+            times = [self._t_ref] if self.t_span is None else np.linspace(*self.t_span, 101)
+            for t in times:
+                lam_at(lam, float(t))
+        return lam
 
     def _check_k(self, k):
+        dae, t = self.dae, self._t_ref
         if k is None:
-            k, _ = determine_index(self.dae, self._t_ref_default(), 10, self.rcond)
+            if not dae.is_constant and self.t_span is not None:
+                return check_solvability(dae, self.t_span, rcond=self.rcond).k
+            k, _ = determine_index(dae, t, 10, self.rcond)
             return k
         k = check_k(k)
-        t = self._t_ref_default()
-        ranks = array_ranks(self.dae, k, t, self.rcond)
-        nxt = array_ranks(self.dae, k + 1, t, self.rcond)
-        if not (ranks.one_full and ranks.full_row_rank and nxt.corank == ranks.corank):
-            raise IndexDeterminationError(
-                f"`k`={k} is too small: the derivative array does not determine x' "
-                f"({ranks}; next: {nxt}). Use k=None for the differentiation index."
-            )
+        times = [t] if (dae.is_constant or self.t_span is None) else check_solvability(dae, self.t_span, rcond=self.rcond).times
+        for ti in times:
+            ranks = array_ranks(dae, k, ti, self.rcond)
+            nxt = array_ranks(dae, k + 1, ti, self.rcond)
+            if not (ranks.one_full and ranks.full_row_rank and nxt.corank == ranks.corank):
+                raise IndexDeterminationError(
+                    f"`k`={k} is too small at t={ti:g}: the derivative array does not determine x' "
+                    f"({ranks}; next: {nxt}). Use k=None for the differentiation index."
+                )
         return k
 
-    @staticmethod
-    def _t_ref_default():
-        return 0.0
+    # -- evaluation ---------------------------------------------------------
+    def _factors(self, t, check=True):
+        """The standard-array factors at `t`, with the forcing as values at `t`."""
+        fstack = self.dae.f_jet(t, self._order).reshape(-1)
+        return _Factors(self.dae, self.k, t, self.extra_order, self.rcond, fmap=fstack,
+                        expected_rank=self._rank if check else None)
 
-    # -- forcing ------------------------------------------------------------
+    def _evaluate(self, t):
+        """``(fac, G, g)`` at `t` for a time-varying completion, cached."""
+        t = float(t)
+        hit = self._cache.get(t)
+        if hit is not None:
+            self._cache.move_to_end(t)
+            return hit
+        fac = self._factors(t)
+        G, g = self._maps(fac, t)
+        self._cache[t] = (fac, G, g)
+        if len(self._cache) > _CACHE_SIZE:
+            self._cache.popitem(last=False)
+        return self._cache[t]
+
+    def _lam_jet(self, t, order=0):
+        return lam_at(self.lam, t, order)
+
+    # -- forcing (constant coefficients) -------------------------------------
     def _setup_forcing(self):
         f = self.dae.f
-        n = self.n
         if f is None:
-            self._g_const = np.zeros(n)
-            self._c_const = np.zeros(self.n_constraints)
+            self._g_const = np.zeros(self.n)
+            self._c_const = np.zeros(self._W_c.shape[0])
         elif f.is_constant:
             fstack = f.jet(0.0, self._order).reshape(-1)
             self._g_const = self._W @ fstack
@@ -195,12 +295,6 @@ class Completion:
     def _fstack(self, t):
         return self.dae.f.jet(t, self._order).reshape(-1)
 
-    def forcing(self, t):
-        """The forcing ``g(t)`` of ``x' = G x + g(t)``, shape (n,)."""
-        if self._g_const is not None:
-            return self._g_const
-        return self._W @ self._fstack(t)
-
     # -- public evaluation --------------------------------------------------
     def matrices(self, t):
         """``(G, g)`` with ``x' = G x + g`` at time `t`.
@@ -210,17 +304,27 @@ class Completion:
         G : ndarray, shape (n, n)
         g : ndarray, shape (n,)
         """
-        return self._G, self.forcing(t)
+        if not self.dae.is_constant:
+            _, G, g = self._evaluate(t)
+            return G, g
+        if self._g_const is not None:
+            return self._G, self._g_const
+        return self._G, self._W @ self._fstack(t)
 
     def rhs(self, t, x):
         """Right-hand side ``G x + g(t)`` in `scipy.integrate.solve_ivp` form."""
-        if self._g_const is not None:
-            return self._G @ x + self._g_const
-        return self._G @ x + self._W @ self.dae.f.jet(t, self._order).reshape(-1)
+        if self.dae.is_constant:
+            if self._g_const is not None:
+                return self._G @ x + self._g_const
+            return self._G @ x + self._W @ self.dae.f.jet(t, self._order).reshape(-1)
+        _, G, g = self._evaluate(t)
+        return G @ x + g
 
     def jac(self, t, x):
-        """Jacobian ``G`` of `rhs` (constant for constant coefficients)."""
-        return self._G
+        """Jacobian ``G(t)`` of `rhs`."""
+        if self.dae.is_constant:
+            return self._G
+        return self._evaluate(t)[1]
 
     def constraint_residual(self, t, x):
         """The constraint residual ``c = Z2^T (F x - g(t))``.
@@ -241,14 +345,16 @@ class Completion:
         x = np.asarray(x, dtype=float)
         if x.shape[:1] != (self.n,) or x.ndim > 2:
             raise DimensionError(f"`x` has the wrong shape: expected ({self.n},) or ({self.n}, m), got {_shape_str(x.shape)}.")
-        c = self._std.C @ x
-        if self._c_const is not None:
-            return c - (self._c_const if x.ndim == 1 else self._c_const[:, None])
-        if x.ndim == 1:
-            return c - self._W_c @ self._fstack(t)
-        t = np.broadcast_to(np.asarray(t, dtype=float), (x.shape[1],))
-        cg = np.column_stack([self._W_c @ self._fstack(ti) for ti in t])
-        return c - cg
+        if x.ndim == 2:
+            t = np.broadcast_to(np.asarray(t, dtype=float), (x.shape[1],))
+            if self.dae.is_constant and self._c_const is not None:
+                return self._std.C @ x - self._c_const[:, None]
+            return np.column_stack([self.constraint_residual(ti, xi) for ti, xi in zip(t, x.T)]) if x.shape[1] else np.zeros((self.n_constraints, 0))
+        if self.dae.is_constant:
+            cg = self._c_const if self._c_const is not None else self._W_c @ self._fstack(t)
+            return self._std.C @ x - cg
+        fac = self._evaluate(t)[0]
+        return fac.C @ x - fac.cg
 
     def project(self, t, x):
         """The consistent point nearest to `x` (least squares) at time `t`.
@@ -258,18 +364,28 @@ class Completion:
         x = np.asarray(x, dtype=float)
         if x.shape != (self.n,):
             raise DimensionError(f"`x` has the wrong shape: expected ({self.n},), got {_shape_str(x.shape)}.")
-        return x - self._std.C_pinv @ self.constraint_residual(t, x)
+        fac = self._std if self.dae.is_constant else self._evaluate(t)[0]
+        return x - fac.C_pinv @ self.constraint_residual(t, x)
 
     @property
     def added_eigenvalue(self):
-        """The eigenvalue theory assigns to the added dynamics."""
-        return 0.0 if self.lam is None else -self.lam
+        """The eigenvalue theory assigns to the added dynamics (constant coefficients)."""
+        if self.lam is None:
+            return 0.0
+        if isinstance(self.lam, TimeFunction):
+            raise ValueError("`added_eigenvalue` needs a constant `lam`.")
+        return -self.lam
 
     def __repr__(self):
-        lam = "" if self.lam is None else f", lam={self.lam:g}"
+        if self.lam is None:
+            lam = ""
+        elif isinstance(self.lam, TimeFunction):
+            lam = ", lam=lam(t)"
+        else:
+            lam = f", lam={self.lam:g}"
         return f"{type(self).__name__}(n={self.n}, k={self.k}{lam}, constraints={self.n_constraints})"
 
-    def _maps(self, std, t):  # pragma: no cover - abstract
+    def _maps(self, fac, t):  # pragma: no cover - abstract
         raise NotImplementedError
 
 
@@ -278,28 +394,32 @@ class StandardCompletion(Completion):
 
     ``x' = V^T J^+ (-F x + g)``. For constant coefficients the added
     eigenvalues are 0, in Jordan blocks as long as the nilpotent chains
-    (thesis Lemma 1): off the manifold, solutions drift polynomially.
+    (thesis Lemma 1): off the manifold, solutions drift polynomially. For
+    time-varying coefficients the added dynamics can be anything (thesis
+    Example 3).
     """
 
     method = "standard"
     uses_lam = False
 
-    def _maps(self, std, t):
-        P = std.pinv_rows(self.n)
-        return -P @ std.jets.F[0], P @ std.jets.L[0]
+    def _maps(self, fac, t):
+        P = fac.pinv_rows(self.n)
+        return -P @ fac.jets.F[0], P @ fac.Lg[0]
 
 
 class StabilizedCompletion(StandardCompletion):
-    """Least squares completion of the stabilized array ``D = d/dt + lam`` (ch. 3).
+    """Least squares completion of the stabilized array ``D = d/dt + lam`` (ch. 3, 5).
 
-    The added eigenvalues are ``-lam``, in Jordan blocks as long as the
-    nilpotent chains, so off-manifold solutions decay like a polynomial times
-    ``exp(-lam t)``.
+    For constant coefficients the added eigenvalues are ``-lam``, in Jordan
+    blocks as long as the nilpotent chains, so off-manifold solutions decay
+    like a polynomial times ``exp(-lam t)``. ``lam`` may vary with time
+    (thesis ch. 5); the product rule of ERRATA item 1 is applied.
 
     Notes
     -----
-    The stabilized array is ``(Lam kron I)`` times the standard one, with
-    ``Lam`` unit lower triangular (`stabilization_jets`). Writing the LSC
+    The stabilized array is ``(Lam kron I)`` times the standard one, row for
+    row, with ``Lam`` unit lower triangular (`stabilization_jets`; for
+    time-varying ``lam`` it holds the rate's derivatives). Writing the LSC
     ``V^T (D J)^+ D (-F x + g)`` through thesis Theorem 8 gives, exactly,
 
     ``x' = [standard LSC] + K c``,  ``K = Y0 D^-1 (M^+)^T``,  ``M = D^-T Z2``,
@@ -309,66 +429,64 @@ class StabilizedCompletion(StandardCompletion):
     SVD of ``D J``, whose rows scale like ``lam^i``: against a 60-digit
     reference (index 3, n = 8) the relative error in ``G`` is 5e-7 at
     lam = 100 where the SVD of ``D J`` gives 2e-3, and 4e-3 at lam = 1000
-    where it gives none correct.
+    where it gives no digit right.
     """
 
     method = "stabilized"
     uses_lam = True
 
-    def _maps(self, std, t):
-        G, W = super()._maps(std, t)
+    def _maps(self, fac, t):
+        G, W = super()._maps(fac, t)
         n, k = self.n, self.k
-        N, a = std.Z2.shape
-        Lam = stabilization_jets(k, 0, lam_jet(self.lam, t, k))[0]
+        N, a = fac.Z2.shape
+        Lam = stabilization_jets(k, 0, self._lam_jet(t, k))[0]
         Lam_inv = scipy.linalg.solve_triangular(Lam, np.eye(k + 1), lower=True, unit_diagonal=True)
         # M = (Lam^-T kron I) Z2 and Y0 (Lam^-1 kron I), block by block.
-        M = np.einsum("ji,jba->iba", Lam_inv, std.Z2.reshape(k + 1, n, a)).reshape(N, a)
-        Y0_Dinv = np.einsum("aib,ij->ajb", std.pinv_rows(n).reshape(n, k + 1, n), Lam_inv).reshape(n, N)
+        M = np.einsum("ji,jba->iba", Lam_inv, fac.Z2.reshape(k + 1, n, a)).reshape(N, a)
+        Y0_Dinv = np.einsum("aib,ij->ajb", fac.pinv_rows(n).reshape(n, k + 1, n), Lam_inv).reshape(n, N)
         Qm, Rm = scipy.linalg.qr(M, mode="economic")
         K = scipy.linalg.solve_triangular(Rm, (Y0_Dinv @ Qm).T, lower=False).T
-        # c = C x - Z2^T L fstack
-        return G + K @ std.C, W - K @ (std.Z2.T @ std.jets.L[0])
+        return G + K @ fac.C, W - K @ fac.cg
 
 
 class AlternativeCompletion(Completion):
-    """Index-one form with stabilized constraints (thesis ch. 4, ERRATA 2 and 4).
+    """Index-one form with stabilized constraints (thesis ch. 4, 6; ERRATA 2, 4).
 
     ``Z1^T (A x' + B x - f) = 0`` together with ``c' = -lam c`` for the
     constraints ``c = Z2^T (F x - g)``. ``Z1`` is an orthonormal basis of the
     range of ``A T2``, ``T2`` of the null space of ``Z2^T F``. The added
-    eigenvalues are exactly ``-lam`` with no Jordan blocks: the constraint
-    residual decays exactly like ``exp(-lam t)``.
+    eigenvalues are exactly ``-lam`` with no Jordan blocks, and for
+    time-varying coefficients and rates the residual decays exactly like
+    ``exp(-int lam)``. The derivative of the basis is never obtained by
+    differencing: ``(Z2^T)' = -Z2^T J' J^+`` with ``J'`` from the analytic
+    derivatives of the coefficients (ERRATA item 4).
     """
 
     method = "alternative"
     uses_lam = True
     extra_order = 1
 
-    def _maps(self, std, t):
-        n, k = self.n, self.k
-        jets = std.jets
+    def _maps(self, fac, t):
+        n = self.n
+        jets = fac.jets
         A = jets.J[0][:n, :n]
         B = jets.F[0][:n]
-        Z2, C = std.Z2, std.C
-        AT2 = A @ std.T2
+        Z2, C = fac.Z2, fac.C
+        AT2 = A @ fac.T2
         Z1, s1, _ = scipy.linalg.svd(AT2, full_matrices=False)
         if numerical_rank(s1, AT2.shape, self.rcond, what="A T2") < AT2.shape[1]:
-            raise IndexDeterminationError(f"A T2 is rank deficient at t={t:g}: the DAE is not solvable.")
+            raise IndexDeterminationError(f"A T2 is rank deficient at t={t!r}: the DAE is not solvable.")
         M = np.vstack([Z1.T @ A, C])
-        width = (k + 2) * n
-        # c' = Z2'^T (F x - g) + Z2^T (F' x + F x' - g') with (Z2^T)' = -Z2^T J' J^+
-        # (ERRATA item 4): no differencing of a computed basis. J' = 0 for
-        # constant coefficients.
+        # c' = (Z2^T)' (F x - g) + Z2^T (F' x + F x' - g') = -lam c, with
+        # (Z2^T)' = -Z2^T J' J^+, so (Z2^T)' (F x - g) = -Y (F x - g).
         Jd = jets.J[1]
         if np.any(Jd):
-            Y = Z2.T @ Jd @ std.pinv_rows()
+            Y = fac.times_pinv(Z2.T @ Jd)
         else:
-            Y = np.zeros((Z2.shape[1], jets.J.shape[1]))
-        lam = self.lam
+            Y = np.zeros((Z2.shape[1], Jd.shape[0]))
+        lam = self._lam_jet(t)[0]
         G_num = np.vstack([-Z1.T @ B, -lam * C + Y @ jets.F[0] - Z2.T @ jets.F[1]])
-        E0 = np.zeros((n, width))
-        E0[:, :n] = np.eye(n)
-        W_num = np.vstack([Z1.T @ E0, (lam * Z2.T - Y) @ jets.L[0] + Z2.T @ jets.L[1]])
+        W_num = np.concatenate([Z1.T @ fac.f0, (lam * Z2.T - Y) @ fac.Lg[0] + Z2.T @ fac.Lg[1]], axis=0)
         lu = scipy.linalg.lu_factor(M)
         return scipy.linalg.lu_solve(lu, G_num), scipy.linalg.lu_solve(lu, W_num)
 
@@ -380,8 +498,8 @@ COMPLETIONS = {
 }
 
 
-def complete(dae, method, *, lam=None, k=None, rcond=None):
-    """Complete a linear DAE to an ODE ``x' = G x + g(t)``.
+def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None):
+    """Complete a linear DAE to an ODE ``x' = G(t) x + g(t)``.
 
     Parameters
     ----------
@@ -389,15 +507,25 @@ def complete(dae, method, *, lam=None, k=None, rcond=None):
         The system ``A x' + B x = f(t)``.
     method : {'standard', 'stabilized', 'alternative'} or Completion subclass
         See `COMPLETIONS`.
-    lam : float, optional
-        Stabilization rate, required (positive, finite) for 'stabilized' and
-        'alternative', and must be None for 'standard'.
+    lam : float, sympy expression or callable, optional
+        Stabilization rate, required for 'stabilized' and 'alternative' and
+        None for 'standard': a positive finite constant, a sympy expression
+        in ``t`` or a callable ``lam(t, d)`` returning the d-th derivative.
+        A time-varying rate must stay positive; it is checked on `t_span`
+        (101 points) and wherever the completion is evaluated.
     k : int, optional
         Number of differentiations; None means the differentiation index.
         A larger ``k`` is allowed (for the standard LSC it changes nothing,
         thesis Theorem 5).
     rcond : float, optional
         Relative threshold for every rank decision.
+    t_span : pair of float, optional
+        Interval of use. For time-varying coefficients ``k`` is then decided
+        over the interval (`check_solvability`): the index can be lower at
+        isolated times (thesis Example 1 is 1-full with k = 1 at t = 0 only).
+        Without it ``k`` is decided at t = 0. Either way, every evaluation
+        checks that the array keeps its rank and stays 1-full, and raises
+        `IndexDeterminationError` naming the time otherwise.
 
     Returns
     -------
@@ -425,4 +553,4 @@ def complete(dae, method, *, lam=None, k=None, rcond=None):
         cls = COMPLETIONS[method]
     else:
         raise ValueError(f"`method` must be one of {set(COMPLETIONS)} or a Completion subclass; found {method!r}.")
-    return cls(dae, lam=lam, k=k, rcond=rcond)
+    return cls(dae, lam=lam, k=k, rcond=rcond, t_span=t_span)

@@ -8,7 +8,7 @@ from ._exceptions import IndexDeterminationError
 from ._linalg import default_rcond, numerical_rank, validate_rcond
 from ._validate import check_dae, check_k, check_time
 
-__all__ = ["differentiation_index", "ArrayRanks"]
+__all__ = ["differentiation_index", "check_solvability", "ArrayRanks", "SolvabilityReport"]
 
 
 class ArrayRanks:
@@ -164,3 +164,110 @@ def determine_index(dae, t, kmax, rcond):
         f"no k in 0..{kmax} gives a derivative array that is 1-full with respect to x' "
         f"(the index exceeds kmax={kmax}, or the DAE is not solvable); ranks found:\n  {lines}"
     )
+
+
+class SolvabilityReport:
+    """Result of `check_solvability`.
+
+    Attributes
+    ----------
+    k : int
+        Differentiations that work at every sampled time (the largest
+        pointwise index).
+    times : ndarray
+        The sampled times.
+    pointwise_index : ndarray of int
+        The index found at each sampled time.
+    ranks : list of ArrayRanks
+        The ranks of the array with `k` differentiations at each time.
+    """
+
+    def __init__(self, k, times, pointwise_index, ranks):
+        self.k, self.times, self.pointwise_index, self.ranks = k, times, pointwise_index, ranks
+
+    def __repr__(self):
+        return (
+            f"SolvabilityReport(k={self.k}, {self.times.size} times in [{self.times[0]:g}, {self.times[-1]:g}], "
+            f"pointwise index {sorted(set(self.pointwise_index.tolist()))}, corank {self.ranks[0].corank})"
+        )
+
+
+def check_solvability(dae, t_span, *, kmax=10, rcond=None, samples=21):
+    """Decide unique solvability of a linear DAE over an interval.
+
+    Solvability is decided by the derivative array, not by the pencil
+    (ERRATA item 6): for time-varying coefficients a regular pencil
+    (``det(s A(t) + B(t)) != 0``) does not imply unique solvability, and a
+    singular one does not exclude it. At each of `samples` equally spaced
+    times the index is determined; then the array with ``k`` = the largest
+    of them must be 1-full, satisfy (A4) and have the same corank at every
+    sampled time (thesis (A3), constant rank).
+
+    Parameters
+    ----------
+    dae : LinearDAE
+    t_span : pair of float
+    kmax : int, optional
+    rcond : float, optional
+    samples : int, optional
+        Number of sampled times (at least 2), both ends included.
+
+    Returns
+    -------
+    SolvabilityReport
+
+    Raises
+    ------
+    IndexDeterminationError
+        Naming the times where no k works, where 1-fullness fails or where
+        the rank changes.
+
+    Examples
+    --------
+    Thesis Example 1 is 1-full with k = 1 at t = 0 only; over the interval
+    it needs k = 2:
+
+    >>> import numpy as np, sympy
+    >>> from lsc import LinearDAE, check_solvability
+    >>> t = sympy.Symbol("t")
+    >>> dae = LinearDAE(sympy.Matrix([[0, t], [0, 0]]), -np.eye(2))
+    >>> report = check_solvability(dae, (-1.0, 1.0))
+    >>> report.k, sorted(set(report.pointwise_index.tolist()))
+    (2, [1, 2])
+    """
+    from ._validate import check_t_span
+
+    check_dae(dae)
+    t0, t1 = check_t_span(t_span)
+    kmax = check_k(kmax, "kmax")
+    rcond = validate_rcond(rcond)
+    if isinstance(samples, bool) or not isinstance(samples, int) or samples < 2:
+        raise ValueError(f"`samples` must be an int >= 2; found {samples!r}.")
+    times = np.linspace(t0, t1, samples)
+    if 0.0 not in times and min(t0, t1) < 0.0 < max(t0, t1):
+        times = np.sort(np.append(times, 0.0))  # where coefficients often degenerate
+    index, failures = [], []
+    for t in times:
+        try:
+            index.append(determine_index(dae, float(t), kmax, rcond)[0])
+        except IndexDeterminationError as exc:
+            failures.append(f"t={t:g}: {str(exc).splitlines()[0]}")
+    if failures:
+        raise IndexDeterminationError(
+            f"`dae` is not uniquely solvable on {tuple(t_span)}: no k <= {kmax} works at "
+            f"{len(failures)} of {times.size} sampled times:\n  " + "\n  ".join(failures)
+        )
+    k = max(index)
+    ranks = [array_ranks(dae, k, float(t), rcond) for t in times]
+    coranks = [r.corank for r in ranks]
+    bad = [f"t={t:g}: {r}" for t, r in zip(times, ranks) if not (r.one_full and r.full_row_rank)]
+    if bad:
+        raise IndexDeterminationError(f"with k={k} the derivative array is not 1-full at:\n  " + "\n  ".join(bad))
+    if len(set(coranks)) > 1:
+        typical = max(set(coranks), key=coranks.count)
+        where = [f"t={t:g} (corank {c})" for t, c in zip(times, coranks) if c != typical]
+        raise IndexDeterminationError(
+            f"with k={k} the rank of the derivative array is not constant on {tuple(t_span)} "
+            f"(corank {typical} elsewhere): " + ", ".join(where)
+        )
+    return SolvabilityReport(k, times, np.array(index), ranks)

@@ -13,9 +13,13 @@ class LinearDAE:
 
     Parameters
     ----------
-    A, B : array_like, shape (n, n)
-        Real, finite, square coefficient matrices of equal shape. ``A`` may be
-        singular (that is what makes it a DAE).
+    A, B : array_like, sympy matrix or callable
+        Real, finite, square coefficients of equal shape (n, n). ``A`` may be
+        singular (that is what makes it a DAE). Constant arrays; sympy
+        matrices in the symbol ``t`` (differentiated symbolically and
+        compiled once); or callables ``A(t, d)`` returning the d-th time
+        derivative, shape (n, n). When both are callables, ``n`` is read
+        from ``A(0.0, 0)``.
     f : None, array_like, sympy expression or callable, optional
         The forcing. ``None`` means zero; a constant vector of length ``n``;
         a sympy column/row vector (or list of expressions) in the symbol
@@ -50,27 +54,27 @@ class LinearDAE:
     """
 
     def __init__(self, A, B, f=None):
-        A_is_array = not (callable(A) or _contains_sympy(A))
-        B_is_array = not (callable(B) or _contains_sympy(B))
-        if A_is_array:
-            A = _as_float_array("A", A)
-            if A.ndim != 2 or A.shape[0] != A.shape[1]:
-                raise DimensionError(f"`A` must be a square matrix: expected (n, n), got {_shape_str(A.shape)}.")
-        if B_is_array:
-            B = _as_float_array("B", B)
-            if B.ndim != 2 or B.shape[0] != B.shape[1]:
-                raise DimensionError(f"`B` must be a square matrix: expected (n, n), got {_shape_str(B.shape)}.")
-        if A_is_array and B_is_array and A.shape != B.shape:
-            raise DimensionError(
-                f"`A` and `B` must have the same shape: expected B of shape {_shape_str(A.shape)}, "
-                f"got {_shape_str(B.shape)}."
-            )
-        if not (A_is_array and B_is_array):
-            raise NotImplementedError("time-varying `A` or `B` are not supported yet; give constant arrays.")
-        n = A.shape[0]
+        n = None
+        coefficients = {}
+        for name, value in (("A", A), ("B", B)):
+            if callable(value) or _contains_sympy(value):
+                coefficients[name] = value
+                continue
+            value = _as_float_array(name, value)
+            if value.ndim != 2 or value.shape[0] != value.shape[1]:
+                raise DimensionError(f"`{name}` must be a square matrix: expected (n, n), got {_shape_str(value.shape)}.")
+            if n is not None and value.shape != (n, n):
+                raise DimensionError(
+                    f"`A` and `B` must have the same shape: expected B of shape {_shape_str((n, n))}, "
+                    f"got {_shape_str(value.shape)}."
+                )
+            n = value.shape[0]
+            coefficients[name] = value
+        if n is None:
+            n = _infer_n(coefficients["A"], "A")
         self.n = n
-        self.A = as_time_function("A", A, (n, n))
-        self.B = as_time_function("B", B, (n, n))
+        self.A = as_time_function("A", coefficients["A"], (n, n))
+        self.B = as_time_function("B", coefficients["B"], (n, n))
         self.f = None if f is None else as_time_function("f", f, (n,))
         self.is_constant = self.A.is_constant and self.B.is_constant
 
@@ -106,6 +110,19 @@ class LinearDAE:
         if self.f is not None:
             r = r - self.f(t)
         return r
+
+
+def _infer_n(value, name):
+    """n from a sympy matrix, or from one evaluation of a callable at t = 0."""
+    if _contains_sympy(value):
+        import sympy
+
+        shape = sympy.Matrix(value).shape
+    else:
+        shape = np.shape(value(0.0, 0))
+    if len(shape) != 2 or shape[0] != shape[1]:
+        raise DimensionError(f"`{name}` must be a square matrix: expected (n, n), got {_shape_str(shape)}.")
+    return shape[0]
 
 
 def _vector(name, value, n):

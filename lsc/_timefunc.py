@@ -78,7 +78,7 @@ class SympyFunction(TimeFunction):
 
         while len(self._derivs) <= order:
             self._derivs.append(self._derivs[-1].diff(self._t))
-        flat = [sympy.Matrix(d).reshape(1, int(np.prod(self.shape)))[:] for d in self._derivs[: order + 1]]
+        flat = [sympy.Matrix(d).reshape(1, int(np.prod(self.shape, dtype=int)))[:] for d in self._derivs[: order + 1]]
         entries = [e for row in flat for e in row]
         # t is always a Python float here, so the math module (then numpy for
         # what math lacks) is about twice as fast as numpy on scalars; common
@@ -105,13 +105,28 @@ class SympyFunction(TimeFunction):
 
 
 class CallableFunction(TimeFunction):
-    """A user callable ``h(t, d)`` returning the d-th derivative."""
+    """A user callable ``h(t, d)`` returning the d-th derivative.
+
+    If the callable also has a method ``jet(t, order)`` returning all
+    derivatives ``0..order`` stacked, that is used instead (one call).
+    """
 
     def __init__(self, name, fn, shape):
         super().__init__(name, shape)
         self.fn = fn
 
     def jet(self, t, order):
+        if hasattr(self.fn, "jet"):
+            # The callable computes all derivatives at once (e.g. by jets).
+            out = np.asarray(self.fn.jet(t, order), dtype=float)
+            if out.shape != (order + 1,) + self.shape:
+                raise DimensionError(
+                    f"`{self.name}.jet(t, order)` must return shape {_shape_str((order + 1,) + self.shape)}: "
+                    f"got {_shape_str(out.shape)} at t={t!r}."
+                )
+            if not np.all(np.isfinite(out)):
+                raise ValueError(f"`{self.name}.jet(t, order)` returned non-finite values at t={t!r}.")
+            return out
         out = np.empty((order + 1,) + self.shape)
         for d in range(order + 1):
             value = np.asarray(self.fn(t, d), dtype=float)
@@ -131,13 +146,15 @@ def _sympy_matrix(name, obj, shape):
     import sympy
 
     try:
-        if isinstance(obj, (list, tuple)):
+        if shape == ():
+            mat = sympy.Matrix([[sympy.sympify(obj)]])
+        elif isinstance(obj, (list, tuple)):
             mat = sympy.Matrix(obj)
         else:
             mat = sympy.Matrix(sympy.sympify(obj))
     except (TypeError, ValueError, sympy.SympifyError) as exc:
         raise TypeError(f"`{name}` could not be read as a sympy matrix: {exc}") from None
-    want_rows, want_cols = (shape[0], 1) if len(shape) == 1 else shape
+    want_rows, want_cols = {0: (1, 1), 1: (shape[0], 1) if shape else None, 2: shape}[len(shape)]
     if len(shape) == 1 and mat.shape == (1, want_rows):
         mat = mat.T
     if mat.shape != (want_rows, want_cols):

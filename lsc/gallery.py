@@ -29,7 +29,19 @@ from ._exceptions import DimensionError
 from ._problem import LinearDAE
 from ._validate import check_k
 
-__all__ = ["Problem", "nilpotent_chain", "random_pencil", "mechanical", "prescribed_path"]
+__all__ = [
+    "Problem",
+    "nilpotent_chain",
+    "random_pencil",
+    "mechanical",
+    "prescribed_path",
+    "thesis_example1",
+    "thesis_example3",
+    "thesis_example4",
+    "thesis_example5",
+    "stiff_index1",
+    "rotating_canonical",
+]
 
 
 class Problem:
@@ -44,11 +56,12 @@ class Problem:
         Consistent initial value ``exact(t_span[0])``.
     index : int
         Differentiation index.
-    finite_eigenvalues : ndarray
-        Finite eigenvalues of the pencil (roots of ``det(mu A + B)``).
+    finite_eigenvalues : ndarray or None
+        Finite eigenvalues of the pencil (roots of ``det(mu A + B)``); None
+        for time-varying coefficients, where they decide nothing.
     jordan_blocks : tuple of int
         Sizes of the nilpotent chains (Jordan blocks at infinity), largest
-        first.
+        first (of the canonical form the problem was built from).
     """
 
     def __init__(self, name, dae, t_span, exact, index, finite_eigenvalues, jordan_blocks):
@@ -57,9 +70,12 @@ class Problem:
         self.t_span = t_span
         self._exact = exact
         self.index = index
-        self.finite_eigenvalues = np.sort_complex(np.asarray(finite_eigenvalues, dtype=complex))
-        if np.all(self.finite_eigenvalues.imag == 0):
-            self.finite_eigenvalues = self.finite_eigenvalues.real
+        if finite_eigenvalues is None:
+            self.finite_eigenvalues = None
+        else:
+            self.finite_eigenvalues = np.sort_complex(np.asarray(finite_eigenvalues, dtype=complex))
+            if np.all(self.finite_eigenvalues.imag == 0):
+                self.finite_eigenvalues = self.finite_eigenvalues.real
         self.jordan_blocks = tuple(sorted(jordan_blocks, reverse=True))
         self.x0 = self.exact(t_span[0])
 
@@ -352,3 +368,230 @@ def _lambdified_exact(x, t):
         return np.array([np.broadcast_to(np.asarray(v, dtype=float), ts.shape) for v in values])
 
     return exact
+
+
+# -- time-varying coefficients -------------------------------------------------
+
+
+def _sympy_problem(name, A, B, x, t, t_span, index, blocks, f=None):
+    """A problem from sympy A(t), B(t) and an exact solution x(t); f = A x' + B x unless given."""
+    import sympy
+
+    if f is None:
+        f = sympy.simplify(A * x.diff(t) + B * x)
+    dae = LinearDAE(A, B, f)
+    return Problem(name, dae, t_span, _lambdified_exact(x, t), index, None, blocks)
+
+
+def thesis_example1(t_span=(-1.0, 1.0)):
+    """Thesis Example 1: ``[[0, t], [0, 0]] x' - x = f``, index 2 (1 at t = 0 only).
+
+    With ``f = (sin t, cos 2t)`` the unique solution is ``x2 = -f2``,
+    ``x1 = t x2' - f1``. The derivative array is 1-full with one
+    differentiation at ``t = 0`` (where ``A = 0``) but needs two everywhere
+    else: decide ``k`` over the interval.
+
+    Examples
+    --------
+    >>> from lsc import gallery, check_solvability
+    >>> p = gallery.thesis_example1()
+    >>> check_solvability(p.dae, p.t_span).k
+    2
+    """
+    import sympy
+
+    t = sympy.Symbol("t")
+    A = sympy.Matrix([[0, t], [0, 0]])
+    B = -sympy.eye(2)
+    f = sympy.Matrix([sympy.sin(t), sympy.cos(2 * t)])
+    x2 = -f[1]
+    x = sympy.Matrix([t * x2.diff(t) - f[0], x2])
+    return _sympy_problem("thesis_example1", A, B, x, t, t_span, 2, (2,), f=f)
+
+
+def thesis_example3(alpha=2.0, beta=-0.5, t_span=(0.0, 3.0)):
+    """Thesis Example 3: ``x1' = beta x1``, ``0 = e^(alpha t) (x1 - x2)``; index 1.
+
+    Solutions ``x1 = x2 = c e^(beta t)`` (here ``c = 1``). The standard LSC is
+    ``x1' = beta x1``, ``x2' = -alpha x2 + (alpha + beta) x1``: its added
+    eigenvalue ``-alpha`` is arbitrary, set by how the constraint is scaled.
+    """
+    import sympy
+
+    t = sympy.Symbol("t")
+    e = sympy.exp(alpha * t)
+    A = sympy.Matrix([[1, 0], [0, 0]])
+    B = sympy.Matrix([[-beta, 0], [e, -e]])
+    x = sympy.Matrix([sympy.exp(beta * t), sympy.exp(beta * t)])
+    return _sympy_problem(f"thesis_example3(alpha={alpha}, beta={beta})", A, B, x, t, t_span, 1, (1,), f=sympy.zeros(2, 1))
+
+
+def thesis_example4(t_span=(0.0, 2.0)):
+    """Thesis Example 4: the algebraic ``e^(-2t) x = f``, ``f = cos t``; index 1.
+
+    Solution ``x = e^(2t) f``. The stabilized LSC is
+    ``x' = -(lam - 2) x + e^(2t) (f' + lam f)`` (thesis (5.67)); its distance
+    to the manifold ``x = e^(2t) f`` decays only for ``lam > 2``.
+    """
+    import sympy
+
+    t = sympy.Symbol("t")
+    f = sympy.Matrix([sympy.cos(t)])
+    x = sympy.Matrix([sympy.exp(2 * t) * f[0]])
+    return _sympy_problem("thesis_example4", sympy.zeros(1, 1), sympy.Matrix([[sympy.exp(-2 * t)]]), x, t, t_span, 1, (1,), f=f)
+
+
+def thesis_example5(alpha=1.0, t_span=(0.0, 5.0)):
+    """Thesis Example 5: ``x1' = -x1 + e^(alpha t) x2``, ``0 = x2``; index 1.
+
+    Solutions ``x = (c e^-t, 0)`` (here ``c = 1``). The stabilized LSC is
+    ``x1' = -x1 + e^(alpha t) x2``, ``x2' = -lam x2``: every solution reaches
+    the manifold for ``lam > 0``, but approaches a solution of the DAE only
+    for ``lam > alpha`` (thesis (5.70)).
+    """
+    import sympy
+
+    t = sympy.Symbol("t")
+    A = sympy.Matrix([[1, 0], [0, 0]])
+    B = sympy.Matrix([[1, -sympy.exp(alpha * t)], [0, 1]])
+    x = sympy.Matrix([sympy.exp(-t), 0])
+    return _sympy_problem(f"thesis_example5(alpha={alpha})", A, B, x, t, t_span, 1, (1,), f=sympy.zeros(2, 1))
+
+
+def stiff_index1(kappa=1000.0, t_span=(0.0, 2.0)):
+    """A stiff index-1 problem with time-varying coefficients.
+
+    ``x1' = -kappa (1 + 0.5 sin t) (x1 - cos t) - sin t + x2 - e^(-t) x1^*``-type
+    coupling, written as ``A x' + B x = f`` with ``A = diag(1, 0)`` and an
+    algebraic row ``t x1 + (1 + t^2) x2 = f2``; exact solution
+    ``x1 = cos t``, ``x2 = sin(2t) / (1 + t^2)`` (manufactured). The fast
+    mode has rate ``-kappa (1 + 0.5 sin t)``: use an implicit method.
+    """
+    import sympy
+
+    t = sympy.Symbol("t")
+    k = kappa * (1 + sympy.sin(t) / 2)
+    A = sympy.Matrix([[1, 0], [0, 0]])
+    B = sympy.Matrix([[k, -1], [t, 1 + t**2]])
+    x = sympy.Matrix([sympy.cos(t), sympy.sin(2 * t) / (1 + t**2)])
+    return _sympy_problem(f"stiff_index1(kappa={kappa:g})", A, B, x, t, t_span, 1, (1,))
+
+
+def _jet_matmul(X, Y):
+    """Jet of the product of two matrix jets (Leibniz rule), length of the shorter."""
+    from math import comb
+
+    m = min(len(X), len(Y))
+    return np.array([sum(comb(d, j) * X[j] @ Y[d - j] for j in range(d + 1)) for d in range(m)])
+
+
+def _rotation_jet(n, rates, t, order):
+    """Jet of ``R(t) = prod_i R_(i, i+1)(rate_i t)``: plane rotations, exact derivatives."""
+    R = np.zeros((order + 1, n, n))
+    R[0] = np.eye(n)
+    for i, w in enumerate(rates):
+        G = np.zeros((order + 1, n, n))
+        G[0] = np.eye(n)
+        j = (i + 1) % n
+        for d in range(order + 1):
+            a = w * t + d * np.pi / 2
+            G[d, i, i], G[d, i, j], G[d, j, i], G[d, j, j] = (w**d) * np.array([np.cos(a), -np.sin(a), np.sin(a), np.cos(a)])
+        R = _jet_matmul(R, G)
+    return R
+
+
+class _JetCoefficient:
+    """A callable ``h(t, d)`` that also offers its whole jet, ``h.jet(t, order)``.
+
+    lsc asks for the jet in one call (`CallableFunction` uses ``jet`` when a
+    callable has it), so the derivatives are computed once per time.
+    """
+
+    def __init__(self, jet_fn):
+        self.jet = jet_fn
+
+    def __call__(self, t, d):
+        return self.jet(t, d)[d]
+
+
+def rotating_canonical(index=3, omega=1.0, t_span=(0.0, 5.0)):
+    """A canonical form turned by time-varying orthogonal transformations.
+
+    ``y1' + C y1 = h1`` (a damped oscillator, eigenvalues ``-0.5 +- 1j``) and
+    ``N y2' + y2 = h2`` with one chain of length `index`; equations and
+    unknowns rotated by ``P(t)``, ``Q(t)`` (products of plane rotations at
+    rates proportional to `omega`)::
+
+        A(t) = P E Q^T,   B(t) = P (Ab - E Q^T Q') Q^T,   x = Q(t) y
+
+    so that ``A x' + B x = P (E y' + Ab y)`` exactly and the index is
+    `index` at every t. The exact solution is manufactured (sinusoidal
+    ``y*``, ``f = P (E y*' + Ab y*)``). Constraint directions rotate at
+    about `omega` rad per unit time. Coefficients are callables ``h(t, d)``
+    computed from exact jets (products of rotations by the Leibniz rule), so
+    every derivative is exact to rounding.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lsc import gallery
+    >>> p = gallery.rotating_canonical(4)
+    >>> p.index, p.dae.n, p.dae.is_constant
+    (4, 6, False)
+    >>> bool(np.allclose(p.dae.residual(1.2, p.exact(1.2), p.exact(1.2, 1)), 0, atol=1e-12))
+    True
+    """
+    index = check_k(index, "index")
+    if index < 1:
+        raise ValueError(f"`index` must be >= 1; found {index}.")
+    n = 2 + index
+    E = np.zeros((n, n))
+    E[:2, :2] = np.eye(2)
+    E[2:, 2:] = _shift_blocks((index,))
+    Ab = np.zeros((n, n))
+    Ab[:2, :2] = [[0.5, 1.0], [-1.0, 0.5]]
+    Ab[2:, 2:] = np.eye(index)
+    rates = [omega * r for r in (1.0, 0.7, 1.3, 0.9, 1.1, 0.6, 1.2, 0.8)[: n - 1]]
+    y_star = _Sinusoids(amp=np.ones(n), omega=1 + 0.3 * np.arange(n), phase=np.arange(n, dtype=float), offset=0.5 * np.ones(n))
+
+    def P_jet(t, order):
+        return _rotation_jet(n, rates, t, order)
+
+    def Q_jet(t, order):
+        return _rotation_jet(n, rates[::-1], t, order)
+
+    def transpose(X):
+        return np.transpose(X, (0, 2, 1))
+
+    def A_jet(t, order):
+        return _jet_matmul(_jet_matmul(P_jet(t, order), _constant_jet(E, order)), transpose(Q_jet(t, order)))
+
+    def B_jet(t, order):
+        Q = Q_jet(t, order + 1)
+        # Q[1:] is the jet of Q' (one order shorter than Q).
+        inner = _constant_jet(Ab, order) - np.einsum("ij,djk->dik", E, _jet_matmul(transpose(Q[:-1]), Q[1:]))
+        return _jet_matmul(_jet_matmul(P_jet(t, order), inner), transpose(Q[:-1]))
+
+    def y_jet(t, order):
+        return np.array([y_star(t, d) for d in range(order + 1)])
+
+    def f_jet(t, order):
+        y = y_jet(t, order + 1)
+        h = y[1:] @ E.T + y[:-1] @ Ab.T
+        return _jet_matmul(P_jet(t, order), h)
+
+    def exact(ts, d):
+        return np.array([_jet_matmul(Q_jet(t, d), y_jet(t, d))[d] for t in ts]).T
+
+    A = _JetCoefficient(A_jet)
+    B = _JetCoefficient(B_jet)
+    f = _JetCoefficient(f_jet)
+    return Problem(
+        f"rotating_canonical(index={index}, omega={omega:g})", LinearDAE(A, B, f), t_span, exact, index, None, (index,),
+    )
+
+
+def _constant_jet(X, order):
+    out = np.zeros((order + 1,) + X.shape)
+    out[0] = X
+    return out
