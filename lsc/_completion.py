@@ -63,7 +63,7 @@ class _Factors:
 
     def __init__(self, dae, k, t, q, rcond, fmap=None, expected_rank=None):
         n = dae.n
-        self.n, self.t = n, t
+        self.n, self.t = n, float(t)
         self.jets = jets = array_jets(dae, k, t, None, q)
         J = jets.J[0]
         self.U, self.s, self.Vt = scipy.linalg.svd(J)

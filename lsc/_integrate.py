@@ -136,7 +136,7 @@ def solve_completion(
         n = completion.n
         return CompletionResult(
             t=np.zeros(0), x=np.zeros((n, 0)), residual=np.zeros(0), success=False, status=-2,
-            message=f"evaluating the right-hand side failed at t={exc.t!r}: {exc.exc}",
+            message=f"evaluating the right-hand side failed at t={float(exc.t)!r}: {exc.exc}",
             nfev=0, njev=0, nlu=0, sol=None, completion=completion,
         )
     x = sol.y

@@ -415,6 +415,8 @@ def thesis_example3(alpha=2.0, beta=-0.5, t_span=(0.0, 3.0)):
     Solutions ``x1 = x2 = c e^(beta t)`` (here ``c = 1``). The standard LSC is
     ``x1' = beta x1``, ``x2' = -alpha x2 + (alpha + beta) x1``: its added
     eigenvalue ``-alpha`` is arbitrary, set by how the constraint is scaled.
+    Both stabilized completions move it to ``-alpha - lam``: their residual
+    ``c = e^(alpha t) (x1 - x2)`` decays like ``e^(-lam t)``.
     """
     import sympy
 

@@ -5,7 +5,7 @@ import sympy
 
 from lsc import (
     DimensionError, IndexDeterminationError, LinearDAE, complete, derivative_array, differentiation_index,
-    eigenanalysis, gallery, solve_completion, solve_dae,
+    eigenanalysis, gallery, solve_completion, solve_dae, check_solvability,
 )
 
 t = sympy.Symbol("t")
@@ -59,6 +59,15 @@ CASES = [
     (lambda: complete(CHAIN, "standard").project(0.0, np.zeros(3)), DimensionError, "expected (2,), got (3,)"),
     (lambda: CHAIN.residual(0.0, np.zeros(2), np.zeros(3)), DimensionError, "`xdot` has the wrong shape: expected (2,), got (3,)"),
     (lambda: eigenanalysis("c"), TypeError, "`completion` must be an lsc Completion"),
+    # time-varying input
+    (lambda: complete(LinearDAE(lambda s, d: np.zeros((3, 3)), I2), "standard"), DimensionError, "`A(t, d)` must return shape (2, 2): expected (2, 2), got (3, 3)"),
+    (lambda: complete(LinearDAE(N2, lambda s, d: np.full((2, 2), np.nan)), "standard"), ValueError, "`B(t, d)` returned non-finite values at t=0.0, d=0"),
+    (lambda: LinearDAE(sympy.Matrix([[sympy.Symbol("s"), 0], [0, t]]), I2), ValueError, "`A` may depend on the symbol t only; found other symbols ['s']"),
+    (lambda: complete(CHAIN, "alternative", lam=lambda s, d: np.ones(2)), DimensionError, "`lam(t, d)` must return shape ()"),
+    (lambda: complete(CHAIN, "alternative", lam=1 + sympy.Symbol("a") * t), ValueError, "`lam` may depend on the symbol t only"),
+    (lambda: complete(CHAIN, "alternative", lam=1 - t, t_span=(0.0, 2.0)), ValueError, "`lam` must be positive wherever the completion is evaluated"),
+    (lambda: complete(CHAIN, "stabilized", lam=-1 + 0 * t), ValueError, "`lam` must be positive"),
+    (lambda: check_solvability(CHAIN, (0.0, 1.0), samples=1), ValueError, "`samples` must be an int >= 2; found 1"),
 ]
 
 
