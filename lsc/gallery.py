@@ -41,6 +41,7 @@ __all__ = [
     "thesis_example5",
     "stiff_index1",
     "rotating_canonical",
+    "moving_pencil",
 ]
 
 
@@ -597,3 +598,94 @@ def _constant_jet(X, order):
     out = np.zeros((order + 1,) + X.shape)
     out[0] = X
     return out
+
+
+def moving_pencil(n=10, blocks=(3,), seed=0, rate=0.5, t_span=(0.0, 1.0)):
+    """A random regular pencil moved by time-varying transformations; scales in n.
+
+    ``A(t) = P E Q^-1``, ``B(t) = P (Ab - E Q^-1 Q') Q^-1`` with
+    ``P(t) = P0 (I + t L)``, ``Q(t) = Q0 (I + t K)`` (``||K|| = ||L|| = rate``,
+    so both stay invertible for ``|t| < 1/rate``) and the canonical
+    ``E = diag(I, N)``, ``Ab = diag(C, I)`` of `random_pencil`. Then
+    ``A x' + B x = P (E y' + Ab y)`` for ``x = Q y`` exactly, the index is
+    ``max(blocks)`` at every t, and the exact solution is manufactured from
+    sinusoidal ``y*``. Derivatives are exact jets (``Q^-1`` by the recursion
+    ``R^(d) = -d R Q' R^(d-1)``), cheap enough that a completion's cost is
+    what gets measured.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lsc import gallery
+    >>> p = gallery.moving_pencil(n=8, blocks=(3, 1))
+    >>> p.index, p.dae.is_constant
+    (3, False)
+    >>> bool(np.allclose(p.dae.residual(0.4, p.exact(0.4), p.exact(0.4, 1)), 0, atol=1e-10))
+    True
+    """
+    blocks = tuple(check_k(b, "blocks[i]") for b in blocks)
+    a = sum(blocks)
+    if n < a or any(b < 1 for b in blocks):
+        raise ValueError(f"`blocks` must be positive chain lengths summing to at most n={n}; found {blocks}.")
+    rng = np.random.default_rng(seed)
+    d = n - a
+    E = np.zeros((n, n))
+    E[:d, :d] = np.eye(d)
+    E[d:, d:] = _shift_blocks(blocks)
+    Ab = np.zeros((n, n))
+    Ab[:d, :d] = -_real_block(-rng.uniform(0.1, 2.0, d))
+    Ab[d:, d:] = np.eye(a)
+    P0, Q0 = _conditioned(rng, n, 5.0), _conditioned(rng, n, 5.0)
+
+    def scaled(M):
+        return rate * M / np.linalg.norm(M, 2)
+
+    L, K = scaled(rng.standard_normal((n, n))), scaled(rng.standard_normal((n, n)))
+    y_star = _Sinusoids(amp=rng.uniform(0.5, 1.5, n), omega=rng.uniform(0.5, 2.0, n), phase=rng.uniform(0, 2 * np.pi, n),
+                        offset=rng.uniform(-1, 1, n))
+
+    def linear_jet(M0, M1, t, order):
+        out = np.zeros((order + 1, n, n))
+        out[0] = M0 + t * M1
+        if order:
+            out[1] = M1
+        return out
+
+    def P_jet(t, order):
+        return linear_jet(P0, P0 @ L, t, order)
+
+    def Q_jet(t, order):
+        return linear_jet(Q0, Q0 @ K, t, order)
+
+    def Qinv_jet(t, order):
+        Q = Q0 @ (np.eye(n) + t * K)
+        R0 = np.linalg.inv(Q)
+        out = np.zeros((order + 1, n, n))
+        out[0] = R0
+        step = R0 @ (Q0 @ K)
+        for j in range(1, order + 1):
+            out[j] = -j * step @ out[j - 1]
+        return out
+
+    def A_jet(t, order):
+        return _jet_matmul(P_jet(t, order), np.einsum("ij,djk->dik", E, Qinv_jet(t, order)))
+
+    def B_jet(t, order):
+        R = Qinv_jet(t, order)
+        Qd = np.zeros((order + 1, n, n))
+        Qd[0] = Q0 @ K
+        inner = _constant_jet(Ab, order) - np.einsum("ij,djk->dik", E, _jet_matmul(R, Qd))
+        return _jet_matmul(_jet_matmul(P_jet(t, order), inner), R)
+
+    def y_jet(t, order):
+        return np.array([y_star(t, j) for j in range(order + 1)])
+
+    def f_jet(t, order):
+        y = y_jet(t, order + 1)
+        return _jet_matmul(P_jet(t, order), y[1:] @ E.T + y[:-1] @ Ab.T)
+
+    def exact(ts, deriv):
+        return np.array([_jet_matmul(Q_jet(t, deriv), y_jet(t, deriv))[deriv] for t in ts]).T
+
+    dae = LinearDAE(_JetCoefficient(A_jet), _JetCoefficient(B_jet), _JetCoefficient(f_jet))
+    return Problem(f"moving_pencil(n={n}, blocks={blocks}, seed={seed})", dae, t_span, exact, max(blocks), None, blocks)
