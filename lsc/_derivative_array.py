@@ -155,8 +155,9 @@ def derivative_array(dae, k, t=0.0, lam=None):
         block rows.
     t : float, optional
         Time at which to evaluate (irrelevant for constant data).
-    lam : float, optional
-        If given, differentiate with ``D = d/dt + lam`` (stabilized array).
+    lam : float, sympy expression or callable, optional
+        If given, differentiate with ``D = d/dt + lam`` (stabilized array);
+        a time-varying ``lam(t)`` enters through the product rule.
 
     Returns
     -------
@@ -176,13 +177,15 @@ def derivative_array(dae, k, t=0.0, lam=None):
            [1., 2., 0., 1.],
            [0., 1., 0., 0.]])
     """
-    from ._validate import check_dae, check_k, check_lam_value, check_time
+    from ._completion import _as_rate, lam_at
+    from ._validate import check_dae, check_k, check_time
 
     check_dae(dae)
     k = check_k(k)
     t = check_time("t", t)
     if lam is not None:
-        lam = check_lam_value(lam)
+        lam = _as_rate(lam)
+        lam_at(lam, t)
     jets = array_jets(dae, k, t, lam)
     fstack = dae.f_jet(t, k).reshape(-1)
     return DerivativeArray(jets.J[0], jets.F[0], jets.L[0] @ fstack, k, t, lam)

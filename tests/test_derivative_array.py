@@ -85,3 +85,39 @@ def test_exact_solution_satisfies_array(problem, lam):
     lhs = arr.J @ w
     rhs = -arr.F @ problem.exact(t) + arr.g
     np.testing.assert_allclose(lhs, rhs, rtol=1e-10, atol=1e-10 * (1 + np.abs(rhs).max()))
+
+
+@pytest.mark.parametrize("k", [1, 2, 3])
+def test_time_varying_coefficients_and_rate_match_symbolic(k):
+    """ERRATA item 1: D(u v) = (D u) v + u v' with D = d/dt + lam(t), A(t), B(t)."""
+    t = sympy.Symbol("t")
+    A = sympy.Matrix([[sympy.cos(t), t], [0, 0]])
+    B = sympy.Matrix([[1, sympy.exp(t / 3)], [t**2, 2]])
+    f = [sympy.sin(2 * t), sympy.exp(t / 2)]
+    lam = 1 + t**2 / 2
+    t0 = 0.7
+    arr = derivative_array(LinearDAE(A, B, f), k, t=t0, lam=lam)
+    # symbolic reference: apply D = d/dt + lam(t) to A x' + B x - f, then evaluate at t0
+    n = 2
+    xs = [sympy.Function(f"x{i}")(t) for i in range(n)]
+    x = sympy.Matrix(xs)
+    cur = A * x.diff(t) + B * x - sympy.Matrix(f)
+    rows = []
+    for _ in range(k + 1):
+        rows.append(cur)
+        cur = cur.diff(t) + lam * cur
+    syms = {(i, m): sympy.Symbol(f"d{i}_{m}") for i in range(n) for m in range(k + 2)}
+    N = (k + 1) * n
+    J, F, g = np.zeros((N, N)), np.zeros((N, n)), np.zeros(N)
+    for bi, block in enumerate(rows):
+        for r in range(n):
+            expr = block[r].subs({xs[i].diff(t, m): syms[(i, m)] for i in range(n) for m in range(k + 1, 0, -1)})
+            expr = sympy.expand(expr.subs({xs[i]: syms[(i, 0)] for i in range(n)}))
+            for i in range(n):
+                F[bi * n + r, i] = float(expr.coeff(syms[(i, 0)]).subs(t, t0))
+                for m in range(1, k + 2):
+                    J[bi * n + r, (m - 1) * n + i] = float(expr.coeff(syms[(i, m)]).subs(t, t0))
+            g[bi * n + r] = -float(expr.subs({s: 0 for s in syms.values()}).subs(t, t0))
+    np.testing.assert_allclose(arr.J, J, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(arr.F, F, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(arr.g, g, rtol=1e-12, atol=1e-12)
