@@ -105,12 +105,14 @@ def test_example4_stabilized_formula(lam):
 @pytest.mark.parametrize("alpha, lam", [(1.0, 2.5), (1.0, 0.5), (2.0, 1.0), (0.5, 3.0)])
 def test_example5_convergence_iff_lam_above_alpha(alpha, lam):
     """Thesis (5.69)-(5.70): x2 decays like e^{-lam t}; y approaches a DAE solution iff lam > alpha."""
-    p = gallery.thesis_example5(alpha)
+    # Horizon 4: coefficients grow like e^{alpha t}; at alpha = 2, t = 5 the rank
+    # decisions of [J, F] come within the RankDecisionWarning margin.
+    p = gallery.thesis_example5(alpha, t_span=(0.0, 4.0))
     c = complete(p.dae, "stabilized", lam=lam, t_span=p.t_span)
     for s in (0.0, 2.0):
         np.testing.assert_allclose(c.matrices(s)[0], [[-1.0, np.exp(alpha * s)], [0.0, -lam]], rtol=1e-12, atol=1e-14)
     c1, c2 = 1.0, 0.1
-    T = 5.0
+    T = 4.0
     ts = np.linspace(0, T, 11)
     res = solve_completion(c, (0, T), [c1 + c2 / (1 + alpha - lam), c2], method="Radau", t_eval=ts, rtol=1e-11, atol=1e-14)
     np.testing.assert_allclose(res.x[1], c2 * np.exp(-lam * ts), rtol=1e-7)
