@@ -1,0 +1,30 @@
+"""Command line: ``lsc-fmu build SPEC.toml -o DIR`` (also ``python -m fmu_build``)."""
+import argparse
+import sys
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="lsc-fmu", description="Build FMI 2.0 Co-Simulation FMUs of lsc completions.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    build = sub.add_parser("build", help="build an FMU from a TOML spec")
+    build.add_argument("spec", help="path of the TOML spec")
+    build.add_argument("-o", "--output", default=".", help="folder (or .fmu file) to write (default: .)")
+    build.add_argument("--method", choices=["standard", "stabilized", "alternative"], help="override the completion method")
+    build.add_argument("--lam", type=float, help="override the stabilization rate")
+    build.add_argument("--name", help="override the model name")
+    args = parser.parse_args(argv)
+
+    from ._build import build_fmu
+    from ._spec import SpecError
+
+    try:
+        path = build_fmu(args.spec, args.output, method=args.method, lam=args.lam, model_name=args.name)
+    except (SpecError, ValueError, TypeError, OSError) as exc:
+        print(f"lsc-fmu: error: {exc}", file=sys.stderr)
+        return 2
+    print(path)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,198 @@
+"""What runs inside a built FMU (copied into it next to a private copy of lsc).
+
+The slave class generated for a model delegates everything to `LscRuntime`.
+Design rules, from pythonfmu's behaviour:
+
+- A Python exception in any FMI call is fatal for the instance (pythonfmu
+  destroys it). So a bad value set by a master never raises: it is logged
+  as an error, the last valid value stays in effect, and every following
+  ``do_step`` returns False (fmi2Discard) with the reason logged, until a
+  valid value is set. No step ever runs on a bad value.
+- The completion is rebuilt only when something it depends on changed
+  (``lambda``, ``method`` or a parameter); otherwise it is reused.
+- The FMU state snapshot holds everything the next step depends on: time,
+  the continuous state, every variable value and the pending errors, so a
+  master can roll back and repeat a step bit for bit.
+"""
+
+import math
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from . import LinearDAE, complete
+
+METHODS = ("standard", "stabilized", "alternative")
+SOLVERS = ("RK45", "DOP853", "Radau", "BDF")
+
+
+class _Jet:
+    """A coefficient h(t, d) backed by generated jet code, for lsc."""
+
+    def __init__(self, fn, params):
+        self.fn, self.params = fn, params
+
+    def jet(self, t, order):
+        return self.fn(t, self.params, order)
+
+    def __call__(self, t, d):
+        return self.jet(t, d)[d]
+
+
+class LscRuntime:
+    def __init__(self, slave, model):
+        from pythonfmu import Boolean, Fmi2Causality, Fmi2Variability, Integer, Real
+
+        self.slave, self.model = slave, model
+        M = model.MODEL
+        self.n = len(M["states"])
+        self.values = {"lambda": M["lam"], "method": METHODS.index(M["method"]), "project_initial": False,
+                       "rtol": 1e-6, "atol": 1e-9, "solver": 0}
+        self.errors = {}  # variable -> message of a rejected value
+        self.t = M["start"]
+        self.x = np.array([s["start"] for s in M["states"]], dtype=float)
+        self._completion = None
+        self._completion_key = None
+
+        par, out = Fmi2Causality.parameter, Fmi2Causality.output
+        fixed, tunable, cont = Fmi2Variability.fixed, Fmi2Variability.tunable, Fmi2Variability.continuous
+
+        def reg(var):
+            slave.register_variable(var)
+
+        reg(Real("lambda", causality=par, variability=tunable, start=M["lam"],
+                 description="stabilization rate lam (1/time): off-manifold errors decay like exp(-lam t); unused by 'standard'",
+                 getter=lambda: self.values["lambda"], setter=lambda v: self._set("lambda", v)))
+        reg(Integer("method", causality=par, variability=fixed, start=METHODS.index(M["method"]),
+                    description="completion: 0 standard, 1 stabilized, 2 alternative",
+                    getter=lambda: self.values["method"], setter=lambda v: self._set("method", v)))
+        reg(Integer("solver", causality=par, variability=tunable, start=0,
+                    description="integrator per step: 0 RK45, 1 DOP853, 2 Radau, 3 BDF",
+                    getter=lambda: self.values["solver"], setter=lambda v: self._set("solver", v)))
+        reg(Real("rtol", causality=par, variability=tunable, start=1e-6, description="relative tolerance of the integrator",
+                 getter=lambda: self.values["rtol"], setter=lambda v: self._set("rtol", v)))
+        reg(Real("atol", causality=par, variability=tunable, start=1e-9, description="absolute tolerance of the integrator",
+                 getter=lambda: self.values["atol"], setter=lambda v: self._set("atol", v)))
+        reg(Boolean("project_initial", causality=par, variability=fixed, start=False,
+                    description="project the initial state onto the solution manifold before the first step",
+                    getter=lambda: self.values["project_initial"], setter=lambda v: self._set("project_initial", v)))
+        for p in M["parameters"]:
+            self.values[p["name"]] = p["value"]
+            reg(Real(p["name"], causality=par, variability=tunable if p["tunable"] else fixed, start=p["value"],
+                     description=p["description"], getter=lambda name=p["name"]: self.values[name],
+                     setter=lambda v, name=p["name"]: self._set(name, v)))
+        for i, s in enumerate(M["states"]):
+            key = s["name"] + "_0"
+            self.values[key] = s["start"]
+            reg(Real(key, causality=par, variability=fixed, start=s["start"], description=f"initial value of {s['name']}",
+                     getter=lambda key=key: self.values[key], setter=lambda v, key=key: self._set(key, v)))
+        for i, s in enumerate(M["states"]):
+            reg(Real(s["name"], causality=out, variability=cont, description=s["description"],
+                     getter=lambda i=i: float(self.x[i])))
+        reg(Real("constraint_residual", causality=out, variability=cont,
+                 description="norm of the constraint residual Z2^T (F x - g): distance from the solution manifold",
+                 getter=self._residual_norm))
+
+    # -- values set by a master ----------------------------------------------
+    def _set(self, name, value):
+        problem = self._check(name, value)
+        if problem:
+            self.errors[name] = problem
+            self._log_error(f"rejected {name} = {value!r}: {problem}; the last valid value ({self.values[name]!r}) stays, "
+                            "and doStep will discard until a valid value is set")
+            return
+        self.errors.pop(name, None)
+        if name in ("method", "solver", "project_initial"):
+            value = int(value) if name != "project_initial" else bool(value)
+        else:
+            value = float(value)
+        self.values[name] = value
+
+    def _check(self, name, value):
+        if name == "method":
+            return None if value in (0, 1, 2) else "method must be 0 (standard), 1 (stabilized) or 2 (alternative)"
+        if name == "solver":
+            return None if value in range(len(SOLVERS)) else f"solver must be 0..{len(SOLVERS) - 1}"
+        if name == "project_initial":
+            return None
+        if not math.isfinite(value):
+            return "the value is not finite"
+        if name == "lambda" and not value > 0:
+            return "lambda must be positive (it is the decay rate of off-manifold errors)"
+        if name in ("rtol", "atol") and not value > 0:
+            return f"{name} must be positive"
+        return None
+
+    def _log_error(self, msg):
+        from pythonfmu import Fmi2Status
+
+        self.slave.log(msg, status=Fmi2Status.error)
+
+    # -- the completion --------------------------------------------------------
+    def _params(self):
+        return {p["name"]: self.values[p["name"]] for p in self.model.MODEL["parameters"]}
+
+    def completion(self):
+        method = METHODS[self.values["method"]]
+        lam = None if method == "standard" else self.values["lambda"]
+        params = self._params()
+        key = (method, lam, tuple(sorted(params.items())))
+        if key != self._completion_key:
+            M, model = self.model.MODEL, self.model
+            A = _Jet(model.A_jet, params) if M["A_varies"] else model.A_jet(0.0, params, 0)[0]
+            B = _Jet(model.B_jet, params) if M["B_varies"] else model.B_jet(0.0, params, 0)[0]
+            f = _Jet(model.f_jet, params) if M["f_varies"] else model.f_jet(0.0, params, 0)[0]
+            dae = LinearDAE(A, B, f)
+            span = (M["start"], M["stop"]) if not dae.is_constant else None
+            self._completion = complete(dae, method, lam=lam, k=M["k"], t_span=span)
+            self._completion_key = key
+        return self._completion
+
+    def _residual_norm(self):
+        try:
+            return float(np.linalg.norm(self.completion().constraint_residual(self.t, self.x)))
+        except Exception:  # never let a getter kill the instance
+            return float("nan")
+
+    # -- FMI calls -------------------------------------------------------------
+    def setup(self, start_time):
+        self.t = float(start_time)
+
+    def initialize(self):
+        self.x = np.array([self.values[s["name"] + "_0"] for s in self.model.MODEL["states"]], dtype=float)
+        if self.values["project_initial"] and not self.errors:
+            try:
+                self.x = self.completion().project(self.t, self.x)
+            except Exception as exc:
+                self.errors["project_initial"] = str(exc)
+                self._log_error(f"projecting the initial state failed: {exc}")
+
+    def step(self, t, h):
+        if self.errors:
+            for name, msg in self.errors.items():
+                self._log_error(f"doStep at t={t!r} discarded: {name} was set to an invalid value ({msg})")
+            return False
+        try:
+            c = self.completion()
+            method = SOLVERS[self.values["solver"]]
+            options = {"jac": c.jac} if method in ("Radau", "BDF") else {}
+            sol = solve_ivp(c.rhs, (t, t + h), self.x, method=method, rtol=self.values["rtol"], atol=self.values["atol"],
+                            t_eval=None, **options)
+        except Exception as exc:
+            self._log_error(f"doStep at t={t!r} failed: {type(exc).__name__}: {exc}")
+            return False
+        if not sol.success or not np.all(np.isfinite(sol.y[:, -1])):
+            self._log_error(f"doStep at t={t!r}, h={h!r} failed: {sol.message}")
+            return False
+        self.x = sol.y[:, -1].copy()
+        self.t = t + h
+        return True
+
+    def get_state(self):
+        return {"t": self.t, "x": self.x.tolist(), "values": dict(self.values), "errors": dict(self.errors)}
+
+    def set_state(self, state):
+        self.t = float(state["t"])
+        self.x = np.array(state["x"], dtype=float)
+        self.values = dict(state["values"])
+        self.errors = dict(state["errors"])
