@@ -124,7 +124,7 @@ class LscRuntime:
         return None
 
     def _log_error(self, msg):
-        from pythonfmu import Fmi2Status
+        from pythonfmu.enums import Fmi2Status
 
         self.slave.log(msg, status=Fmi2Status.error)
 

@@ -1,0 +1,116 @@
+"""Run a built FMU in this (fresh) process and report JSON: used by test_fmu.py.
+
+Reads a scenario from stdin:
+  {"fmu": path, "start_values": {...}, "t0": 0, "dt": 0.1, "steps": N,
+   "set_at": {"i": {name: value}}, "outputs": [...], "rollback_at": i,
+   "block": ["lsc", "sympy"]}
+and prints {"time", "values", "status", "logs", "rollback"}.
+FMUs are exercised in a subprocess because a pythonfmu FMU loaded into a
+process that already imported its modules silently runs the host's copy.
+"""
+import json
+import sys
+
+
+class _Blocker:
+    def __init__(self, names):
+        self.names = set(names)
+
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in self.names:
+            raise ImportError(f"import of {name!r} blocked by the test")
+        return None
+
+
+def main():
+    sc = json.load(sys.stdin)
+    if sc.get("block"):
+        sys.meta_path.insert(0, _Blocker(sc["block"]))
+    from ctypes import byref
+
+    from fmpy import extract, read_model_description
+    from fmpy.fmi1 import FMICallException
+    from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, defaultCallbacks
+    from fmpy.logging import addLoggerProxy
+
+    logs = []
+
+    def logger(env, instance, status, category, message):
+        logs.append(message.decode("utf-8", "replace"))
+
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+    callbacks.allocateMemory = defaultCallbacks.allocateMemory
+    callbacks.freeMemory = defaultCallbacks.freeMemory
+    addLoggerProxy(byref(callbacks))
+
+    md = read_model_description(sc["fmu"])
+    var = {v.name: v for v in md.modelVariables}
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(sc["fmu"]), modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName="instance")
+    fmu.instantiate(callbacks=callbacks, loggingOn=True)
+
+    def set_values(values):
+        for name, value in values.items():
+            v = var[name]
+            if v.type == "Real":
+                fmu.setReal([v.valueReference], [float(value)])
+            elif v.type == "Integer":
+                fmu.setInteger([v.valueReference], [int(value)])
+            else:
+                fmu.setBoolean([v.valueReference], [bool(value)])
+
+    outputs = sc["outputs"]
+
+    def read():
+        return fmu.getReal([var[n].valueReference for n in outputs])
+
+    t, dt = sc.get("t0", 0.0), sc["dt"]
+    fmu.setupExperiment(startTime=t)
+    fmu.enterInitializationMode()
+    set_values(sc.get("start_values", {}))
+    fmu.exitInitializationMode()
+    times, values, status, rollback = [t], [read()], [], None
+    for i in range(sc["steps"]):
+        if str(i) in sc.get("set_at", {}):
+            set_values(sc["set_at"][str(i)])
+        if sc.get("rollback_at") == i:
+            state = fmu.getFMUstate()
+            blob = fmu.serializeFMUstate(state)
+            fmu.doStep(t, dt)
+            first = read()
+            fmu.doStep(t + dt, dt)
+            first2 = read()
+            fmu.setFMUstate(fmu.deSerializeFMUstate(blob))
+            fmu.doStep(t, dt)
+            second = read()
+            fmu.doStep(t + dt, dt)
+            second2 = read()
+            fmu.setFMUstate(state)
+            rollback = {"first": [first, first2], "second": [second, second2]}
+        try:
+            fmu.doStep(t, dt)
+            status.append("ok")
+            t += dt
+        except FMICallException as exc:
+            status.append("discard" if exc.status == 2 else f"status {exc.status}")
+        times.append(t)
+        values.append(read())
+    fmu.terminate()
+    # Free the instance but keep the library loaded: unloading pythonfmu's
+    # library tears down its embedded-interpreter thread, which intermittently
+    # aborts the host at exit ("corrupted double-linked list").
+    fmu.fmi2FreeInstance(fmu.component)
+    print(json.dumps({"time": times, "values": {n: [row[j] for row in values] for j, n in enumerate(outputs)},
+                      "status": status, "logs": logs, "rollback": rollback}), flush=True)
+    # Skip interpreter finalization: with a pythonfmu FMU loaded, the host
+    # intermittently aborts at exit ("corrupted double-linked list", seen for
+    # one of 16 FMUs here) after all work is done. Known issue, not ours to
+    # mask in results: everything above has already been reported.
+    import os
+
+    os._exit(0)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,204 @@
+"""FMUs built by fmu_build, exercised in subprocesses (fmpy) against the library."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pythonfmu")
+fmpy_validation = pytest.importorskip("fmpy.validation")
+
+import lsc  # noqa: E402
+from fmu_build import SpecError, build_fmu, load_spec, parse_spec  # noqa: E402
+from lsc import gallery  # noqa: E402
+
+HERE = Path(__file__).parent
+ROOT = HERE.parent
+SPEC = ROOT / "examples" / "specs" / "prescribed_path.toml"
+TOL = {"rtol": 1e-10, "atol": 1e-12}
+
+
+def run(scenario):
+    out = subprocess.run([sys.executable, str(HERE / "fmu_runner.py")], input=json.dumps(scenario), capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def library(completion, t_span, x0, t_eval, lam_switch=None):
+    res = lsc.solve_completion(completion, t_span, x0, t_eval=t_eval, method="DOP853", rtol=1e-12, atol=1e-14)
+    assert res.success
+    return res
+
+
+# (name, how to build, states, index, constant?)
+PROBLEMS = {
+    "path": (lambda d, **kw: build_fmu(SPEC, d, **kw), gallery.prescribed_path, ["y", "v", "u"]),
+    "mechanical": (lambda d, **kw: build_fmu(gallery.mechanical().dae, d, model_name="Mechanical", **kw), gallery.mechanical, None),
+    "example1": (lambda d, **kw: build_fmu(gallery.thesis_example1().dae, d, model_name="Example1", **kw), gallery.thesis_example1, None),
+    "example3": (lambda d, **kw: build_fmu(gallery.thesis_example3().dae, d, model_name="Example3", **kw), gallery.thesis_example3, None),
+}
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory):
+    out = {}
+    for key, (make, _, _) in PROBLEMS.items():
+        for method, lam in [("standard", None), ("stabilized", 2.0), ("alternative", 2.0)]:
+            out[key, method] = make(tmp_path_factory.mktemp(f"{key}-{method}"), method=method, lam=lam)
+    return out
+
+
+def test_every_built_fmu_is_valid(fmus):
+    for path in fmus.values():
+        assert fmpy_validation.validate_fmu(str(path)) == []
+
+
+@pytest.mark.parametrize("key", sorted(PROBLEMS))
+@pytest.mark.parametrize("method, lam", [("standard", None), ("stabilized", 2.0), ("alternative", 2.0), ("alternative", 5.0)])
+def test_round_trip_matches_library_and_exact(fmus, key, method, lam):
+    _, problem, names = PROBLEMS[key]
+    p = problem()
+    n = p.dae.n
+    names = names or [f"x{i + 1}" for i in range(n)]
+    t0 = 0.0
+    dt, steps = 0.1, 10
+    x0 = p.exact(t0) + 1e-3 * np.linspace(1.0, -1.0, n)
+    start = {f"{s}_0": float(v) for s, v in zip(names, x0)}
+    start.update(TOL)
+    if lam is not None:
+        start["lambda"] = lam
+    r = run({"fmu": str(fmus[key, method]), "dt": dt, "steps": steps, "outputs": names + ["constraint_residual"],
+             "start_values": start})
+    assert r["status"] == ["ok"] * steps
+    t = np.array(r["time"])
+    X = np.array([r["values"][s] for s in names])
+    span = None if p.dae.is_constant else (0.0, 1.0)
+    c = lsc.complete(p.dae, method, lam=lam, t_span=span)
+    ref = library(c, (t0, t[-1]), x0, t)
+    np.testing.assert_allclose(X, ref.x, rtol=1e-8, atol=1e-8 * np.abs(ref.x).max())
+    np.testing.assert_allclose(r["values"]["constraint_residual"], ref.residual, rtol=1e-6, atol=1e-10)
+    if method != "standard" and key in ("path", "example1"):
+        # a single solution curve: the stabilized completions pull back onto it
+        err = np.abs(X[:, -1] - p.exact(t[-1])).max()
+        assert err < 1e-3 * np.exp(-lam * 1.0) * 10
+
+
+def test_lambda_change_takes_effect_at_next_step(fmus):
+    p = gallery.prescribed_path()
+    x0 = p.exact(0.0) + 1e-3
+    start = {"y_0": x0[0], "v_0": x0[1], "u_0": x0[2], **TOL}
+    r = run({"fmu": str(fmus["path", "alternative"]), "dt": 0.1, "steps": 10, "outputs": ["constraint_residual"],
+             "start_values": start, "set_at": {"5": {"lambda": 6.0}}})
+    res = np.array(r["values"]["constraint_residual"])
+    ratios = res[1:] / res[:-1]
+    np.testing.assert_allclose(ratios[:5], np.exp(-2.0 * 0.1), rtol=1e-6)
+    np.testing.assert_allclose(ratios[5:], np.exp(-6.0 * 0.1), rtol=1e-6)
+
+
+def test_rollback_repeats_steps_bit_for_bit(fmus):
+    r = run({"fmu": str(fmus["example1", "alternative"]), "dt": 0.05, "steps": 6, "outputs": ["x1", "x2", "constraint_residual"],
+             "start_values": {"x1_0": 0.1, "x2_0": -0.9}, "rollback_at": 3})
+    assert r["rollback"]["first"] == r["rollback"]["second"]
+    assert r["status"] == ["ok"] * 6
+
+
+@pytest.mark.parametrize("name, value, fragment", [
+    ("lambda", -1.0, "lambda must be positive"),
+    ("lambda", float("nan"), "not finite"),
+    ("method", 7, "method must be 0 (standard), 1 (stabilized) or 2 (alternative)"),
+    ("rtol", 0.0, "rtol must be positive"),
+])
+def test_bad_values_discard_with_a_readable_log_and_recover(fmus, name, value, fragment):
+    good = {"lambda": 2.0, "method": 2, "rtol": 1e-6}[name]
+    r = run({"fmu": str(fmus["path", "alternative"]), "dt": 0.1, "steps": 6, "outputs": ["y", "constraint_residual"],
+             "set_at": {"2": {name: value}, "4": {name: good}}})
+    assert r["status"] == ["ok", "ok", "discard", "discard", "ok", "ok"]
+    assert any(fragment in msg for msg in r["logs"]), r["logs"]
+    assert all(np.isfinite(r["values"]["y"]))
+
+
+def test_fmu_runs_without_lsc_and_sympy_in_the_host(fmus):
+    scenario = {"fmu": str(fmus["mechanical", "stabilized"]), "dt": 0.1, "steps": 5, "outputs": ["x1", "x5"],
+                "start_values": TOL}
+    plain = run(scenario)
+    blocked = run({**scenario, "block": ["lsc", "sympy"]})
+    assert blocked["values"] == plain["values"]
+    assert blocked["status"] == ["ok"] * 5
+
+
+def test_variable_communication_step_sizes(fmus, tmp_path):
+    # two runs with different step sequences land on the same state at t = 1
+    a = run({"fmu": str(fmus["path", "alternative"]), "dt": 0.25, "steps": 4, "outputs": ["y", "u"], "start_values": TOL})
+    b = run({"fmu": str(fmus["path", "alternative"]), "dt": 0.125, "steps": 8, "outputs": ["y", "u"], "start_values": TOL})
+    np.testing.assert_allclose([a["values"]["y"][-1], a["values"]["u"][-1]], [b["values"]["y"][-1], b["values"]["u"][-1]], rtol=1e-8)
+
+
+def test_model_description_units_and_structure(fmus):
+    from fmpy import read_model_description
+
+    md = read_model_description(str(fmus["path", "alternative"]))
+    var = {v.name: v for v in md.modelVariables}
+    assert var["y"].unit == "m" and var["u"].unit == "N" and var["m"].unit == "kg" and var["lambda"].unit == "1/s"
+    assert var["lambda"].variability == "tunable" and var["lambda"].causality == "parameter"
+    assert var["m"].variability == "fixed" and var["k"].variability == "tunable"
+    assert all(v.description for v in md.modelVariables)
+    assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
+    assert (md.defaultExperiment.startTime, md.defaultExperiment.stopTime, md.defaultExperiment.stepSize) == ("0.0", "10.0", "0.01")
+    assert {u.variable.name for u in md.outputs} == {"y", "v", "u", "constraint_residual"}
+    assert {u.variable.name for u in md.initialUnknowns} == {"y", "v", "u", "constraint_residual"}
+
+
+def test_spec_reports_every_problem_at_once():
+    bad = {
+        "model": {"name": "1bad"},
+        "states": {"x": {}, "lambda": {}},
+        "parameters": {"p": {"value": "one"}},
+        "equations": {"A": [[1, 0], [0, "__import__('os')"]], "B": [[1, "x.real"], ["q", 0]], "f": [0, "open('f')"]},
+        "completion": {"method": "magic", "lam": -1},
+        "experiment": {"start": 1.0, "stop": 0.5},
+    }
+    with pytest.raises(SpecError) as info:
+        parse_spec(bad)
+    msg = str(info.value)
+    for fragment in [
+        "model.name: '1bad' is not a valid identifier",
+        "states.lambda: 'lambda' is not a valid identifier",
+        "parameters.p.value: expected a number",
+        "equations.A[1][1]: call of '__import__' is not allowed",
+        "equations.B[0][1]: attribute access not allowed",
+        "equations.B[1][0]: unknown name 'q'",
+        "equations.f[1]: call of 'open' is not allowed",
+        "completion.method: must be one of",
+        "completion.lam: must be positive",
+        "experiment.stop: must be greater than experiment.start",
+    ]:
+        assert fragment in msg, fragment
+    assert len(info.value.problems) == 10
+
+
+def test_unsolvable_spec_writes_no_fmu(tmp_path):
+    spec = {"model": {"name": "Singular"}, "states": {"a": {}, "b": {}},
+            "equations": {"A": [[1, 0], [0, 0]], "B": [[0, 1], [0, 0]], "f": [0, 0]}}
+    with pytest.raises(lsc.IndexDeterminationError, match="singular"):
+        build_fmu(spec, tmp_path)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cli(tmp_path):
+    ok = subprocess.run([sys.executable, "-m", "fmu_build", "build", str(SPEC), "-o", str(tmp_path), "--lam", "3"],
+                        capture_output=True, text=True, timeout=300)
+    assert ok.returncode == 0, ok.stderr
+    assert Path(ok.stdout.strip()).name == "PrescribedPath.fmu"
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[model]\nname = "B"\n[states]\nx = {}\n[equations]\nA = [[1]]\nB = [["os.system"]]\n')
+    err = subprocess.run([sys.executable, "-m", "fmu_build", "build", str(bad), "-o", str(tmp_path)], capture_output=True,
+                         text=True, timeout=300)
+    assert err.returncode == 2 and "attribute access not allowed" in err.stderr
+
+
+def test_example_spec_loads():
+    spec = load_spec(SPEC)
+    assert spec.name == "PrescribedPath" and spec.n == 3 and spec.method == "alternative"
