@@ -20,7 +20,10 @@ import math
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from . import LinearDAE, complete
+try:  # inside a built FMU this module sits in the private copy of lsc
+    from . import LinearDAE, complete
+except ImportError:  # imported from fmu_build itself (documentation, tests)
+    from lsc import LinearDAE, complete
 
 METHODS = ("standard", "stabilized", "alternative")
 SOLVERS = ("RK45", "DOP853", "Radau", "BDF")
