@@ -132,7 +132,7 @@ class {name}(Fmi2Slave):
         self.rt = LscRuntime(self, MODEL)
 
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
-        self.rt.setup(start_time)
+        self.rt.setup(start_time, stop_time)
 
     def exit_initialization_mode(self):
         self.rt.initialize()

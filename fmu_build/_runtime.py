@@ -10,15 +10,22 @@ Design rules, from pythonfmu's behaviour:
   valid value is set. No step ever runs on a bad value.
 - The completion is rebuilt only when something it depends on changed
   (``lambda``, ``method`` or a parameter); otherwise it is reused.
+- One ODE solver runs across communication steps; a step end is read from
+  the solver's dense output, so a communication step costs a few Python
+  calls, not a fresh integration. The solver restarts from the current
+  state when anything it depends on changes (``lambda``, ``method``, a
+  parameter, ``solver``, tolerances, the time given by the master) and
+  when a snapshot is taken or restored.
 - The FMU state snapshot holds everything the next step depends on: time,
-  the continuous state, every variable value and the pending errors, so a
-  master can roll back and repeat a step bit for bit.
+  the continuous state, every variable value and the pending errors; since
+  taking a snapshot restarts the solver there, a master can roll back and
+  repeat a step bit for bit.
 """
 
 import math
 
 import numpy as np
-from scipy.integrate import solve_ivp
+from scipy.integrate import BDF, DOP853, RK45, Radau
 
 try:  # inside a built FMU this module sits in the private copy of lsc
     from . import LinearDAE, complete
@@ -27,6 +34,7 @@ except ImportError:  # imported from fmu_build itself (documentation, tests)
 
 METHODS = ("standard", "stabilized", "alternative")
 SOLVERS = ("RK45", "DOP853", "Radau", "BDF")
+_SOLVER_CLASSES = {"RK45": RK45, "DOP853": DOP853, "Radau": Radau, "BDF": BDF}
 
 
 class _Jet:
@@ -56,6 +64,10 @@ class LscRuntime:
         self.x = np.array([s["start"] for s in M["states"]], dtype=float)
         self._completion = None
         self._completion_key = None
+        self._dirty = True  # a value the completion depends on may have changed
+        self.t_stop = M["stop"]
+        self._solver = None
+        self._dense = None  # (t_lo, t_hi, interpolant) of the solver's last step
 
         par, out = Fmi2Causality.parameter, Fmi2Causality.output
         fixed, tunable, cont = Fmi2Variability.fixed, Fmi2Variability.tunable, Fmi2Variability.continuous
@@ -105,6 +117,10 @@ class LscRuntime:
                             "and doStep will discard until a valid value is set")
             return
         self.errors.pop(name, None)
+        if name in ("solver", "rtol", "atol"):
+            self._solver = None
+        else:
+            self._dirty = True
         if name in ("method", "solver", "project_initial"):
             value = int(value) if name != "project_initial" else bool(value)
         else:
@@ -136,6 +152,9 @@ class LscRuntime:
         return {p["name"]: self.values[p["name"]] for p in self.model.MODEL["parameters"]}
 
     def completion(self):
+        if self._completion is not None and not self._dirty:
+            return self._completion
+        self._dirty = False
         method = METHODS[self.values["method"]]
         lam = None if method == "standard" else self.values["lambda"]
         params = self._params()
@@ -149,6 +168,7 @@ class LscRuntime:
             span = (M["start"], M["stop"]) if not dae.is_constant else None
             self._completion = complete(dae, method, lam=lam, k=M["k"], t_span=span)
             self._completion_key = key
+            self._solver = None
         return self._completion
 
     def _residual_norm(self):
@@ -158,11 +178,15 @@ class LscRuntime:
             return float("nan")
 
     # -- FMI calls -------------------------------------------------------------
-    def setup(self, start_time):
+    def setup(self, start_time, stop_time=None):
         self.t = float(start_time)
+        if stop_time is not None:
+            self.t_stop = float(stop_time)
+        self._solver = None
 
     def initialize(self):
         self.x = np.array([self.values[s["name"] + "_0"] for s in self.model.MODEL["states"]], dtype=float)
+        self._solver = None
         if self.values["project_initial"] and not self.errors:
             try:
                 self.x = self.completion().project(self.t, self.x)
@@ -170,32 +194,67 @@ class LscRuntime:
                 self.errors["project_initial"] = str(exc)
                 self._log_error(f"projecting the initial state failed: {exc}")
 
+    def _start_solver(self, c, target):
+        name = SOLVERS[self.values["solver"]]
+        options = {"jac": c.jac} if name in ("Radau", "BDF") else {}
+        # Integrate up to the experiment's stop time (never past it) unless a
+        # master steps beyond it.
+        bound = self.t_stop if target <= self.t_stop else np.inf
+        self._solver = _SOLVER_CLASSES[name](c.rhs, self.t, self.x, bound, rtol=self.values["rtol"],
+                                             atol=self.values["atol"], **options)
+        self._dense = None
+
     def step(self, t, h):
         if self.errors:
             for name, msg in self.errors.items():
                 self._log_error(f"doStep at t={t!r} discarded: {name} was set to an invalid value ({msg})")
             return False
+        target = t + h
         try:
             c = self.completion()
-            method = SOLVERS[self.values["solver"]]
-            options = {"jac": c.jac} if method in ("Radau", "BDF") else {}
-            sol = solve_ivp(c.rhs, (t, t + h), self.x, method=method, rtol=self.values["rtol"], atol=self.values["atol"],
-                            t_eval=None, **options)
+            if abs(t - self.t) > 1e-12 * max(1.0, abs(t)):
+                # the master's time rules (e.g. after a rollback done its own way)
+                self._solver = None
+            self.t = float(t)
+            if self._solver is None or target > self._solver.t_bound:
+                self._start_solver(c, target)
+            solver = self._solver
+            while solver.t < target:
+                message = solver.step()
+                if solver.status == "failed":
+                    self._solver = None
+                    self._log_error(f"doStep at t={t!r}, h={h!r} failed: {message}")
+                    return False
+                self._dense = (solver.t_old, solver.t, solver.dense_output())
+            if target == solver.t:
+                x = solver.y.copy()
+            else:
+                lo, hi, interpolant = self._dense
+                x = interpolant(target)
         except Exception as exc:
+            self._solver = None
             self._log_error(f"doStep at t={t!r} failed: {type(exc).__name__}: {exc}")
             return False
-        if not sol.success or not np.all(np.isfinite(sol.y[:, -1])):
-            self._log_error(f"doStep at t={t!r}, h={h!r} failed: {sol.message}")
+        if not np.all(np.isfinite(x)):
+            self._solver = None
+            self._log_error(f"doStep at t={t!r}, h={h!r} produced non-finite values")
             return False
-        self.x = sol.y[:, -1].copy()
-        self.t = t + h
+        self.x = x
+        self.t = target
         return True
 
     def get_state(self):
-        return {"t": self.t, "x": self.x.tolist(), "values": dict(self.values), "errors": dict(self.errors)}
+        # Restart the solver here, so that stepping on from this snapshot now
+        # and after restoring it later start identically.
+        self._solver = None
+        return {"t": self.t, "x": self.x.tolist(), "values": dict(self.values), "errors": dict(self.errors),
+                "t_stop": self.t_stop}
 
     def set_state(self, state):
         self.t = float(state["t"])
         self.x = np.array(state["x"], dtype=float)
         self.values = dict(state["values"])
         self.errors = dict(state["errors"])
+        self.t_stop = float(state["t_stop"])
+        self._solver = None
+        self._dirty = True

@@ -79,7 +79,8 @@ def test_round_trip_matches_library_and_exact(fmus, key, method, lam):
     c = lsc.complete(p.dae, method, lam=lam, t_span=span)
     ref = library(c, (t0, t[-1]), x0, t)
     np.testing.assert_allclose(X, ref.x, rtol=1e-8, atol=1e-8 * np.abs(ref.x).max())
-    np.testing.assert_allclose(r["values"]["constraint_residual"], ref.residual, rtol=1e-6, atol=1e-10)
+    # the residual amplifies state differences (e^{alpha t} in Example 3): tolerance follows the states
+    np.testing.assert_allclose(r["values"]["constraint_residual"], ref.residual, rtol=1e-6, atol=1e-9)
     if method != "standard" and key in ("path", "example1"):
         # a single solution curve: the stabilized completions pull back onto it
         err = np.abs(X[:, -1] - p.exact(t[-1])).max()
