@@ -12,7 +12,16 @@ def main(argv=None):
     build.add_argument("--method", choices=["standard", "stabilized", "alternative"], help="override the completion method")
     build.add_argument("--lam", type=float, help="override the stabilization rate")
     build.add_argument("--name", help="override the model name")
+    sub.add_parser("env", help="print the shell exports a native (non-Python) FMI host needs")
     args = parser.parse_args(argv)
+
+    if args.command == "env":
+        from ._host import native_host_env
+
+        env = native_host_env({})
+        for key in ("LD_PRELOAD", "PYTHONHOME", "PYTHONPATH"):
+            print(f"export {key}='{env[key]}'")
+        return 0
 
     from ._build import build_fmu
     from ._spec import SpecError

@@ -33,8 +33,23 @@ def library(completion, t_span, x0, t_eval, lam_switch=None):
     return res
 
 
-# (name, how to build, states, index, constant?)
+def chain4():
+    """N x' + x = f, N a 4x4 shift (index 4); x = sum (-1)^i N^i f^(i) exactly."""
+    import sympy
+
+    from lsc.gallery import Problem, _lambdified_exact
+
+    t = sympy.Symbol("t")
+    f = sympy.Matrix([sympy.sin(t), sympy.cos(2 * t), sympy.exp(-t), 1 + t**2 / 2])
+    N = sympy.Matrix(4, 4, lambda i, j: 1 if j == i + 1 else 0)
+    x = sum(((-1) ** i * N**i * f.diff(t, i) for i in range(4)), sympy.zeros(4, 1))
+    dae = lsc.LinearDAE(np.eye(4, k=1), np.eye(4), f)
+    return Problem("chain4", dae, (0.0, 1.0), _lambdified_exact(x, t), 4, [], (4,))
+
+
+# (how to build, the problem, state names)
 PROBLEMS = {
+    "chain4": (lambda d, **kw: build_fmu(chain4().dae, d, model_name="Chain4", **kw), chain4, None),
     "path": (lambda d, **kw: build_fmu(SPEC, d, **kw), gallery.prescribed_path, ["y", "v", "u"]),
     "mechanical": (lambda d, **kw: build_fmu(gallery.mechanical().dae, d, model_name="Mechanical", **kw), gallery.mechanical, None),
     "example1": (lambda d, **kw: build_fmu(gallery.thesis_example1().dae, d, model_name="Example1", **kw), gallery.thesis_example1, None),
@@ -81,7 +96,7 @@ def test_round_trip_matches_library_and_exact(fmus, key, method, lam):
     np.testing.assert_allclose(X, ref.x, rtol=1e-8, atol=1e-8 * np.abs(ref.x).max())
     # the residual amplifies state differences (e^{alpha t} in Example 3): tolerance follows the states
     np.testing.assert_allclose(r["values"]["constraint_residual"], ref.residual, rtol=1e-6, atol=1e-9)
-    if method != "standard" and key in ("path", "example1"):
+    if method != "standard" and key in ("path", "example1", "chain4"):
         # a single solution curve: the stabilized completions pull back onto it
         err = np.abs(X[:, -1] - p.exact(t[-1])).max()
         assert err < 1e-3 * np.exp(-lam * 1.0) * 10
@@ -231,3 +246,57 @@ def test_lambda_set_through_libcosim_changes_the_decay(fmus):
     ratios = c[1:] / c[:-1]
     np.testing.assert_allclose(ratios[:4], np.exp(-0.3), rtol=1e-6)
     np.testing.assert_allclose(ratios[-4:], np.exp(-0.6), rtol=1e-6)
+
+
+def _ecos():
+    ecospy = pytest.importorskip("ecospy")
+    exe = Path(ecospy.__file__).parent / "binaries" / "ecos"
+    if not exe.exists():
+        pytest.skip("ecospy ships no ecos binary for this platform")
+    exe.chmod(exe.stat().st_mode | 0o111)
+    return exe
+
+
+def test_native_ecos_host_runs_the_fmu_with_the_recipe(fmus, tmp_path):
+    from fmu_build import native_host_env
+
+    exe = _ecos()
+    fmu = fmus["path", "alternative"]
+    cmd = [str(exe), "simulate", "--path", str(fmu), "--stopTime", "1", "--stepSize", "0.1", "-l", "err"]
+    out = subprocess.run(cmd, cwd=tmp_path, env=native_host_env(), capture_output=True, text=True, timeout=300)
+    # The exit status is checked in test_native_host_exits_cleanly (known teardown crash).
+    csv = tmp_path / "PrescribedPath.csv"
+    assert csv.exists(), out.stdout[-2000:]
+    header = [h.strip() for h in csv.read_text().splitlines()[0].split(",")]
+    rows = np.loadtxt(csv, delimiter=",", skiprows=1)
+    col = {h.split("::")[-1].split("[")[0]: i for i, h in enumerate(header)}
+    ref = run({"fmu": str(fmu), "dt": 0.1, "steps": 10, "outputs": ["y", "v", "u"]})
+    for name in ("y", "v", "u"):
+        np.testing.assert_allclose(rows[:, col[name]], ref["values"][name], atol=2e-6)  # the CSV has 6 decimals
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "known issue: after writing every result, ecos segfaults at teardown in about 2 of 3 runs when the "
+    "FMU's embedded Python has imported scipy.integrate (a trivial pythonfmu FMU, or one importing only "
+    "numpy or scipy.linalg, exits cleanly 8 of 8); not fixed yet"))
+def test_native_host_exits_cleanly(fmus, tmp_path):
+    from fmu_build import native_host_env
+
+    exe = _ecos()
+    codes = []
+    for i in range(3):
+        run_dir = tmp_path / str(i)
+        run_dir.mkdir()
+        out = subprocess.run([str(exe), "simulate", "--path", str(fmus["path", "alternative"]), "--stopTime", "1",
+                              "--stepSize", "0.1", "-l", "err"], cwd=run_dir, env=native_host_env(), capture_output=True,
+                             timeout=300)
+        codes.append(out.returncode)
+    assert codes == [0, 0, 0]
+
+
+def test_native_host_without_the_recipe_fails(fmus, tmp_path):
+    exe = _ecos()
+    env = {k: v for k, v in __import__("os").environ.items() if k not in ("LD_PRELOAD", "PYTHONHOME", "PYTHONPATH")}
+    subprocess.run([str(exe), "simulate", "--path", str(fmus["path", "alternative"]), "--stopTime", "1", "--stepSize", "0.1",
+                    "-l", "err"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    assert not (tmp_path / "PrescribedPath.csv").exists()  # silently nothing: hence the recipe
