@@ -55,27 +55,63 @@ def _spec_from_dae(dae):
         raise SpecError(problems, source="dae")
     states = [{"name": f"x{i + 1}", "unit": "", "description": f"unknown x[{i + 1}]", "start": 0.0} for i in range(n)]
     return ModelSpec(name="LinearDAE", description="linear DAE A x' + B x = f(t)", states=states, parameters=[],
-                     A=A.subs(subs), B=B.subs(subs), f=f.subs(subs), t=t, symbols={}, method="alternative", lam=1.0,
+                     A=A.subs(subs), B=B.subs(subs), f=f.subs(subs), t=t, symbols={}, inputs=[], input_symbols={},
+                     method="alternative", lam=1.0,
                      k=None, experiment={"start": 0.0, "stop": 1.0, "step": 0.01})
 
 
-def _jet_source(name, M, t, params, order_max, shape):
-    """Python source of ``name(t, p, order)`` returning derivatives 0..order (numpy, math)."""
+def _input_derivatives(expr_matrix, t, input_symbols, order_max):
+    """Derivatives 0..order_max of a matrix with inputs as functions of t.
+
+    Returns a list of matrices in which the j-th derivative of input ``u`` is
+    the symbol ``u__j`` (chain rule done by sympy at build time).
+    """
+    import sympy
+
+    funcs = {u: sympy.Function(f"{name}__fn")(t) for name, u in input_symbols.items()}
+    M = sympy.Matrix(expr_matrix).subs(funcs)
+    out = []
+    for d in range(order_max + 1):
+        D = M if d == 0 else M.diff(t, d)
+        for name, u in input_symbols.items():
+            fn = funcs[u]
+            for j in range(d, 0, -1):
+                D = D.subs(fn.diff(t, j), sympy.Symbol(f"{name}__{j}", real=True))
+            D = D.subs(fn, sympy.Symbol(f"{name}__0", real=True))
+        out.append(D)
+    return out
+
+
+def _jet_source(name, M, t, params, order_max, shape, input_symbols=None):
+    """Python source of ``name(t, p, order[, U])`` returning derivatives 0..order (numpy, math).
+
+    With inputs, ``U[name][j]`` is the j-th derivative of input ``name``.
+    """
     import sympy
     from sympy.printing.pycode import pycode
 
-    lines = [f"def {name}(t, p, order):"]
+    input_symbols = input_symbols or {}
+    # argument names cannot clash with spec names (identifiers never start with "_lsc_")
+    lines = [f"def {name}(t, _lsc_params, order{', _lsc_inputs' if input_symbols else ''}):"]
     for pname in params:
-        lines.append(f"    {pname} = p[{pname!r}]")
+        lines.append(f"    {pname} = _lsc_params[{pname!r}]")
+    for iname in input_symbols:
+        for j in range(order_max + 1):
+            lines.append(f"    {iname}__{j} = _lsc_inputs[{iname!r}][{j}]")
     lines.append(f"    out = np.zeros((order + 1,) + {shape!r})")
     lines.append(f"    if order > {order_max}:")
     lines.append(f"        raise ValueError('{name}: derivatives up to order {order_max} were generated; {{order}} asked'.format(order=order))")
+    derivs = _input_derivatives(M, t, input_symbols, order_max) if input_symbols else None
     D = sympy.Matrix(M)
     for d in range(order_max + 1):
-        if d:
+        if derivs is not None:
+            D = derivs[d]
+        elif d:
             D = D.diff(t)
         if D.is_zero_matrix:
-            break
+            if derivs is None:
+                break
+            continue
         rows = [[pycode(sympy.nsimplify(e) if e.is_Rational else e) for e in D.row(i)] for i in range(D.rows)]
         body = "[" + ", ".join("[" + ", ".join(r) + "]" for r in rows) + "]"
         if len(shape) == 1:
@@ -86,7 +122,43 @@ def _jet_source(name, M, t, params, order_max, shape):
     return "\n".join(lines)
 
 
-def _model_source(spec, k):
+def _needed_input_orders(spec, dae, k):
+    """Highest derivative of each input the completions can use (none estimated beyond).
+
+    For constant coefficients the forcing is ``W @ [f; f'; ...]``: a block of
+    ``W`` that is zero for every method means that derivative of that
+    component of ``f`` is never used, so the input derivatives only it needs
+    are never estimated. Time-varying coefficients: every order may be used.
+    """
+    import sympy
+
+    if not spec.inputs:
+        return {}
+    n = spec.n
+    order = k + 1
+    used = np.ones((order + 1, n), dtype=bool)
+    if dae.is_constant:
+        used[:] = False
+        for method in METHODS:
+            c = lsc.complete(dae, method, lam=None if method == "standard" else spec.lam, k=k)
+            W = c._W
+            scale = np.abs(W).max() or 1.0
+            for d in range(W.shape[1] // n):
+                used[d] |= np.abs(W[:, d * n:(d + 1) * n]).max(axis=0) > 1e-13 * scale
+    derivs = _input_derivatives(spec.f, spec.t, spec.input_symbols, order)
+    need = {}
+    for name in spec.input_symbols:
+        orders = [-1]
+        for d in range(order + 1):
+            for i in range(n):
+                if used[d, i]:
+                    names = {str(s) for s in derivs[d][i].free_symbols}
+                    orders += [j for j in range(order + 1) if f"{name}__{j}" in names]
+        need[name] = max(orders)
+    return need
+
+
+def _model_source(spec, k, dae):
     t = spec.t
     params = [p["name"] for p in spec.parameters]
     n = spec.n
@@ -94,7 +166,9 @@ def _model_source(spec, k):
     model = {
         "name": spec.name, "states": spec.states, "parameters": spec.parameters, "method": spec.method,
         "lam": spec.lam, "k": k, "start": spec.experiment["start"], "stop": spec.experiment["stop"],
-        "A_varies": t in spec.A.free_symbols, "B_varies": t in spec.B.free_symbols, "f_varies": t in spec.f.free_symbols,
+        "A_varies": t in spec.A.free_symbols, "B_varies": t in spec.B.free_symbols,
+        "f_varies": t in spec.f.free_symbols or bool(spec.inputs),
+        "inputs": spec.inputs, "input_orders": _needed_input_orders(spec, dae, k),
     }
     parts = [
         '"""Generated by fmu_build: the model data and exact derivatives (no sympy at run time)."""',
@@ -107,7 +181,7 @@ def _model_source(spec, k):
         "",
         _jet_source("B_jet", spec.B, t, params, order_max, (n, n)),
         "",
-        _jet_source("f_jet", spec.f, t, params, order_max, (n,)),
+        _jet_source("f_jet", spec.f, t, params, order_max, (n,), spec.input_symbols),
         "",
     ]
     return "\n".join(parts)
@@ -210,7 +284,7 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
         init = (src / package / "__init__.py").read_text().replace("from . import gallery\n", "")
         (src / package / "__init__.py").write_text(init)
         shutil.copy(_HERE / "_runtime.py", src / package / "_fmu_runtime.py")
-        (src / f"{model_module}.py").write_text(_model_source(spec, k_used))
+        (src / f"{model_module}.py").write_text(_model_source(spec, k_used, dae))
         script = src / f"{name}.py"
         script.write_text(_SLAVE.format(name=name, model_module=model_module, package=package,
                                         description=spec.description or f"{name}: lsc completion",
@@ -233,6 +307,8 @@ def _numeric_dae(spec):
     import sympy
 
     values = {spec.symbols[p["name"]]: p["value"] for p in spec.parameters}
+    # inputs at their start values: the structure (index, solvability) does not depend on them
+    values.update({spec.input_symbols[u["name"]]: u["start"] for u in spec.inputs})
 
     def num(M):
         M = M.subs(values)
@@ -251,6 +327,7 @@ def _complete_model_description(fmu, spec):
     units = {s["name"]: s["unit"] for s in spec.states if s["unit"]}
     units.update({p["name"]: p["unit"] for p in spec.parameters if p["unit"]})
     units.update({f"{s['name']}_0": s["unit"] for s in spec.states if s["unit"]})
+    units.update({u["name"]: u["unit"] for u in spec.inputs if u["unit"]})
     all_units = sorted(set(units.values()) | {"1/s"})
     units["lambda"] = "1/s"
     variables = root.find("ModelVariables")

@@ -50,6 +50,52 @@ class _Jet:
         return self.jet(t, d)[d]
 
 
+class _InputSignal:
+    """Estimates of an input and its derivatives from the values received.
+
+    pythonfmu cannot receive input derivatives, so they are estimated: the
+    polynomial through the last ``degree + 1`` (time, value) pairs received
+    at communication points gives the input and its derivatives, and is
+    extrapolated over the step being taken. With communication step h the
+    j-th derivative has error O(h^(degree + 1 - j)) for a smooth input;
+    ``degree`` is the highest derivative the completion uses plus 2. Only
+    derivatives the completion can use are estimated (``order`` = -1: the
+    input enters only through ... nothing, 0: its value only).
+    """
+
+    def __init__(self, order, start, order_max):
+        self.order, self.order_max = order, order_max
+        self.history = []  # (t, value), increasing t
+        self.value = start
+        self.degree = order + 2 if order > 0 else 0
+        self._coef = None
+
+    def record(self, t):
+        if self.history and t <= self.history[-1][0]:
+            # a repeated or earlier time (rollback handled by the snapshot): replace
+            self.history = [h for h in self.history if h[0] < t]
+        self.history.append((t, self.value))
+        del self.history[: -(self.degree + 1)]
+        ts = np.array([h[0] for h in self.history])
+        vs = np.array([h[1] for h in self.history])
+        deg = min(self.degree, len(ts) - 1)
+        self._t0 = ts[-1]
+        # polynomial in (s - t0), highest power first, exact through the points
+        self._coef = np.polyfit(ts - self._t0, vs, deg) if deg > 0 else np.array([vs[-1]])
+
+    def jet(self, t):
+        """[u, u', ..., u^(order_max)] at t (zeros beyond the orders in use)."""
+        out = np.zeros(self.order_max + 1)
+        if self._coef is None:
+            out[0] = self.value
+            return out
+        c = self._coef
+        for j in range(min(self.order, self.order_max) + 1 if self.order >= 0 else 1):
+            out[j] = np.polyval(c, t - self._t0)
+            c = np.polyder(c) if c.size > 1 else np.zeros(1)
+        return out
+
+
 class LscRuntime:
     def __init__(self, slave, model):
         from pythonfmu import Boolean, Fmi2Causality, Fmi2Variability, Integer, Real
@@ -69,7 +115,10 @@ class LscRuntime:
         self._solver = None
         self._dense = None  # (t_lo, t_hi, interpolant) of the solver's last step
 
-        par, out = Fmi2Causality.parameter, Fmi2Causality.output
+        par, out, inp = Fmi2Causality.parameter, Fmi2Causality.output, Fmi2Causality.input
+        order_max = M["k"] + 2
+        self.inputs = {u["name"]: _InputSignal(M["input_orders"].get(u["name"], -1), u["start"], order_max)
+                       for u in M.get("inputs", [])}
         fixed, tunable, cont = Fmi2Variability.fixed, Fmi2Variability.tunable, Fmi2Variability.continuous
 
         def reg(var):
@@ -101,6 +150,10 @@ class LscRuntime:
             self.values[key] = s["start"]
             reg(Real(key, causality=par, variability=fixed, start=s["start"], description=f"initial value of {s['name']}",
                      getter=lambda key=key: self.values[key], setter=lambda v, key=key: self._set(key, v)))
+        for u in M.get("inputs", []):
+            reg(Real(u["name"], causality=inp, variability=cont, start=u["start"], description=u["description"],
+                     getter=lambda name=u["name"]: self.inputs[name].value,
+                     setter=lambda v, name=u["name"]: self._set_input(name, v)))
         for i, s in enumerate(M["states"]):
             reg(Real(s["name"], causality=out, variability=cont, description=s["description"],
                      getter=lambda i=i: float(self.x[i])))
@@ -126,6 +179,14 @@ class LscRuntime:
         else:
             value = float(value)
         self.values[name] = value
+
+    def _set_input(self, name, value):
+        if not math.isfinite(value):
+            self.errors[name] = "the value is not finite"
+            self._log_error(f"rejected input {name} = {value!r}: not finite; doStep will discard until it is")
+            return
+        self.errors.pop(name, None)
+        self.inputs[name].value = float(value)
 
     def _check(self, name, value):
         if name == "method":
@@ -163,7 +224,11 @@ class LscRuntime:
             M, model = self.model.MODEL, self.model
             A = _Jet(model.A_jet, params) if M["A_varies"] else model.A_jet(0.0, params, 0)[0]
             B = _Jet(model.B_jet, params) if M["B_varies"] else model.B_jet(0.0, params, 0)[0]
-            f = _Jet(model.f_jet, params) if M["f_varies"] else model.f_jet(0.0, params, 0)[0]
+            if self.inputs:
+                f = _Jet(lambda t, p, order: model.f_jet(t, p, order, {n: s.jet(t) for n, s in self.inputs.items()}),
+                         params)
+            else:
+                f = _Jet(model.f_jet, params) if M["f_varies"] else model.f_jet(0.0, params, 0)[0]
             dae = LinearDAE(A, B, f)
             span = (M["start"], M["stop"]) if not dae.is_constant else None
             self._completion = complete(dae, method, lam=lam, k=M["k"], t_span=span)
@@ -216,6 +281,13 @@ class LscRuntime:
                 # the master's time rules (e.g. after a rollback done its own way)
                 self._solver = None
             self.t = float(t)
+            if self.inputs:
+                # the input estimates change with every received value: new forcing, new solver
+                for signal in self.inputs.values():
+                    signal.record(self.t)
+                if hasattr(c, "_cache"):
+                    c._cache.clear()
+                self._solver = None
             if self._solver is None or target > self._solver.t_bound:
                 self._start_solver(c, target)
             solver = self._solver
@@ -248,7 +320,8 @@ class LscRuntime:
         # and after restoring it later start identically.
         self._solver = None
         return {"t": self.t, "x": self.x.tolist(), "values": dict(self.values), "errors": dict(self.errors),
-                "t_stop": self.t_stop}
+                "t_stop": self.t_stop,
+                "inputs": {n: {"value": s.value, "history": [list(h) for h in s.history]} for n, s in self.inputs.items()}}
 
     def set_state(self, state):
         self.t = float(state["t"])
@@ -256,5 +329,15 @@ class LscRuntime:
         self.values = dict(state["values"])
         self.errors = dict(state["errors"])
         self.t_stop = float(state["t_stop"])
+        for name, saved in state.get("inputs", {}).items():
+            signal = self.inputs[name]
+            signal.value = saved["value"]
+            signal.history = [tuple(h) for h in saved["history"]]
+            signal._coef = None
+            if signal.history:  # rebuild the polynomial from the saved points
+                last_t, last_v = signal.history.pop()
+                current, signal.value = signal.value, last_v
+                signal.record(last_t)
+                signal.value = current
         self._solver = None
         self._dirty = True

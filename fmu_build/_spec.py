@@ -14,6 +14,9 @@ completion and a default experiment::
     [parameters]
     m = { value = 1.0, unit = "kg", tunable = false, description = "mass" }
 
+    [inputs]                       # optional; may appear in f only
+    p = { unit = "m", description = "path", start = 0.0 }
+
     [equations]
     A = [[1, 0, 0], [0, "m", 0], [0, 0, 0]]
     B = [[0, -1, 0], ["k", "c", -1], [1, 0, 0]]
@@ -117,7 +120,7 @@ def parse_spec(data, source="spec"):
     import sympy
 
     problems = []
-    known = {"model", "states", "parameters", "equations", "completion", "experiment", "inputs", "outputs"}
+    known = {"model", "states", "parameters", "inputs", "equations", "completion", "experiment", "outputs"}
     for key in data:
         if key not in known:
             problems.append(f"{key}: unknown section (known: {', '.join(sorted(known))})")
@@ -130,8 +133,6 @@ def parse_spec(data, source="spec"):
         _identifier(name, "model.name", problems)
     description = model.get("description", "")
 
-    if data.get("inputs"):
-        problems.append("inputs: inputs are not supported yet by fmu_build (the FMU would need input derivatives)")
     if data.get("outputs"):
         problems.append("outputs: custom outputs are not supported yet; every state and constraint_residual are outputs")
 
@@ -167,13 +168,32 @@ def parse_spec(data, source="spec"):
             parameters.append({"name": pname, "value": value if value is not None else 0.0, "unit": info.get("unit", ""),
                                "tunable": tunable, "description": info.get("description", f"parameter {pname}")})
 
+    inputs, input_symbols = [], {}
+    taken = {s["name"] for s in states} | set(symbols) | RESERVED
+    for iname, info in (data.get("inputs") or {}).items():
+        field = f"inputs.{iname}"
+        info = info if isinstance(info, dict) else {}
+        ok = _identifier(iname, field, problems)
+        if ok and iname in taken:
+            problems.append(f"{field}: {iname!r} clashes with a state, a parameter or a name reserved by the FMU")
+            ok = False
+        start = _number(info.get("start", 0.0), f"{field}.start", problems)
+        if ok:
+            input_symbols[iname] = sympy.Symbol(iname, real=True)
+            inputs.append({"name": iname, "unit": info.get("unit", ""), "description": info.get("description", f"input {iname}"),
+                           "start": start if start is not None else 0.0})
+
     n = len(states)
-    names = {"t": t, **symbols}
+    names = {"t": t, **symbols, **input_symbols}
     eq = data.get("equations") or {}
     A = _matrix(eq.get("A"), "equations.A", (n, n), names, problems)
     B = _matrix(eq.get("B"), "equations.B", (n, n), names, problems)
     f_raw = eq.get("f", [0] * n)
     f = _matrix([[v] for v in f_raw] if isinstance(f_raw, list) else f_raw, "equations.f", (n, 1), names, problems, vector=True)
+    for label, M in (("A", A), ("B", B)):
+        used = sorted(str(u) for u in (M.free_symbols if M is not None else set()) if str(u) in input_symbols)
+        if used:
+            problems.append(f"equations.{label}: inputs may appear in f only (found {', '.join(used)})")
 
     comp = data.get("completion") or {}
     method = comp.get("method", "alternative")
@@ -194,7 +214,8 @@ def parse_spec(data, source="spec"):
     if problems:
         raise SpecError(problems, source=source)
     return ModelSpec(name=name, description=description, states=states, parameters=parameters, A=A, B=B, f=f, t=t,
-                     symbols=symbols, method=method, lam=lam, k=k, experiment={"start": start, "stop": stop, "step": step})
+                     symbols=symbols, inputs=inputs, input_symbols=input_symbols, method=method, lam=lam, k=k,
+                     experiment={"start": start, "stop": stop, "step": step})
 
 
 def _matrix(rows, field, shape, names, problems, vector=False):

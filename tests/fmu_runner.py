@@ -3,7 +3,7 @@
 Reads a scenario from stdin:
   {"fmu": path, "start_values": {...}, "t0": 0, "dt": 0.1, "steps": N,
    "set_at": {"i": {name: value}}, "outputs": [...], "rollback_at": i,
-   "block": ["lsc", "sympy"]}
+   "block": ["lsc", "sympy"], "input_series": {name: [value at each step start]}}
 and prints {"time", "values", "status", "logs", "rollback"}.
 FMUs are exercised in a subprocess because a pythonfmu FMU loaded into a
 process that already imported its modules silently runs the host's copy.
@@ -74,6 +74,8 @@ def main():
     for i in range(sc["steps"]):
         if str(i) in sc.get("set_at", {}):
             set_values(sc["set_at"][str(i)])
+        for name, series in sc.get("input_series", {}).items():
+            set_values({name: series[i]})  # the input's value at this communication point
         if sc.get("rollback_at") == i:
             state = fmu.getFMUstate()
             blob = fmu.serializeFMUstate(state)

@@ -300,3 +300,59 @@ def test_native_host_without_the_recipe_fails(fmus, tmp_path):
     subprocess.run([str(exe), "simulate", "--path", str(fmus["path", "alternative"]), "--stopTime", "1", "--stepSize", "0.1",
                     "-l", "err"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     assert not (tmp_path / "PrescribedPath.csv").exists()  # silently nothing: hence the recipe
+
+
+INPUT_SPEC = ROOT / "examples" / "specs" / "path_input.toml"
+
+
+def _model_data(fmu, name):
+    import ast
+    import zipfile
+
+    src = zipfile.ZipFile(fmu).read(f"resources/{name}_model.py").decode()
+    line = next(line for line in src.splitlines() if line.startswith("MODEL = "))
+    return ast.literal_eval(line[len("MODEL = "):])
+
+
+def test_input_derivatives_are_estimated_to_third_order(tmp_path):
+    fmu = build_fmu(INPUT_SPEC, tmp_path)
+    assert fmpy_validation.validate_fmu(str(fmu)) == []
+    p = gallery.prescribed_path()
+    errors = []
+    for dt in (0.025, 0.0125):
+        steps = int(round(2.0 / dt))
+        ts = dt * np.arange(steps)
+        r = run({"fmu": str(fmu), "dt": dt, "steps": steps, "outputs": ["y", "v", "u"],
+                 "start_values": {"v_0": 2.5, "u_0": 1.25, **TOL},
+                 "input_series": {"p": (np.sin(ts) + 0.5 * np.sin(3 * ts)).tolist()}})
+        assert r["status"] == ["ok"] * steps
+        t = np.array(r["time"])
+        X = np.array([r["values"][n] for n in ("y", "v", "u")])
+        errors.append(np.abs(X[:, -1] - p.exact(t[-1])))
+    assert errors[1][2] < 1e-3  # the force u = m p'' + c p' + k p: uses p'' estimated from p
+    assert errors[0][2] / errors[1][2] > 2**2.5  # third order in the communication step
+    assert errors[1].max() < 1e-3
+
+
+def test_only_needed_input_derivatives_are_estimated(tmp_path):
+    # index 3 path: the completion uses p, p', p'', p''' and never p'''' (W's block is zero)
+    assert _model_data(build_fmu(INPUT_SPEC, tmp_path / "a"), "PathInput")["input_orders"] == {"p": 3}
+    # an ODE x' + x = w: only w itself, no derivative
+    spec = {"model": {"name": "Lag"}, "states": {"x": {}}, "inputs": {"w": {}},
+            "equations": {"A": [[1]], "B": [[1]], "f": ["w"]}}
+    assert _model_data(build_fmu(spec, tmp_path / "b"), "Lag")["input_orders"] == {"w": 0}
+
+
+def test_inputs_in_A_or_B_are_refused():
+    spec = {"model": {"name": "Bad"}, "states": {"x": {}}, "inputs": {"w": {}},
+            "equations": {"A": [["w"]], "B": [[1]], "f": [0]}}
+    with pytest.raises(SpecError, match="equations.A: inputs may appear in f only"):
+        parse_spec(spec)
+
+
+def test_rollback_with_inputs_is_bit_for_bit(tmp_path):
+    fmu = build_fmu(INPUT_SPEC, tmp_path)
+    ts = 0.05 * np.arange(8)
+    r = run({"fmu": str(fmu), "dt": 0.05, "steps": 8, "outputs": ["y", "u"], "rollback_at": 5,
+             "input_series": {"p": (np.sin(ts) + 0.5 * np.sin(3 * ts)).tolist()}})
+    assert r["rollback"]["first"] == r["rollback"]["second"]
