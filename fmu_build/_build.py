@@ -280,9 +280,14 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
         src = Path(tmp) / "src"
         src.mkdir()
         shutil.copytree(Path(lsc.__file__).parent, src / package, ignore=shutil.ignore_patterns("__pycache__", "gallery.py"))
-        # the runtime has no use for the gallery (sympy) and must not import it
-        init = (src / package / "__init__.py").read_text().replace("from . import gallery\n", "")
+        # The runtime needs neither the gallery (sympy) nor solve_ivp: importing
+        # scipy.integrate in an embedded interpreter loads scipy._lib._uarray,
+        # whose finalization crashes native hosts at exit (see _vendor_ivp).
+        init = (src / package / "__init__.py").read_text()
+        for line in ("from . import gallery\n", "from ._integrate import CompletionResult, solve_completion, solve_dae\n"):
+            init = init.replace(line, "")
         (src / package / "__init__.py").write_text(init)
+        _vendor_ivp(src / package / "_ivp")
         shutil.copy(_HERE / "_runtime.py", src / package / "_fmu_runtime.py")
         (src / f"{model_module}.py").write_text(_model_source(spec, k_used, dae))
         script = src / f"{name}.py"
@@ -300,6 +305,45 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
                 del sys.modules[mod]
     _complete_model_description(Path(fmu), spec)
     return Path(fmu)
+
+
+_IVP_FILES = ("base.py", "common.py", "rk.py", "dop853_coefficients.py", "radau.py", "bdf.py")
+
+
+def _vendor_ivp(dest):
+    """Copy scipy's pure-Python ODE solvers into the FMU, without scipy.optimize.
+
+    ``import scipy.integrate`` pulls in scipy.optimize and scipy.fft, hence
+    scipy._lib._uarray, whose objects are freed wrongly when an embedded
+    interpreter is finalized: the native host ecos then segfaults at exit
+    (gdb: ``_uarray Function::clear`` in ``Py_FinalizeEx``). The solver
+    modules themselves only need numpy, scipy.linalg and scipy.sparse, plus
+    ``group_columns`` from scipy.optimize, which only sparse Jacobians use
+    (lsc passes dense ones); it is replaced by a stub. The copies come from
+    the installed scipy at build time (BSD licence, included).
+    """
+    import scipy
+
+    ivp = Path(scipy.__file__).parent / "integrate" / "_ivp"
+    if not all((ivp / f).exists() for f in _IVP_FILES):
+        return False  # another scipy layout: the runtime falls back to scipy.integrate
+    dest.mkdir()
+    for f in _IVP_FILES:
+        text = (ivp / f).read_text()
+        text = text.replace("from scipy.optimize._numdiff import group_columns", "from ._stubs import group_columns")
+        (dest / f).write_text(text)
+    (dest / "_stubs.py").write_text(
+        "def group_columns(A, order=0):\n"
+        "    raise NotImplementedError('sparse Jacobians are not used in lsc FMUs')\n"
+    )
+    (dest / "__init__.py").write_text(
+        '"""scipy.integrate._ivp solvers, copied at FMU build time (scipy is BSD-licensed: see LICENSE.txt)."""\n'
+        "from .rk import RK45, DOP853\nfrom .radau import Radau\nfrom .bdf import BDF\n"
+    )
+    licence = next(Path(scipy.__file__).parent.parent.glob("scipy-*.dist-info/LICENSE*"), None)
+    if licence is not None:
+        shutil.copy(licence, dest / "LICENSE.txt")
+    return True
 
 
 def _numeric_dae(spec):

@@ -25,7 +25,10 @@ Design rules, from pythonfmu's behaviour:
 import math
 
 import numpy as np
-from scipy.integrate import BDF, DOP853, RK45, Radau
+try:  # inside a built FMU: scipy's solvers without importing scipy.integrate (see _build._vendor_ivp)
+    from ._ivp import BDF, DOP853, RK45, Radau
+except ImportError:
+    from scipy.integrate import BDF, DOP853, RK45, Radau
 
 try:  # inside a built FMU this module sits in the private copy of lsc
     from . import LinearDAE, complete

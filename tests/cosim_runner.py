@@ -4,7 +4,6 @@ Reads {"fmu", "dt", "steps", "outputs", "initial": {name: value}, "override_at":
 from stdin; prints {"time", "values"}. Runs in its own process (see fmu_runner.py).
 """
 import json
-import os
 import sys
 
 
@@ -42,7 +41,6 @@ def main():
         times.append((i + 1) * sc["dt"])
         values.append(observer.last_real_values(slave, vrs))
     print(json.dumps({"time": times, "values": {n: [row[j] for row in values] for j, n in enumerate(outputs)}}), flush=True)
-    os._exit(0)  # see fmu_runner.py
 
 
 if __name__ == "__main__":
