@@ -40,6 +40,30 @@ SOLVERS = ("RK45", "DOP853", "Radau", "BDF")
 _SOLVER_CLASSES = {"RK45": RK45, "DOP853": DOP853, "Radau": Radau, "BDF": BDF}
 
 
+def _evaluate_dense(dense, t):
+    """Evaluate a solver's last-step interpolant at one time, cheaply.
+
+    DOP853's interpolant (scipy's ``Dop853DenseOutput``) is
+    ``y_old + F6 x (1-x) ... `` evaluated by seven small array updates; as
+    ``y_old + sum_k w_k F_k`` with scalar weights it is one product, which
+    matters at one evaluation per communication step. Other interpolants are
+    called as they are.
+    """
+    F = getattr(dense, "F", None)
+    if F is None or not hasattr(dense, "y_old"):
+        return dense(t)
+    x = (t - dense.t_old) / dense.h
+    m = len(F)
+    weights = np.empty(m)
+    w = 1.0
+    # F[k] is multiplied by the factors of passes i = m-1-k .. m-1 of the
+    # Horner-like loop, where pass i multiplies by x (i even) or 1 - x (i odd).
+    for i in range(m - 1, -1, -1):
+        w *= x if i % 2 == 0 else 1.0 - x
+        weights[m - 1 - i] = w
+    return dense.y_old + weights @ F
+
+
 class _Jet:
     """A coefficient h(t, d) backed by generated jet code, for lsc."""
 
@@ -305,7 +329,7 @@ class LscRuntime:
                 x = solver.y.copy()
             else:
                 lo, hi, interpolant = self._dense
-                x = interpolant(target)
+                x = _evaluate_dense(interpolant, target)
         except Exception as exc:
             self._solver = None
             self._log_error(f"doStep at t={t!r} failed: {type(exc).__name__}: {exc}")
