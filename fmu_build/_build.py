@@ -12,6 +12,7 @@ import numpy as np
 
 import lsc
 
+from ._runtime import start_name
 from ._spec import METHODS, ModelSpec, SpecError, load_spec, parse_spec
 
 __all__ = ["build_fmu"]
@@ -53,7 +54,7 @@ def _spec_from_dae(dae):
     subs = {s: t for m in (A, B, f) for s in m.free_symbols if s.name == "t"}
     if problems:
         raise SpecError(problems, source="dae")
-    states = [{"name": f"x{i + 1}", "unit": "", "description": f"unknown x[{i + 1}]", "start": 0.0} for i in range(n)]
+    states = [{"name": f"x[{i + 1}]", "unit": "", "description": f"unknown x[{i + 1}]", "start": 0.0} for i in range(n)]
     return ModelSpec(name="LinearDAE", description="linear DAE A x' + B x = f(t)", states=states, parameters=[],
                      A=A.subs(subs), B=B.subs(subs), f=f.subs(subs), t=t, symbols={}, inputs=[], input_symbols={},
                      method="alternative", lam=1.0,
@@ -370,7 +371,7 @@ def _complete_model_description(fmu, spec):
     root = ET.fromstring(contents["modelDescription.xml"])
     units = {s["name"]: s["unit"] for s in spec.states if s["unit"]}
     units.update({p["name"]: p["unit"] for p in spec.parameters if p["unit"]})
-    units.update({f"{s['name']}_0": s["unit"] for s in spec.states if s["unit"]})
+    units.update({start_name(s["name"]): s["unit"] for s in spec.states if s["unit"]})
     units.update({u["name"]: u["unit"] for u in spec.inputs if u["unit"]})
     all_units = sorted(set(units.values()) | {"1/s"})
     units["lambda"] = "1/s"

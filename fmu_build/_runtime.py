@@ -64,6 +64,17 @@ def _evaluate_dense(dense, t):
     return dense.y_old + weights @ F
 
 
+def start_name(state):
+    """Name of a state's start-value parameter, legal in FMI structured naming.
+
+    ``y`` -> ``y_0``; an array element ``x[3]`` -> ``x_0[3]``.
+    """
+    if state.endswith("]") and "[" in state:
+        base, index = state.split("[", 1)
+        return f"{base}_0[{index}"
+    return state + "_0"
+
+
 class _Jet:
     """A coefficient h(t, d) backed by generated jet code, for lsc."""
 
@@ -173,7 +184,7 @@ class LscRuntime:
                      description=p["description"], getter=lambda name=p["name"]: self.values[name],
                      setter=lambda v, name=p["name"]: self._set(name, v)))
         for i, s in enumerate(M["states"]):
-            key = s["name"] + "_0"
+            key = start_name(s["name"])
             self.values[key] = s["start"]
             reg(Real(key, causality=par, variability=fixed, start=s["start"], description=f"initial value of {s['name']}",
                      getter=lambda key=key: self.values[key], setter=lambda v, key=key: self._set(key, v)))
@@ -277,7 +288,7 @@ class LscRuntime:
         self._solver = None
 
     def initialize(self):
-        self.x = np.array([self.values[s["name"] + "_0"] for s in self.model.MODEL["states"]], dtype=float)
+        self.x = np.array([self.values[start_name(s["name"])] for s in self.model.MODEL["states"]], dtype=float)
         self._solver = None
         if self.values["project_initial"] and not self.errors:
             try:

@@ -12,6 +12,7 @@ fmpy_validation = pytest.importorskip("fmpy.validation")
 
 import lsc  # noqa: E402
 from fmu_build import SpecError, build_fmu, load_spec, parse_spec  # noqa: E402
+from fmu_build._runtime import start_name  # noqa: E402
 from lsc import gallery  # noqa: E402
 
 HERE = Path(__file__).parent
@@ -77,11 +78,11 @@ def test_round_trip_matches_library_and_exact(fmus, key, method, lam):
     _, problem, names = PROBLEMS[key]
     p = problem()
     n = p.dae.n
-    names = names or [f"x{i + 1}" for i in range(n)]
+    names = names or [f"x[{i + 1}]" for i in range(n)]
     t0 = 0.0
     dt, steps = 0.1, 10
     x0 = p.exact(t0) + 1e-3 * np.linspace(1.0, -1.0, n)
-    start = {f"{s}_0": float(v) for s, v in zip(names, x0)}
+    start = {start_name(s): float(v) for s, v in zip(names, x0)}
     start.update(TOL)
     if lam is not None:
         start["lambda"] = lam
@@ -115,8 +116,8 @@ def test_lambda_change_takes_effect_at_next_step(fmus):
 
 
 def test_rollback_repeats_steps_bit_for_bit(fmus):
-    r = run({"fmu": str(fmus["example1", "alternative"]), "dt": 0.05, "steps": 6, "outputs": ["x1", "x2", "constraint_residual"],
-             "start_values": {"x1_0": 0.1, "x2_0": -0.9}, "rollback_at": 3})
+    r = run({"fmu": str(fmus["example1", "alternative"]), "dt": 0.05, "steps": 6, "outputs": ["x[1]", "x[2]", "constraint_residual"],
+             "start_values": {"x_0[1]": 0.1, "x_0[2]": -0.9}, "rollback_at": 3})
     assert r["rollback"]["first"] == r["rollback"]["second"]
     assert r["status"] == ["ok"] * 6
 
@@ -137,7 +138,7 @@ def test_bad_values_discard_with_a_readable_log_and_recover(fmus, name, value, f
 
 
 def test_fmu_runs_without_lsc_and_sympy_in_the_host(fmus):
-    scenario = {"fmu": str(fmus["mechanical", "stabilized"]), "dt": 0.1, "steps": 5, "outputs": ["x1", "x5"],
+    scenario = {"fmu": str(fmus["mechanical", "stabilized"]), "dt": 0.1, "steps": 5, "outputs": ["x[1]", "x[5]"],
                 "start_values": TOL}
     plain = run(scenario)
     # nor scipy.integrate/optimize/fft: their import is what crashed native hosts at exit
