@@ -247,6 +247,18 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
         Listing every problem of the spec.
     lsc.IndexDeterminationError
         When the DAE is not solvable: no FMU is written.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from fmpy.validation import validate_fmu
+    >>> from fmu_build import build_fmu
+    >>> spec = {"model": {"name": "Lag"}, "states": {"x": {"unit": "m"}},
+    ...         "parameters": {"tau": {"value": 2.0, "unit": "s", "tunable": True}},
+    ...         "equations": {"A": [["tau"]], "B": [[1]], "f": ["sin(t)"]}}
+    >>> path = build_fmu(spec, tempfile.mkdtemp())
+    >>> path.name, validate_fmu(str(path))
+    ('Lag.fmu', [])
     """
     from pythonfmu.builder import FmuBuilder
 

@@ -89,7 +89,16 @@ class ModelSpec:
 
 
 def load_spec(path):
-    """Read and validate a spec file; raises `SpecError` listing every problem."""
+    """Read and validate a TOML spec file; raises `SpecError` listing every problem.
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> import fmu_build
+    >>> spec = fmu_build.load_spec(Path(fmu_build.__file__).parent.parent / "examples/specs/prescribed_path.toml")
+    >>> spec.name, [s["name"] for s in spec.states]
+    ('PrescribedPath', ['y', 'v', 'u'])
+    """
     with open(path, "rb") as fh:
         try:
             data = tomllib.load(fh)
@@ -116,7 +125,24 @@ def _number(value, field, problems, positive=False):
 
 
 def parse_spec(data, source="spec"):
-    """Validate a spec given as a dict (parsed TOML); see the module docstring."""
+    """Validate a spec given as a dict (parsed TOML); see the module docstring.
+
+    Raises `SpecError` listing every problem, each naming its field.
+
+    Examples
+    --------
+    >>> from fmu_build import parse_spec
+    >>> spec = parse_spec({"model": {"name": "Lag"}, "states": {"x": {}},
+    ...                    "equations": {"A": [[1]], "B": [[2]], "f": ["exp(-t)"]}})
+    >>> spec.n, spec.method, str(spec.f[0])
+    (1, 'alternative', 'exp(-t)')
+    >>> parse_spec({"model": {"name": "Bad"}, "states": {"x": {}},
+    ...             "equations": {"A": [["x.real"]], "B": [[1]]}})
+    Traceback (most recent call last):
+    ...
+    fmu_build._spec.SpecError: spec has 1 problem(s):
+      - equations.A[0][0]: attribute access not allowed in 'x.real'
+    """
     import sympy
 
     problems = []
