@@ -61,6 +61,105 @@ def _is_implicit(method):
     return isinstance(method, type) and issubclass(method, (Radau, BDF, LSODA))
 
 
+class _ExpmPropagator:
+    """Exact stepping of ``x' = G x + g(t)`` for constant ``G`` (the 'expm' method).
+
+    Over a step ``[t, t + h]`` the forcing is replaced by its Taylor
+    polynomial of degree ``q`` at ``t`` (its derivatives are exact:
+    ``g^(j) = W @ [f^(j); f^(j+1); ...]``), and the linear ODE is then solved
+    exactly::
+
+        x(t + h) = e^{Gh} x(t) + sum_{j=0..q} h^(j+1) phi_(j+1)(Gh) g^(j)(t)
+
+    with ``phi_0 = exp`` and ``phi_(j+1)(z) = (phi_j(z) - 1/j!) / z``. All
+    ``phi_j(Gh)`` come from one ``expm`` of an ``n (q + 2)`` block matrix per
+    distinct step size, so a step costs ``q + 2`` matrix-vector products.
+    Exact (to rounding) when ``g`` is a polynomial of degree <= ``q`` (in
+    particular for constant or zero forcing); otherwise the local error is
+    ``O(h^(q+2) |g^(q+1)|)`` and the global error ``O(h^(q+1))``.
+    """
+
+    def __init__(self, completion, q):
+        self.c, self.q = completion, q
+        self.G = completion._G
+        self.W = completion._W
+        self.n = completion.n
+        self._cache = {}
+
+    def _matrices(self, h):
+        key = float(h)
+        hit = self._cache.get(key)
+        if hit is None:
+            import scipy.linalg
+
+            n, q = self.n, self.q
+            m = q + 2
+            # Block upper-bidiagonal [[Gh, I, 0..], [0, 0, I, ..], ...]: the first
+            # block row of its exponential is [phi_0, phi_1, ..., phi_(q+1)](Gh).
+            M = np.zeros((m * n, m * n))
+            M[:n, :n] = self.G * h
+            for j in range(1, m):
+                M[(j - 1) * n : j * n, j * n : (j + 1) * n] = np.eye(n)
+            E = scipy.linalg.expm(M)[:n]
+            phi = [E[:, j * n : (j + 1) * n] for j in range(m)]
+            forcing = [h ** (j + 1) * phi[j + 1] @ self.W for j in range(q + 1)]
+            hit = self._cache[key] = (phi[0], forcing)
+        return hit
+
+    def step(self, t, x, h):
+        Phi, forcing = self._matrices(h)
+        x_new = Phi @ x
+        f = self.c.dae.f
+        if f is None:
+            return x_new
+        p = self.c._order
+        if f.is_constant:
+            # g is constant: only the j = 0 term
+            return x_new + forcing[0] @ f.jet(t, p).reshape(-1)
+        jet = f.jet(t, p + self.q)
+        for j in range(self.q + 1):
+            x_new = x_new + forcing[j] @ jet[j : j + p + 1].reshape(-1)
+        return x_new
+
+
+def _solve_expm(completion, t0, t1, x0, t_eval, options):
+    q = options.pop("taylor_degree", 3)
+    max_step = options.pop("max_step", np.inf)
+    if options:
+        raise TypeError(f"method='expm' takes only `taylor_degree` and `max_step` options; found {sorted(options)}.")
+    if not completion.dae.is_constant:
+        raise ValueError("method='expm' needs constant coefficients; use an ODE method for time-varying ones.")
+    if isinstance(q, bool) or not isinstance(q, int) or q < 0:
+        raise ValueError(f"`taylor_degree` must be a non-negative int; found {q!r}.")
+    if not max_step > 0:
+        raise ValueError(f"`max_step` must be positive; found {max_step!r}.")
+    t_out = np.linspace(t0, t1, 101) if t_eval is None else np.asarray(t_eval, dtype=float)
+    direction = np.sign(t1 - t0)
+    if t_out.ndim != 1 or np.any(direction * np.diff(t_out) < 0) or np.any(direction * (t_out - t0) < 0) \
+            or np.any(direction * (t_out - t1) > 0):
+        raise ValueError("`t_eval` must be sorted in the direction of integration and lie within `t_span`.")
+    prop = _ExpmPropagator(completion, q)
+    xs, x, t, nsteps = [], x0.copy(), t0, 0
+    for target in t_out:
+        span = target - t
+        if span != 0.0:
+            m = max(1, int(np.ceil(abs(span) / max_step - 1e-12)))
+            h = span / m
+            for _ in range(m):
+                x = prop.step(t, x, h)
+                t = t + h
+                nsteps += 1
+            t = target
+        xs.append(x.copy())
+    X = np.array(xs).T
+    residual = np.linalg.norm(completion.constraint_residual(t_out, X), axis=0) if t_out.size else np.zeros(0)
+    return CompletionResult(
+        t=t_out, x=X, residual=residual, success=True, status=0,
+        message=f"exact stepping: {nsteps} steps, {len(prop._cache)} matrix exponential(s)",
+        nfev=0, njev=0, nlu=0, sol=None, completion=completion,
+    )
+
+
 def solve_completion(
     completion, t_span, x0, *, method="RK45", t_eval=None, rtol=1e-3, atol=1e-6, project=False, **options
 ):
@@ -79,7 +178,12 @@ def solve_completion(
         Any solve_ivp method. For the implicit ones ('Radau', 'BDF',
         'LSODA') the constant Jacobian ``G`` is passed. Large ``lam`` makes
         the completion stiff: prefer 'Radau' or 'BDF' when ``lam`` times the
-        interval length is large.
+        interval length is large. ``'expm'`` (constant coefficients only)
+        steps exactly with the matrix exponential from output time to output
+        time (see `_ExpmPropagator`): exact for polynomial forcing of degree
+        <= ``taylor_degree`` (option, default 3), otherwise of order
+        ``taylor_degree + 1`` in the step (option ``max_step`` refines it);
+        ``t_eval`` defaults to 101 equally spaced times; rtol/atol are unused.
     t_eval : array_like, optional
         Output times (default: the solver's steps).
     rtol, atol : float or array_like, optional
@@ -112,6 +216,10 @@ def solve_completion(
         raise TypeError(f"`completion` must be an lsc Completion (see lsc.complete); found {type(completion).__name__}.")
     t0, t1 = check_t_span(t_span)
     x0 = check_state("x0", x0, completion.n)
+    if method == "expm":
+        if project:
+            x0 = completion.project(t0, x0)
+        return _solve_expm(completion, t0, t1, x0, t_eval, dict(options))
     if not (isinstance(method, str) or (isinstance(method, type) and issubclass(method, OdeSolver))):
         raise TypeError(f"`method` must be a solve_ivp method name or OdeSolver class; found {method!r}.")
     if project:

@@ -113,3 +113,67 @@ def test_result_reports_counts():
     p = gallery.nilpotent_chain(1)
     res = solve_dae(p.dae, p.t_span, p.x0, lam=1.0, method="BDF")
     assert res.success and res.nfev > 0 and res.nlu > 0 and res.njev == 0  # constant jac: never re-evaluated
+
+
+# -- exact stepping with the matrix exponential (method='expm') -------------------------
+
+
+def _polynomial_chain():
+    import sympy
+
+    t = sympy.Symbol("t")
+    f = sympy.Matrix([t**2, 1 + t, t**3 / 6])
+    N = sympy.Matrix(3, 3, lambda i, j: 1 if j == i + 1 else 0)
+    x = sum(((-1) ** i * N**i * f.diff(t, i) for i in range(3)), sympy.zeros(3, 1))
+    exact = sympy.lambdify(t, list(x))
+    return LinearDAE(np.eye(3, k=1), np.eye(3), list(f)), lambda s: np.array(exact(s), dtype=float)
+
+
+@pytest.mark.parametrize("method, lam", METHOD_LAMS)
+def test_expm_is_exact_for_polynomial_forcing(method, lam):
+    dae, exact = _polynomial_chain()
+    c = complete(dae, method, lam=lam)
+    ts = np.linspace(0.0, 3.0, 4)  # steps of 1: only exactness can pass this
+    res = solve_completion(c, (0.0, 3.0), exact(0.0), method="expm", t_eval=ts)
+    assert res.success
+    np.testing.assert_allclose(res.x, np.array([exact(s) for s in ts]).T, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("q", [1, 3])
+def test_expm_order_is_taylor_degree_plus_one(q):
+    p = gallery.random_pencil(n=8, blocks=(3, 1), seed=3)
+    c = complete(p.dae, "stabilized", lam=2.0)
+    hs = np.array([0.2, 0.1, 0.05])
+    errors = []
+    for h in hs:
+        res = solve_completion(c, (0.0, 2.0), p.x0, method="expm", t_eval=np.arange(0.0, 2.0 + h / 2, h), taylor_degree=q)
+        errors.append(np.abs(res.x - p.exact(res.t)).max())
+    slope = np.polyfit(np.log(hs), np.log(errors), 1)[0]
+    assert abs(slope - (q + 1)) < 0.2, (slope, errors)
+
+
+def test_expm_alternative_residual_decays_exactly():
+    # polynomial forcing: the propagation is exact, so is the decay (steps of a whole unit)
+    dae, exact = _polynomial_chain()
+    c = complete(dae, "alternative", lam=1.5)
+    res = solve_completion(c, (0.0, 3.0), exact(0.0) + 0.01, method="expm", t_eval=np.arange(0.0, 4.0))
+    np.testing.assert_allclose(res.residual[1:] / res.residual[:-1], np.exp(-1.5), rtol=1e-10)
+
+
+@pytest.mark.parametrize("kwargs, exception, fragment", [
+    (dict(taylor_degree=-1), ValueError, "`taylor_degree` must be a non-negative int"),
+    (dict(max_step=0.0), ValueError, "`max_step` must be positive"),
+    (dict(t_eval=[0.5, 0.2]), ValueError, "`t_eval` must be sorted"),
+    (dict(first_step=0.1), TypeError, "only `taylor_degree` and `max_step`"),
+])
+def test_expm_bad_options(kwargs, exception, fragment):
+    dae, exact = _polynomial_chain()
+    with pytest.raises(exception, match=None) as info:
+        solve_completion(complete(dae, "standard"), (0.0, 1.0), exact(0.0), method="expm", **kwargs)
+    assert fragment in str(info.value)
+
+
+def test_expm_refuses_time_varying():
+    p = gallery.thesis_example3()
+    with pytest.raises(ValueError, match="constant coefficients"):
+        solve_completion(complete(p.dae, "standard"), p.t_span, p.x0, method="expm")
