@@ -131,7 +131,6 @@ def _needed_input_orders(spec, dae, k):
     component of ``f`` is never used, so the input derivatives only it needs
     are never estimated. Time-varying coefficients: every order may be used.
     """
-    import sympy
 
     if not spec.inputs:
         return {}

@@ -1,4 +1,9 @@
-"""lsc: least squares completions of linear DAEs, with chosen extra dynamics."""
+"""lsc: least squares completions of linear DAEs, with chosen extra dynamics.
+
+Turns ``A(t) x' + B(t) x = f(t)`` of any index into an ODE ``x' = G x + g``
+whose solutions contain the DAE's and whose extra solutions decay at a rate
+``lam`` chosen in advance (see the README and the thesis in shared/seed).
+"""
 from ._completion import COMPLETIONS, AlternativeCompletion, Completion, StabilizedCompletion, StandardCompletion, complete
 from ._derivative_array import DerivativeArray, derivative_array
 from ._exceptions import DimensionError, IndexDeterminationError, RankDecisionWarning
@@ -7,3 +12,27 @@ from ._problem import LinearDAE
 from ._analysis import Eigenanalysis, eigenanalysis
 from ._integrate import CompletionResult, solve_completion, solve_dae
 from . import gallery
+
+__all__ = [
+    "LinearDAE",
+    "derivative_array",
+    "DerivativeArray",
+    "differentiation_index",
+    "check_solvability",
+    "SolvabilityReport",
+    "complete",
+    "COMPLETIONS",
+    "Completion",
+    "StandardCompletion",
+    "StabilizedCompletion",
+    "AlternativeCompletion",
+    "eigenanalysis",
+    "Eigenanalysis",
+    "solve_completion",
+    "solve_dae",
+    "CompletionResult",
+    "gallery",
+    "DimensionError",
+    "IndexDeterminationError",
+    "RankDecisionWarning",
+]

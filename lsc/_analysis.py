@@ -19,7 +19,6 @@ import numpy as np
 import scipy.linalg
 
 from ._completion import Completion
-from ._linalg import numerical_rank
 
 __all__ = ["eigenanalysis", "Eigenanalysis"]
 

@@ -8,8 +8,6 @@ Sympy input is differentiated and compiled once per order, so no symbolic work
 happens per time step.
 """
 
-import numbers
-
 import numpy as np
 
 from ._exceptions import DimensionError
@@ -220,7 +218,3 @@ def _as_float_array(name, obj):
     if not np.all(np.isfinite(value)):
         raise ValueError(f"`{name}` must be finite; found NaN or inf entries.")
     return value
-
-
-def is_real_number(x):
-    return isinstance(x, numbers.Real) and not isinstance(x, bool)

@@ -1,7 +1,6 @@
 """Time-varying coefficients and rates: thesis chapters 5-6 against exact formulas."""
 import numpy as np
 import pytest
-import scipy.integrate
 import sympy
 
 from lsc import (
