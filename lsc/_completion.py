@@ -88,11 +88,12 @@ class _Factors:
             self.Lg = jets.L
             self.f0 = np.eye(n, jets.L.shape[2])
         else:
-            self.Lg = jets.L @ fmap
+            self.Lg = jets.forcing(fmap)
             self.f0 = fmap[:n]
         # Constraint residual c = C x - cg.
         self.cg = self.Z2.T @ self.Lg[0]
         self._C_svd = None
+        self._first_rows = None
 
     def _c_svd(self):
         if self._C_svd is None:
@@ -118,10 +119,13 @@ class _Factors:
         Uc, sc, Vct = self._c_svd()
         return (Vct[: sc.size].T / sc) @ Uc.T
 
-    def pinv_rows(self, n):
-        """The first `n` rows of ``J^+`` (thesis ``V^T J^+``); never the whole."""
-        r = self.rank
-        return (self.Vt[:r, :n].T / self.s[:r]) @ self.U[:, :r].T
+    @property
+    def first_rows(self):
+        """The first n rows of ``J^+`` (thesis ``V^T J^+``); never the whole, formed once."""
+        if self._first_rows is None:
+            r, n = self.rank, self.n
+            self._first_rows = (self.Vt[:r, :n].T / self.s[:r]) @ self.U[:, :r].T
+        return self._first_rows
 
     def times_pinv(self, X):
         """``X @ J^+`` from the SVD factors."""
@@ -403,7 +407,7 @@ class StandardCompletion(Completion):
     uses_lam = False
 
     def _maps(self, fac, t):
-        P = fac.pinv_rows(self.n)
+        P = fac.first_rows
         return -P @ fac.jets.F[0], P @ fac.Lg[0]
 
 
@@ -443,7 +447,7 @@ class StabilizedCompletion(StandardCompletion):
         Lam_inv = scipy.linalg.solve_triangular(Lam, np.eye(k + 1), lower=True, unit_diagonal=True)
         # M = (Lam^-T kron I) Z2 and Y0 (Lam^-1 kron I), block by block.
         M = np.einsum("ji,jba->iba", Lam_inv, fac.Z2.reshape(k + 1, n, a)).reshape(N, a)
-        Y0_Dinv = np.einsum("aib,ij->ajb", fac.pinv_rows(n).reshape(n, k + 1, n), Lam_inv).reshape(n, N)
+        Y0_Dinv = np.einsum("aib,ij->ajb", fac.first_rows.reshape(n, k + 1, n), Lam_inv).reshape(n, N)
         Qm, Rm = scipy.linalg.qr(M, mode="economic")
         K = scipy.linalg.solve_triangular(Rm, (Y0_Dinv @ Qm).T, lower=False).T
         return G + K @ fac.C, W - K @ fac.cg

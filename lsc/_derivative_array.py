@@ -88,10 +88,26 @@ class _ArrayJets:
     ``F[d]`` of F (N, n) and ``L[d]`` of the forcing map (N, (k+q+1) n): the
     d-th derivative of ``g`` is ``L[d] @ fstack`` with
     ``fstack = [f, f', ..., f^(k+q)]``. ``Lam`` is `stabilization_jets`.
+
+    ``L[d]`` is ``Lam[d] kron I_n``: it is formed (lazily) only where the map
+    itself is wanted, for constant coefficients; applying it to values,
+    `forcing`, needs no dense matrix.
     """
 
-    def __init__(self, J, F, L, Lam, k, q, n):
-        self.J, self.F, self.L, self.Lam, self.k, self.q, self.n = J, F, L, Lam, k, q, n
+    def __init__(self, J, F, Lam, k, q, n):
+        self.J, self.F, self.Lam, self.k, self.q, self.n = J, F, Lam, k, q, n
+        self._L = None
+
+    @property
+    def L(self):
+        if self._L is None:
+            self._L = np.stack([np.kron(self.Lam[d], np.eye(self.n)) for d in range(self.q + 1)])
+        return self._L
+
+    def forcing(self, fstack):
+        """``[L[d] @ fstack for d = 0..q]``, shape (q + 1, N), without forming ``L``."""
+        blocks = fstack.reshape(-1, self.n)
+        return np.einsum("dij,jn->din", self.Lam, blocks).reshape(self.q + 1, -1)
 
 
 def array_jets(dae, k, t, lam=None, q=0):
@@ -105,7 +121,6 @@ def array_jets(dae, k, t, lam=None, q=0):
     N = (k + 1) * n
     J = np.zeros((q + 1, N, N))
     F = np.zeros((q + 1, N, n))
-    L = np.stack([np.kron(Lam[d], np.eye(n)) for d in range(q + 1)])
     for i in range(k + 1):
         rows = slice(i * n, (i + 1) * n)
         F[:, rows] = B_pow[i][: q + 1]
@@ -114,7 +129,7 @@ def array_jets(dae, k, t, lam=None, q=0):
             if m <= i:
                 block = block + comb(i, m) * B_pow[i - m][: q + 1]
             J[:, rows, (m - 1) * n : m * n] = block
-    return _ArrayJets(J, F, L, Lam, k, q, n)
+    return _ArrayJets(J, F, Lam, k, q, n)
 
 
 class DerivativeArray:
@@ -188,4 +203,4 @@ def derivative_array(dae, k, t=0.0, lam=None):
         lam_at(lam, t)
     jets = array_jets(dae, k, t, lam)
     fstack = dae.f_jet(t, k).reshape(-1)
-    return DerivativeArray(jets.J[0], jets.F[0], jets.L[0] @ fstack, k, t, lam)
+    return DerivativeArray(jets.J[0], jets.F[0], jets.forcing(fstack)[0], k, t, lam)
