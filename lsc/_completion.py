@@ -28,7 +28,7 @@ import scipy.linalg
 
 from ._derivative_array import array_jets, lam_jet, stabilization_jets
 from ._exceptions import DimensionError, IndexDeterminationError
-from ._index import array_ranks, check_solvability, determine_index
+from ._index import check_solvability, determine_index, k_works
 from ._linalg import numerical_rank, validate_rcond
 from ._timefunc import TimeFunction, _contains_sympy, _shape_str, as_time_function
 from ._validate import check_dae, check_k, check_lam_value, check_t_span
@@ -247,15 +247,14 @@ class Completion:
             k, _ = determine_index(dae, t, 10, self.rcond)
             return k
         k = check_k(k)
-        times = [t] if (dae.is_constant or self.t_span is None) else check_solvability(dae, self.t_span, rcond=self.rcond).times
-        for ti in times:
-            ranks = array_ranks(dae, k, ti, self.rcond)
-            nxt = array_ranks(dae, k + 1, ti, self.rcond)
-            if not (ranks.one_full and ranks.full_row_rank and nxt.corank == ranks.corank):
-                raise IndexDeterminationError(
-                    f"`k`={k} is too small at t={ti:g}: the derivative array does not determine x' "
-                    f"({ranks}; next: {nxt}). Use k=None for the differentiation index."
-                )
+        if not dae.is_constant and self.t_span is not None:
+            return check_solvability(dae, self.t_span, k=k, rcond=self.rcond).k
+        ok, ranks, nxt = k_works(dae, k, t, self.rcond)
+        if not ok:
+            raise IndexDeterminationError(
+                f"`k`={k} is too small at t={t:g}: the derivative array does not determine x' "
+                f"({ranks}; next: {nxt}). Use k=None for the differentiation index."
+            )
         return k
 
     # -- evaluation ---------------------------------------------------------

@@ -135,20 +135,32 @@ def differentiation_index(dae, t=0.0, kmax=10, rcond=None):
     return k
 
 
+def k_works(dae, k, t, rcond, ranks=None):
+    """Whether ``k`` differentiations determine ``x'`` at ``t``: ``(ok, ranks, next_ranks)``.
+
+    The one criterion used everywhere: the array with ``k`` differentiations
+    is 1-full and ``[J, F]`` has full row rank, and the array with ``k + 1``
+    keeps the corank and full row rank (thesis (A3)-(A4) for k and k+1).
+    ``next_ranks`` is None when the first part already fails.
+    """
+    ranks = ranks if ranks is not None else array_ranks(dae, k, t, rcond)
+    if not (ranks.full_row_rank and ranks.one_full):
+        return False, ranks, None
+    nxt = array_ranks(dae, k + 1, t, rcond)
+    return nxt.full_row_rank and nxt.corank == ranks.corank, ranks, nxt
+
+
 def determine_index(dae, t, kmax, rcond):
     """``(k, ranks)`` with the ranks for each k tried; raises on failure."""
     tried = []
     ranks_next = None
     for k in range(kmax + 1):
-        ranks = ranks_next if ranks_next is not None else array_ranks(dae, k, t, rcond)
-        ranks_next = None
+        ok, ranks, ranks_next = k_works(dae, k, t, rcond, ranks=ranks_next)
         tried.append(ranks)
+        if ok:
+            return k, tried
         if not ranks.full_row_rank:
             break
-        if ranks.one_full:
-            ranks_next = array_ranks(dae, k + 1, t, rcond)
-            if ranks_next.corank == ranks.corank and ranks_next.full_row_rank:
-                return k, tried
     lines = "\n  ".join(str(r) for r in tried)
     if dae.is_constant and not pencil_is_regular(dae, rcond):
         raise IndexDeterminationError(
@@ -176,8 +188,8 @@ class SolvabilityReport:
         pointwise index).
     times : ndarray
         The sampled times.
-    pointwise_index : ndarray of int
-        The index found at each sampled time.
+    pointwise_index : ndarray of int or None
+        The index found at each sampled time (None when ``k`` was given).
     ranks : list of ArrayRanks
         The ranks of the array with `k` differentiations at each time.
     """
@@ -188,25 +200,39 @@ class SolvabilityReport:
     def __repr__(self):
         return (
             f"SolvabilityReport(k={self.k}, {self.times.size} times in [{self.times[0]:g}, {self.times[-1]:g}], "
-            f"pointwise index {sorted(set(self.pointwise_index.tolist()))}, corank {self.ranks[0].corank})"
+            f"pointwise index {'given k' if self.pointwise_index is None else sorted(set(self.pointwise_index.tolist()))}, "
+            f"corank {self.ranks[0].corank})"
         )
 
 
-def check_solvability(dae, t_span, *, kmax=10, rcond=None, samples=21):
+def sample_times(t_span, samples=21):
+    """Equally spaced times over `t_span`, plus t = 0 when inside (coefficients often degenerate there)."""
+    t0, t1 = t_span
+    times = np.linspace(t0, t1, samples)
+    if 0.0 not in times and min(t0, t1) < 0.0 < max(t0, t1):
+        times = np.sort(np.append(times, 0.0))
+    return times
+
+
+def check_solvability(dae, t_span, *, k=None, kmax=10, rcond=None, samples=21):
     """Decide unique solvability of a linear DAE over an interval.
 
     Solvability is decided by the derivative array, not by the pencil
     (ERRATA item 6): for time-varying coefficients a regular pencil
     (``det(s A(t) + B(t)) != 0``) does not imply unique solvability, and a
     singular one does not exclude it. At each of `samples` equally spaced
-    times the index is determined; then the array with ``k`` = the largest
-    of them must be 1-full, satisfy (A4) and have the same corank at every
-    sampled time (thesis (A3), constant rank).
+    times the index is determined; then ``k`` = the largest of them must
+    work at every sampled time (`k_works`: 1-full, (A4), the same corank
+    with ``k + 1``), with the same corank everywhere (thesis (A3), constant
+    rank).
 
     Parameters
     ----------
     dae : LinearDAE
     t_span : pair of float
+    k : int, optional
+        Check this number of differentiations instead of determining the
+        index (`SolvabilityReport.pointwise_index` is then None).
     kmax : int, optional
     rcond : float, optional
     samples : int, optional
@@ -219,8 +245,8 @@ def check_solvability(dae, t_span, *, kmax=10, rcond=None, samples=21):
     Raises
     ------
     IndexDeterminationError
-        Naming the times where no k works, where 1-fullness fails or where
-        the rank changes.
+        Naming the times where no k works, where ``k`` does not determine
+        ``x'`` or where the rank changes.
 
     Examples
     --------
@@ -243,26 +269,29 @@ def check_solvability(dae, t_span, *, kmax=10, rcond=None, samples=21):
     rcond = validate_rcond(rcond)
     if isinstance(samples, bool) or not isinstance(samples, int) or samples < 2:
         raise ValueError(f"`samples` must be an int >= 2; found {samples!r}.")
-    times = np.linspace(t0, t1, samples)
-    if 0.0 not in times and min(t0, t1) < 0.0 < max(t0, t1):
-        times = np.sort(np.append(times, 0.0))  # where coefficients often degenerate
-    index, failures = [], []
-    for t in times:
-        try:
-            index.append(determine_index(dae, float(t), kmax, rcond)[0])
-        except IndexDeterminationError as exc:
-            failures.append(f"t={t:g}: {str(exc).splitlines()[0]}")
-    if failures:
-        raise IndexDeterminationError(
-            f"`dae` is not uniquely solvable on {tuple(t_span)}: no k <= {kmax} works at "
-            f"{len(failures)} of {times.size} sampled times:\n  " + "\n  ".join(failures)
-        )
-    k = max(index)
-    ranks = [array_ranks(dae, k, float(t), rcond) for t in times]
-    coranks = [r.corank for r in ranks]
-    bad = [f"t={t:g}: {r}" for t, r in zip(times, ranks) if not (r.one_full and r.full_row_rank)]
+    times = sample_times((t0, t1), samples)
+    index = None
+    if k is None:
+        index, failures = [], []
+        for t in times:
+            try:
+                index.append(determine_index(dae, float(t), kmax, rcond)[0])
+            except IndexDeterminationError as exc:
+                failures.append(f"t={t:g}: {str(exc).splitlines()[0]}")
+        if failures:
+            raise IndexDeterminationError(
+                f"`dae` is not uniquely solvable on {tuple(t_span)}: no k <= {kmax} works at "
+                f"{len(failures)} of {times.size} sampled times:\n  " + "\n  ".join(failures)
+            )
+        k = max(index)
+    else:
+        k = check_k(k)
+    checks = [k_works(dae, k, float(t), rcond) for t in times]
+    bad = [f"t={t:g}: {r}" + ("" if nxt is None else f"; next: {nxt}") for t, (ok, r, nxt) in zip(times, checks) if not ok]
     if bad:
-        raise IndexDeterminationError(f"with k={k} the derivative array is not 1-full at:\n  " + "\n  ".join(bad))
+        raise IndexDeterminationError(f"with k={k} the derivative array does not determine x' at:\n  " + "\n  ".join(bad))
+    ranks = [r for _, r, _ in checks]
+    coranks = [r.corank for r in ranks]
     if len(set(coranks)) > 1:
         typical = max(set(coranks), key=coranks.count)
         where = [f"t={t:g} (corank {c})" for t, c in zip(times, coranks) if c != typical]
@@ -270,4 +299,4 @@ def check_solvability(dae, t_span, *, kmax=10, rcond=None, samples=21):
             f"with k={k} the rank of the derivative array is not constant on {tuple(t_span)} "
             f"(corank {typical} elsewhere): " + ", ".join(where)
         )
-    return SolvabilityReport(k, times, np.array(index), ranks)
+    return SolvabilityReport(k, times, None if index is None else np.array(index), ranks)

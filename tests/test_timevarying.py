@@ -247,3 +247,19 @@ def test_evaluations_at_one_time_share_one_factorization(monkeypatch):
     c.project(1.7, x)
     c.jac(1.7, x)
     assert calls == [1.7]
+
+
+def test_given_k_is_checked_over_the_interval():
+    p = gallery.thesis_example1()
+    with pytest.raises(IndexDeterminationError, match="with k=1 the derivative array does not determine x' at"):
+        check_solvability(p.dae, p.t_span, k=1)
+    with pytest.raises(IndexDeterminationError, match="k=1"):
+        complete(p.dae, "standard", k=1, t_span=p.t_span)
+    report = check_solvability(p.dae, p.t_span, k=3)
+    assert report.k == 3 and report.pointwise_index is None
+    # Theorem 5 holds pointwise too: the standard LSC with k = 3 equals the one with k = 2
+    c2 = complete(p.dae, "standard", t_span=p.t_span)
+    c3 = complete(p.dae, "standard", k=3, t_span=p.t_span)
+    for s in (-0.6, 0.0, 0.9):
+        np.testing.assert_allclose(c3.matrices(s)[0], c2.matrices(s)[0], rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(c3.matrices(s)[1], c2.matrices(s)[1], rtol=1e-10, atol=1e-10)
