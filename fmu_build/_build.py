@@ -285,8 +285,7 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
     name = spec.name
     package = f"{name}_lsc"
     model_module = f"{name}_model"
-    for mod in [m for m in sys.modules if m in (name, model_module, package) or m.startswith(package + ".")]:
-        del sys.modules[mod]
+    _forget_modules(name, model_module, package)
     dest = Path(dest)
     with tempfile.TemporaryDirectory(prefix="lsc_fmu_") as tmp:
         src = Path(tmp) / "src"
@@ -313,8 +312,7 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
                                        canGetAndSetFMUstate=True, canSerializeFMUstate=True)
         finally:
             sys.path.remove(str(src))
-            for mod in [m for m in sys.modules if m in (name, model_module, package) or m.startswith(package + ".")]:
-                del sys.modules[mod]
+            _forget_modules(name, model_module, package)
     _complete_model_description(Path(fmu), spec)
     return Path(fmu)
 
@@ -356,6 +354,16 @@ def _vendor_ivp(dest):
     if licence is not None:
         shutil.copy(licence, dest / "LICENSE.txt")
     return True
+
+
+def _forget_modules(name, model_module, package):
+    """Drop the FMU's modules from this process (pythonfmu imports them to write the description).
+
+    A later build of a model with the same name would otherwise get the
+    stale modules from the import cache.
+    """
+    for mod in [m for m in sys.modules if m in (name, model_module, package) or m.startswith(package + ".")]:
+        del sys.modules[mod]
 
 
 def _numeric_dae(spec):

@@ -32,8 +32,10 @@ except ImportError:
 
 try:  # inside a built FMU this module sits in the private copy of lsc
     from . import LinearDAE, complete
+    from ._timefunc import JetCallable
 except ImportError:  # imported from fmu_build itself (documentation, tests)
     from lsc import LinearDAE, complete
+    from lsc._timefunc import JetCallable
 
 METHODS = ("standard", "stabilized", "alternative")
 SOLVERS = ("RK45", "DOP853", "Radau", "BDF")
@@ -73,19 +75,6 @@ def start_name(state):
         base, index = state.split("[", 1)
         return f"{base}_0[{index}"
     return state + "_0"
-
-
-class _Jet:
-    """A coefficient h(t, d) backed by generated jet code, for lsc."""
-
-    def __init__(self, fn, params):
-        self.fn, self.params = fn, params
-
-    def jet(self, t, order):
-        return self.fn(t, self.params, order)
-
-    def __call__(self, t, d):
-        return self.jet(t, d)[d]
 
 
 class _InputSignal:
@@ -260,13 +249,18 @@ class LscRuntime:
         key = (method, lam, tuple(sorted(params.items())))
         if key != self._completion_key:
             M, model = self.model.MODEL, self.model
-            A = _Jet(model.A_jet, params) if M["A_varies"] else model.A_jet(0.0, params, 0)[0]
-            B = _Jet(model.B_jet, params) if M["B_varies"] else model.B_jet(0.0, params, 0)[0]
-            if self.inputs:
-                f = _Jet(lambda t, p, order: model.f_jet(t, p, order, {n: s.jet(t) for n, s in self.inputs.items()}),
-                         params)
+            def coefficient(jet_fn, varies):
+                # generated code takes (t, params, order); lsc wants h(t, d) with h.jet(t, order)
+                h = JetCallable(lambda t, order: jet_fn(t, params, order))
+                return h if varies else h.jet(0.0, 0)[0]
+
+            inputs = self.inputs
+            A = coefficient(model.A_jet, M["A_varies"])
+            B = coefficient(model.B_jet, M["B_varies"])
+            if inputs:
+                f = JetCallable(lambda t, order: model.f_jet(t, params, order, {n: s.jet(t) for n, s in inputs.items()}))
             else:
-                f = _Jet(model.f_jet, params) if M["f_varies"] else model.f_jet(0.0, params, 0)[0]
+                f = coefficient(model.f_jet, M["f_varies"])
             dae = LinearDAE(A, B, f)
             span = (M["start"], M["stop"]) if not dae.is_constant else None
             self._completion = complete(dae, method, lam=lam, k=M["k"], t_span=span)

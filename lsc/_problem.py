@@ -4,6 +4,7 @@ import numpy as np
 
 from ._exceptions import DimensionError
 from ._timefunc import _as_float_array, _contains_sympy, _shape_str, as_time_function
+from ._validate import check_state
 
 __all__ = ["LinearDAE"]
 
@@ -104,8 +105,8 @@ class LinearDAE:
         ndarray, shape (n,)
             Zero (to rounding) exactly when ``(x, xdot)`` satisfies the DAE at `t`.
         """
-        x = _vector("x", x, self.n)
-        xdot = _vector("xdot", xdot, self.n)
+        x = check_state("x", x, self.n)
+        xdot = check_state("xdot", xdot, self.n)
         r = self.A(t) @ xdot + self.B(t) @ x
         if self.f is not None:
             r = r - self.f(t)
@@ -123,11 +124,3 @@ def _infer_n(value, name):
     if len(shape) != 2 or shape[0] != shape[1]:
         raise DimensionError(f"`{name}` must be a square matrix: expected (n, n), got {_shape_str(shape)}.")
     return shape[0]
-
-
-def _vector(name, value, n):
-    """A float vector of length n, or a DimensionError naming `name`."""
-    arr = np.asarray(value, dtype=float)
-    if arr.shape != (n,):
-        raise DimensionError(f"`{name}` has the wrong shape: expected ({n},), got {_shape_str(arr.shape)}.")
-    return arr

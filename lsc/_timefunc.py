@@ -139,6 +139,28 @@ class CallableFunction(TimeFunction):
         return out
 
 
+class JetCallable:
+    """A coefficient ``h(t, d)`` that also offers all its derivatives at once.
+
+    ``h.jet(t, order)`` returns derivatives ``0..order`` stacked; lsc calls
+    it instead of ``h(t, d)`` per order (see `CallableFunction`), so
+    coefficients computed by jet arithmetic are evaluated once per time.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> h = JetCallable(lambda t, order: np.array([[np.sin(t + d * np.pi / 2)] for d in range(order + 1)]))
+    >>> float(h(0.0, 1)[0])
+    1.0
+    """
+
+    def __init__(self, jet_fn):
+        self.jet = jet_fn
+
+    def __call__(self, t, d):
+        return self.jet(t, d)[d]
+
+
 def _sympy_matrix(name, obj, shape):
     """Convert sympy input (or a list containing sympy) to a Matrix of `shape`."""
     import sympy

@@ -27,6 +27,7 @@ import numpy as np
 
 from ._exceptions import DimensionError
 from ._problem import LinearDAE
+from ._timefunc import JetCallable
 from ._validate import check_k
 
 __all__ = [
@@ -503,20 +504,6 @@ def _rotation_jet(n, rates, t, order):
     return R
 
 
-class _JetCoefficient:
-    """A callable ``h(t, d)`` that also offers its whole jet, ``h.jet(t, order)``.
-
-    lsc asks for the jet in one call (`CallableFunction` uses ``jet`` when a
-    callable has it), so the derivatives are computed once per time.
-    """
-
-    def __init__(self, jet_fn):
-        self.jet = jet_fn
-
-    def __call__(self, t, d):
-        return self.jet(t, d)[d]
-
-
 def rotating_canonical(index=3, omega=1.0, t_span=(0.0, 5.0)):
     """A canonical form turned by time-varying orthogonal transformations.
 
@@ -586,9 +573,9 @@ def rotating_canonical(index=3, omega=1.0, t_span=(0.0, 5.0)):
     def exact(ts, d):
         return np.array([_jet_matmul(Q_jet(t, d), y_jet(t, d))[d] for t in ts]).T
 
-    A = _JetCoefficient(A_jet)
-    B = _JetCoefficient(B_jet)
-    f = _JetCoefficient(f_jet)
+    A = JetCallable(A_jet)
+    B = JetCallable(B_jet)
+    f = JetCallable(f_jet)
     return Problem(
         f"rotating_canonical(index={index}, omega={omega:g})", LinearDAE(A, B, f), t_span, exact, index, None, (index,),
     )
@@ -687,5 +674,5 @@ def moving_pencil(n=10, blocks=(3,), seed=0, rate=0.5, t_span=(0.0, 1.0)):
     def exact(ts, deriv):
         return np.array([_jet_matmul(Q_jet(t, deriv), y_jet(t, deriv))[deriv] for t in ts]).T
 
-    dae = LinearDAE(_JetCoefficient(A_jet), _JetCoefficient(B_jet), _JetCoefficient(f_jet))
+    dae = LinearDAE(JetCallable(A_jet), JetCallable(B_jet), JetCallable(f_jet))
     return Problem(f"moving_pencil(n={n}, blocks={blocks}, seed={seed})", dae, t_span, exact, max(blocks), None, blocks)
