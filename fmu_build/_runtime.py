@@ -86,15 +86,15 @@ class _InputSignal:
     extrapolated over the step being taken. With communication step h the
     j-th derivative has error O(h^(degree + 1 - j)) for a smooth input;
     ``degree`` is the highest derivative the completion uses plus 2. Only
-    derivatives the completion can use are estimated (``order`` = -1: the
-    input enters only through ... nothing, 0: its value only).
+    derivatives the completion can use are estimated (``order``: the highest
+    one; 0 means only the value is used; -1 that the input is never used).
     """
 
     def __init__(self, order, start, order_max):
         self.order, self.order_max = order, order_max
         self.history = []  # (t, value), increasing t
         self.value = start
-        self.degree = order + 2 if order > 0 else 0
+        self.degree = order + 2 if order >= 0 else 0  # order -1: the input is never used
         self._coef = None
 
     def record(self, t):
