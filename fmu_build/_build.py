@@ -192,7 +192,14 @@ from pythonfmu import Fmi2Slave
 from pythonfmu.default_experiment import DefaultExperiment
 
 import {model_module} as MODEL
-from {package}._fmu_runtime import LscRuntime
+from {package}._fmu_runtime import LscRuntime, give_back_loader_reference, release_loader_state_at_exit
+
+# pythonfmu 0.7.0's loader runs this file a second time at every fmi2Instantiate and then
+# releases a reference to this module's globals that it never took (a Py_DECREF of
+# PyModule_GetDict's borrowed result). Uncompensated, the dict is freed while the module still
+# uses it and the host process aborts at exit ("corrupted double-linked list"). This line runs
+# once at import and once per instantiation, so every stolen reference is given back.
+give_back_loader_reference(globals())
 
 
 class {name}(Fmi2Slave):
@@ -203,6 +210,7 @@ class {name}(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        release_loader_state_at_exit(self.resources, {name!r})  # pythonfmu 0.7.0 frees its state twice at exit
         self.rt = LscRuntime(self, MODEL)
 
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):

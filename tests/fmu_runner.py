@@ -46,7 +46,12 @@ def main():
 
     md = read_model_description(sc["fmu"])
     var = {v.name: v for v in md.modelVariables}
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(sc["fmu"]), modelIdentifier=md.coSimulation.modelIdentifier,
+    unzipped = extract(sc["fmu"])
+    if sc.get("probe_module_refcount"):
+        return probe_module_refcount(md, unzipped, sc["probe_module_refcount"])
+    if sc.get("probe_exit_hook"):
+        return probe_exit_hook(md, unzipped, sc["probe_exit_hook"])
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
                     instanceName="instance")
     fmu.instantiate(callbacks=callbacks, loggingOn=True)
 
@@ -99,13 +104,58 @@ def main():
         times.append(t)
         values.append(read())
     fmu.terminate()
-    # Free the instance but keep the library loaded: unloading pythonfmu's
-    # library tears down its embedded-interpreter thread, which intermittently
-    # aborts the host at exit ("corrupted double-linked list").
-    fmu.fmi2FreeInstance(fmu.component)
+    fmu.freeInstance()  # and unload the library, as fmpy.simulate_fmu does
     print(json.dumps({"time": times, "values": {n: [row[j] for row in values] for j, n in enumerate(outputs)},
                       "status": status, "logs": logs, "rollback": rollback}), flush=True)
 
+
+def probe_module_refcount(md, unzipped, instances):
+    """Instantiate the FMU `instances` times; after each, print how far the slave
+    module dict's reference count is above the number of objects holding it
+    (negative: someone released a reference it did not own)."""
+    import gc
+    import os
+
+    from fmpy.fmi2 import FMU2Slave
+
+    with open(os.path.join(unzipped, "resources", "slavemodule.txt")) as fh:
+        module = fh.read().strip()
+    surplus, keep = [], []
+    for i in range(instances):
+        fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName=f"instance{i}")
+        fmu.instantiate()
+        keep.append(fmu)
+        owners = len(gc.get_referrers(sys.modules[module].__dict__))
+        # getrefcount counts its own argument once
+        surplus.append(sys.getrefcount(sys.modules[module].__dict__) - 1 - owners)
+    for fmu in keep:
+        fmu.terminate()
+        fmu.fmi2FreeInstance(fmu.component)
+    print(json.dumps({"surplus": surplus}), flush=True)
+
+def probe_exit_hook(md, unzipped, instances):
+    """Instantiate the FMU `instances` times and report the libraries whose
+    pythonfmu state the FMU runtime releases at exit, and how many atexit
+    handlers the instantiations added."""
+    import atexit
+
+    from fmpy.fmi2 import FMU2Slave
+
+    before = atexit._ncallbacks()
+    keep = []
+    for i in range(instances):
+        fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName=f"instance{i}")
+        fmu.instantiate()
+        keep.append(fmu)
+    added = atexit._ncallbacks() - before
+    runtime = next(m for name, m in sys.modules.items() if name.endswith("_lsc._fmu_runtime"))
+    for fmu in keep:
+        fmu.terminate()
+        fmu.fmi2FreeInstance(fmu.component)
+    keep[0].freeLibrary()
+    print(json.dumps({"hooks": sorted(runtime._EXIT_HOOKS), "atexit_added": added}), flush=True)
 
 
 if __name__ == "__main__":

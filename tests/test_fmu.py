@@ -137,6 +137,27 @@ def test_bad_values_discard_with_a_readable_log_and_recover(fmus, name, value, f
     assert all(np.isfinite(r["values"]["y"]))
 
 
+def test_instantiation_leaves_no_reference_deficit(fmus):
+    # pythonfmu 0.7.0 releases one reference to the slave module's dict per
+    # fmi2Instantiate that it never owned; the generated slave gives it back
+    # (give_back_loader_reference). A deficit (< 0) means the dict is freed
+    # while in use and hosts abort at exit; a growing surplus would be a leak.
+    for key in ("path", "example1"):
+        r = run({"fmu": str(fmus[key, "alternative"]), "probe_module_refcount": 3})
+        assert r["surplus"] == [1, 1, 1], (key, r)
+
+
+def test_python_host_releases_pythonfmu_state_before_exit(fmus):
+    # pythonfmu 0.7.0 releases its static interpreter guard twice at process exit, which
+    # aborted 23 of 100 fmpy runs of the example1 FMU by hand (0 of 100 with the hook; the
+    # abort depends on the heap layout, so it is not reproducible inside pytest on demand).
+    # What is checked here is the mechanism: one atexit hook per loaded library, on its
+    # exported finalizePythonInterpreter, and a clean exit.
+    r = run({"fmu": str(fmus["example1", "alternative"]), "probe_exit_hook": 2})
+    assert len(r["hooks"]) == 1 and r["hooks"][0].endswith("binaries/linux64/Example1.so"), r
+    assert r["atexit_added"] >= 1, r  # imports inside the FMU may register handlers of their own
+
+
 def test_fmu_runs_without_lsc_and_sympy_in_the_host(fmus):
     scenario = {"fmu": str(fmus["mechanical", "stabilized"]), "dt": 0.1, "steps": 5, "outputs": ["x[1]", "x[5]"],
                 "start_values": {**TOL, "solver": 2}}  # Radau: the solver with the most scipy imports
