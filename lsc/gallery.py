@@ -32,6 +32,7 @@ from ._validate import check_k
 
 __all__ = [
     "Problem",
+    "StateSpace",
     "nilpotent_chain",
     "random_pencil",
     "mechanical",
@@ -64,6 +65,10 @@ class Problem:
     jordan_blocks : tuple of int
         Sizes of the nilpotent chains (Jordan blocks at infinity), largest
         first (of the canonical form the problem was built from).
+    state_space : StateSpace or None
+        The peers a user would write by hand instead of completing the DAE:
+        the reduced ODE and an index-1 DAE form (for benchmarks); None where
+        the gallery does not derive them.
     """
 
     def __init__(self, name, dae, t_span, exact, index, finite_eigenvalues, jordan_blocks):
@@ -80,6 +85,7 @@ class Problem:
                 self.finite_eigenvalues = self.finite_eigenvalues.real
         self.jordan_blocks = tuple(sorted(jordan_blocks, reverse=True))
         self.x0 = self.exact(t_span[0])
+        self.state_space = None
 
     def exact(self, t, d=0):
         """The d-th derivative of the exact solution: shape (n,) or (n, m) for t of shape (m,)."""
@@ -89,6 +95,108 @@ class Problem:
 
     def __repr__(self):
         return f"Problem({self.name!r}, n={self.dae.n}, index={self.index}, t_span={self.t_span})"
+
+
+
+class StateSpace:
+    """The hand-derived alternatives to completing a gallery DAE.
+
+    What a user who knows the problem's structure would integrate instead:
+
+    - the *reduced ODE* ``y' = rhs(t, y)`` of the dynamic part only (its
+      dimension is the number of finite eigenvalues), with the algebraic
+      part computed from the forcing and its derivatives, and
+      ``x = output(t, y)``;
+    - an *index-1 DAE* ``residual(t, x, x') = 0`` in the original unknowns:
+      the dynamic equations plus the hidden constraints written out, for a
+      DAE solver such as SUNDIALS IDA.
+
+    Attributes
+    ----------
+    y0 : ndarray, shape (d,)
+        Reduced state at ``t_span[0]`` (of the exact solution).
+    rhs : callable ``rhs(t, y) -> (d,)``
+    jac : ndarray or callable ``jac(t, y) -> (d, d)``
+    output : callable ``output(t, y) -> (n,)``
+        The full unknown ``x`` from the reduced state.
+    residual : callable ``residual(t, x, xp) -> (n,)``
+    residual_jac : callable ``residual_jac(t, x, xp, cj) -> (n, n)``
+        ``d residual / dx + cj d residual / dxp``.
+    algebraic : list of int
+        Components of ``x`` whose derivative does not appear in `residual`.
+    """
+
+    def __init__(self, y0, rhs, jac, output, residual, residual_jac, algebraic=()):
+        self.y0 = np.asarray(y0, dtype=float)
+        self.rhs, self.jac, self.output = rhs, jac, output
+        self.residual, self.residual_jac = residual, residual_jac
+        self.algebraic = list(algebraic)
+
+
+def _chain_solution(N, h_jet):
+    """``y2 = sum_i (-N)^i h2^(i)``: the solution of ``N y2' + y2 = h2`` (N nilpotent)."""
+    y2 = np.zeros(N.shape[0])
+    term = np.eye(N.shape[0])
+    for i in range(len(h_jet)):
+        y2 += term @ h_jet[i]
+        term = -term @ N
+    return y2
+
+
+def _canonical_state_space(problem, d, E, Ab, P, Q, nu, P_jet=None, Q_jet=None):
+    """StateSpace of ``P (E y' + Ab y) = f``, ``x = Q y`` (constant or jets ``P_jet``, ``Q_jet``)."""
+    C = Ab[:d, :d]
+    N = E[d:, d:]
+    f_jet = problem.dae.f_jet
+    if P_jet is None:
+        W = np.linalg.inv(P)
+        V = np.linalg.inv(Q)
+
+        def h_jet(t, order):
+            return f_jet(t, order) @ W.T
+
+        def V_jet(t, order):
+            return _constant_jet(V, order)
+
+        def Q_at(t):
+            return Q
+    else:  # orthogonal P(t), Q(t): inverses are transposes, derivatives by the Leibniz rule
+        def h_jet(t, order):  # jet of P(t)^T f(t)
+            P, f = P_jet(t, order), f_jet(t, order)
+            return np.array([sum(_binom(m, j) * (f[m - j] @ P[j]) for j in range(m + 1)) for m in range(order + 1)])
+
+        def V_jet(t, order):
+            return np.transpose(Q_jet(t, order), (0, 2, 1))
+
+        def Q_at(t):
+            return Q_jet(t, 0)[0]
+
+    def rhs(t, y):
+        return h_jet(t, 0)[0, :d] - C @ y
+
+    def output(t, y):
+        return Q_at(t) @ np.concatenate([y, _chain_solution(N, h_jet(t, nu - 1)[:, d:])])
+
+    def residual(t, x, xp):
+        V = V_jet(t, 1)
+        h = h_jet(t, nu - 1)
+        r1 = V[0, :d] @ xp + (V[1, :d] + C @ V[0, :d]) @ x - h[0, :d]
+        r2 = V[0, d:] @ x - _chain_solution(N, h[:, d:])
+        return np.concatenate([r1, r2])
+
+    def residual_jac(t, x, xp, cj):
+        V = V_jet(t, 1)
+        return np.vstack([cj * V[0, :d] + V[1, :d] + C @ V[0, :d], V[0, d:]])
+
+    t0 = problem.t_span[0]
+    y0 = V_jet(t0, 0)[0, :d] @ problem.x0
+    return StateSpace(y0, rhs, -C, output, residual, residual_jac)
+
+
+def _binom(m, j):
+    from math import comb
+
+    return comb(m, j)
 
 
 class _Sinusoids:
@@ -186,7 +294,10 @@ def _canonical_problem(name, spectrum, blocks, P, Q, t_span, seed):
 
     dae = LinearDAE(A, B, f)
     index = max(blocks) if blocks else 0
-    return Problem(name, dae, t_span, exact, index, spectrum, blocks)
+    problem = Problem(name, dae, t_span, exact, index, spectrum, blocks)
+    if d and a:
+        problem.state_space = _canonical_state_space(problem, d, E, Ab, P, Q, index)
+    return problem
 
 
 def nilpotent_chain(index, ode_dim=2, seed=None, t_span=(0.0, 5.0)):
@@ -478,29 +589,93 @@ def stiff_index1(kappa=1000.0, t_span=(0.0, 2.0)):
     A = sympy.Matrix([[1, 0], [0, 0]])
     B = sympy.Matrix([[k, -1], [t, 1 + t**2]])
     x = sympy.Matrix([sympy.cos(t), sympy.sin(2 * t) / (1 + t**2)])
-    return _sympy_problem(f"stiff_index1(kappa={kappa:g})", A, B, x, t, t_span, 1, (1,))
+    problem = _sympy_problem(f"stiff_index1(kappa={kappa:g})", A, B, x, t, t_span, 1, (1,))
+    dae = problem.dae
+
+    def x2(t, x1):  # the algebraic row solved by hand
+        f = dae.f_jet(t, 0)[0]
+        return (f[1] - t * x1) / (1 + t * t)
+
+    def rate(t):
+        return kappa * (1 + 0.5 * np.sin(t))
+
+    def rhs(t, y):
+        return np.array([dae.f_jet(t, 0)[0][0] - rate(t) * y[0] + x2(t, y[0])])
+
+    def jac(t, y):
+        return np.array([[-rate(t) - t / (1 + t * t)]])
+
+    def output(t, y):
+        return np.array([y[0], x2(t, y[0])])
+
+    def residual(t, x, xp):
+        return dae.residual(t, x, xp)
+
+    def residual_jac(t, x, xp, cj):
+        return np.array([[rate(t) + cj, -1.0], [t, 1 + t * t]])
+
+    problem.state_space = StateSpace(problem.x0[:1], rhs, jac, output, residual, residual_jac, algebraic=[1])
+    return problem
 
 
 def _jet_matmul(X, Y):
     """Jet of the product of two matrix jets (Leibniz rule), length of the shorter."""
-    from math import comb
-
     m = min(len(X), len(Y))
-    return np.array([sum(comb(d, j) * X[j] @ Y[d - j] for j in range(d + 1)) for d in range(m)])
+    X, Y = np.asarray(X[:m]), np.asarray(Y[:m])
+    products = np.einsum("pab,qb...->pqa...", X, Y)  # every X^(p) Y^(q) (Y: matrices or vectors)
+    return (_leibniz(m) @ products.reshape(m * m, -1)).reshape((m,) + products.shape[2:])
 
+
+_LEIBNIZ = {}
+
+
+def _leibniz(m):
+    """Leibniz weights as an (m, m*m) matrix: ``(XY)^(d) = sum_(p+q=d) binom(d, p) X^(p) Y^(q)``."""
+    W = _LEIBNIZ.get(m)
+    if W is None:
+        W = np.zeros((m, m, m))
+        for d in range(m):
+            for p in range(d + 1):
+                W[d, p, d - p] = _BINOMIALS[d][p]
+        W = _LEIBNIZ[m] = W.reshape(m, m * m)
+    return W
+
+
+_BINOMIALS = [[1.0]]
+for _row in range(1, 16):
+    _BINOMIALS.append([1.0] + [_BINOMIALS[-1][_j - 1] + _BINOMIALS[-1][_j] for _j in range(1, _row)] + [1.0])
+
+
+def _last_values(fn, size=8):
+    """Memoize a jet ``fn(t, order)`` at the last `size` times; a lower order is a slice."""
+    cache = {}
+
+    def cached(t, order):
+        key = float(t)
+        out = cache.get(key)
+        if out is None or len(out) <= order:
+            if out is None and len(cache) >= size:
+                cache.pop(next(iter(cache)))
+            out = cache[key] = fn(t, order)
+            out.flags.writeable = False
+        return out[: order + 1]
+
+    return cached
 
 def _rotation_jet(n, rates, t, order):
     """Jet of ``R(t) = prod_i R_(i, i+1)(rate_i t)``: plane rotations, exact derivatives."""
     R = np.zeros((order + 1, n, n))
     R[0] = np.eye(n)
+    d = np.arange(order + 1)
     for i, w in enumerate(rates):
-        G = np.zeros((order + 1, n, n))
-        G[0] = np.eye(n)
         j = (i + 1) % n
-        for d in range(order + 1):
-            a = w * t + d * np.pi / 2
-            G[d, i, i], G[d, i, j], G[d, j, i], G[d, j, j] = (w**d) * np.array([np.cos(a), -np.sin(a), np.sin(a), np.cos(a)])
-        R = _jet_matmul(R, G)
+        a = w * t + d * np.pi / 2
+        c, s = (w**d) * np.cos(a), (w**d) * np.sin(a)
+        g = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)  # jet of the 2x2 block, (order+1, 2, 2)
+        # R G changes columns i and j only (G is the identity elsewhere and its derivatives vanish there).
+        cols = R[:, :, [i, j]]
+        products = np.einsum("pak,qkl->pqal", cols, g)
+        R[:, :, [i, j]] = (_leibniz(order + 1) @ products.reshape((order + 1) ** 2, -1)).reshape(cols.shape)
     return R
 
 
@@ -544,11 +719,9 @@ def rotating_canonical(index=3, omega=1.0, t_span=(0.0, 5.0)):
     rates = [omega * r for r in (1.0, 0.7, 1.3, 0.9, 1.1, 0.6, 1.2, 0.8)[: n - 1]]
     y_star = _Sinusoids(amp=np.ones(n), omega=1 + 0.3 * np.arange(n), phase=np.arange(n, dtype=float), offset=0.5 * np.ones(n))
 
-    def P_jet(t, order):
-        return _rotation_jet(n, rates, t, order)
-
-    def Q_jet(t, order):
-        return _rotation_jet(n, rates[::-1], t, order)
+    # A, B and f at one t all need P and Q: compute each jet once per (t, order).
+    P_jet = _last_values(lambda t, order: _rotation_jet(n, rates, t, order))
+    Q_jet = _last_values(lambda t, order: _rotation_jet(n, rates[::-1], t, order))
 
     def transpose(X):
         return np.transpose(X, (0, 2, 1))
@@ -576,9 +749,11 @@ def rotating_canonical(index=3, omega=1.0, t_span=(0.0, 5.0)):
     A = JetCallable(A_jet)
     B = JetCallable(B_jet)
     f = JetCallable(f_jet)
-    return Problem(
+    problem = Problem(
         f"rotating_canonical(index={index}, omega={omega:g})", LinearDAE(A, B, f), t_span, exact, index, None, (index,),
     )
+    problem.state_space = _canonical_state_space(problem, 2, E, Ab, None, None, index, P_jet=P_jet, Q_jet=Q_jet)
+    return problem
 
 
 def _constant_jet(X, order):
