@@ -23,6 +23,9 @@ class CompletionResult:
     residual : ndarray, shape (m,)
         Norm of the constraint residual ``Z2^T (F x - g)`` at each output
         time: the distance from the solution manifold, in constraint units.
+        A diagnostic, computed on first access (it costs one forcing
+        evaluation per output time, which a run that never reads it should
+        not pay).
     success : bool
         True if the integration reached the end of `t_span`.
     status : int
@@ -40,6 +43,16 @@ class CompletionResult:
 
     def __init__(self, **fields):
         self.__dict__.update(fields)
+
+    def __getattr__(self, name):  # only called for attributes not set: the lazy residual
+        if name != "residual":
+            raise AttributeError(f"'CompletionResult' object has no attribute {name!r}")
+        if self.t.size:
+            residual = np.linalg.norm(self.completion.constraint_residual(self.t, self.x), axis=0)
+        else:
+            residual = np.zeros(0)
+        self.residual = residual
+        return residual
 
     def __repr__(self):
         return (
@@ -152,9 +165,8 @@ def _solve_expm(completion, t0, t1, x0, t_eval, options):
             t = target
         xs.append(x.copy())
     X = np.array(xs).T
-    residual = np.linalg.norm(completion.constraint_residual(t_out, X), axis=0) if t_out.size else np.zeros(0)
     return CompletionResult(
-        t=t_out, x=X, residual=residual, success=True, status=0,
+        t=t_out, x=X, success=True, status=0,
         message=f"exact stepping: {nsteps} steps, {len(prop._cache)} matrix exponential(s)",
         nfev=0, njev=0, nlu=0, sol=None, completion=completion,
     )
@@ -248,14 +260,11 @@ def solve_completion(
             nfev=0, njev=0, nlu=0, sol=None, completion=completion,
         )
     x = sol.y
-    residual = (
-        np.linalg.norm(completion.constraint_residual(sol.t, x), axis=0) if sol.t.size else np.zeros(0)
-    )
     message = sol.message
     if not sol.success and not _is_implicit(method):
         message += " (an explicit method failing on a completion often means it is stiff: large lam; try method='Radau')"
     return CompletionResult(
-        t=sol.t, x=x, residual=residual, success=bool(sol.success), status=sol.status, message=message,
+        t=sol.t, x=x, success=bool(sol.success), status=sol.status, message=message,
         nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=sol.sol, completion=completion,
     )
 
