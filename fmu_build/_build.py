@@ -302,10 +302,12 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
         # The runtime needs neither the gallery (sympy) nor solve_ivp: importing
         # scipy.integrate in an embedded interpreter loads scipy._lib._uarray,
         # whose finalization crashes native hosts at exit (see _vendor_ivp).
-        init = (src / package / "__init__.py").read_text()
-        for line in ("from . import gallery\n", "from ._integrate import CompletionResult, solve_completion, solve_dae\n"):
-            init = init.replace(line, "")
-        (src / package / "__init__.py").write_text(init)
+        lines = (src / package / "__init__.py").read_text().splitlines(keepends=True)
+        dropped = ("from . import gallery", "from ._integrate import")
+        kept = [line for line in lines if not line.startswith(dropped)]
+        if len(lines) - len(kept) != len(dropped):  # lsc's __init__ changed shape: fail at build, not in the FMU
+            raise RuntimeError("fmu_build could not strip the gallery and _integrate imports from lsc/__init__.py")
+        (src / package / "__init__.py").write_text("".join(kept))
         _vendor_ivp(src / package / "_ivp")
         shutil.copy(_HERE / "_runtime.py", src / package / "_fmu_runtime.py")
         (src / f"{model_module}.py").write_text(_model_source(spec, k_used, dae))

@@ -10,7 +10,7 @@ from ._exceptions import DimensionError, IndexDeterminationError, RankDecisionWa
 from ._index import SolvabilityReport, check_solvability, differentiation_index
 from ._problem import LinearDAE
 from ._analysis import Eigenanalysis, eigenanalysis
-from ._integrate import CompletionResult, solve_completion, solve_dae
+from ._integrate import CompletionResult, solve_completion, solve_dae, stiffness_ratio
 from . import gallery
 
 __all__ = [
@@ -29,6 +29,7 @@ __all__ = [
     "eigenanalysis",
     "Eigenanalysis",
     "solve_completion",
+    "stiffness_ratio",
     "solve_dae",
     "CompletionResult",
     "gallery",

@@ -4,6 +4,7 @@ import numpy as np
 from scipy.integrate import BDF, LSODA, OdeSolver, Radau, solve_ivp
 
 from ._completion import Completion, complete
+from ._derivative_array import lam_jet
 from ._validate import check_state, check_t_span
 
 __all__ = ["CompletionResult", "solve_completion", "solve_dae"]
@@ -172,6 +173,31 @@ def _solve_expm(completion, t0, t1, x0, t_eval, options):
     )
 
 
+_STIFF = 100.0
+
+
+def stiffness_ratio(completion, t_span):
+    """Fastest decay rate of a completion times the interval length.
+
+    The added modes decay at ``lam`` (its largest value at the interval's
+    ends for a time-varying rate); for constant coefficients the largest
+    ``|Re mu|`` of the pencil's finite eigenvalues (the DAE's own
+    stiffness) counts too. Above about 100 an explicit method's step is
+    limited by stability rather than accuracy.
+    """
+    t0, t1 = t_span
+    rates = [0.0]
+    if completion.lam is not None:
+        rates += [float(lam_jet(completion.lam, t, 0)[0]) for t in (t0, t1)]
+    if completion.dae.is_constant:
+        rate = getattr(completion, "_fastest_rate", None)
+        if rate is None:  # once per completion: G does not change
+            G, _ = completion.matrices(t0)
+            rate = completion._fastest_rate = float(np.max(np.abs(np.linalg.eigvals(G).real), initial=0.0))
+        rates.append(rate)
+    return max(rates) * abs(t1 - t0)
+
+
 def solve_completion(
     completion, t_span, x0, *, method="RK45", t_eval=None, rtol=1e-3, atol=1e-6, project=False, **options
 ):
@@ -196,6 +222,10 @@ def solve_completion(
         <= ``taylor_degree`` (option, default 3), otherwise of order
         ``taylor_degree + 1`` in the step (option ``max_step`` refines it);
         ``t_eval`` defaults to 101 equally spaced times; rtol/atol are unused.
+        ``'auto'`` picks 'Radau' when the completion is stiff on `t_span`
+        (``stiffness_ratio`` > 100, see below) and 'DOP853' otherwise. An
+        explicit method on a stiff completion runs as asked, and the
+        result's message says that an implicit one would be faster.
     t_eval : array_like, optional
         Output times (default: the solver's steps).
     rtol, atol : float or array_like, optional
@@ -232,6 +262,9 @@ def solve_completion(
         if project:
             x0 = completion.project(t0, x0)
         return _solve_expm(completion, t0, t1, x0, t_eval, dict(options))
+    stiffness = stiffness_ratio(completion, (t0, t1))
+    if method == "auto":
+        method = "Radau" if stiffness > _STIFF else "DOP853"
     if not (isinstance(method, str) or (isinstance(method, type) and issubclass(method, OdeSolver))):
         raise TypeError(f"`method` must be a solve_ivp method name or OdeSolver class; found {method!r}.")
     if project:
@@ -261,7 +294,10 @@ def solve_completion(
         )
     x = sol.y
     message = sol.message
-    if not sol.success and not _is_implicit(method):
+    if not _is_implicit(method) and stiffness > _STIFF:
+        message += (f" (the completion is stiff on this interval: |rate| x length = {stiffness:.3g}; "
+                    "method='Radau' or 'auto' takes far fewer steps)")
+    elif not sol.success and not _is_implicit(method):
         message += " (an explicit method failing on a completion often means it is stiff: large lam; try method='Radau')"
     return CompletionResult(
         t=sol.t, x=x, success=bool(sol.success), status=sol.status, message=message,
