@@ -21,7 +21,7 @@ method missed its tolerance). Also ``nfev`` and the constraint residual
 ``|Z2^T (F x - g)|`` at the final time (the same measure for every row).
 ``setup`` is the one-off time of ``lsc.complete`` (not in ``time``).
 
-Writes ``out/work_precision.csv`` and ``out/work_precision.png`` and prints the
+Writes ``out/work_precision.csv`` and ``out/work_precision.png`` (repository root) and prints the
 targets of issue 5 as ratios measured in this run.
 
 Run: ``python examples/work_precision.py [--quick] [--repeats R]``.
@@ -44,7 +44,7 @@ try:
 except ImportError:  # the IDA rows are skipped, and said so
     IDA = None
 
-OUT = Path(__file__).resolve().parent / "out"
+OUT = Path(__file__).resolve().parent.parent / "out"  # like main_job.py: gitignored
 N_OUT = 51
 
 

@@ -319,7 +319,7 @@ class Completion:
         if self.dae.is_constant:
             if self._g_const is not None:
                 return self._G @ x + self._g_const
-            return self._G @ x + self._W @ self.dae.f.jet(t, self._order).reshape(-1)
+            return self._G @ x + self._W @ self._fstack(t)
         _, G, g = self._evaluate(t)
         return G @ x + g
 

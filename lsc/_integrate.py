@@ -99,6 +99,8 @@ class _ExpmPropagator:
         self.W = completion._W
         self.n = completion.n
         self._cache = {}
+        p = completion._order
+        self._shifted = np.add.outer(np.arange(q + 1), np.arange(p + 1))  # jet rows j..j+p for each term j
 
     def _matrices(self, h):
         key = float(h)
@@ -116,7 +118,9 @@ class _ExpmPropagator:
                 M[(j - 1) * n : j * n, j * n : (j + 1) * n] = np.eye(n)
             E = scipy.linalg.expm(M)[:n]
             phi = [E[:, j * n : (j + 1) * n] for j in range(m)]
-            forcing = [h ** (j + 1) * phi[j + 1] @ self.W for j in range(q + 1)]
+            # All q + 1 Taylor terms as one matrix acting on the stacked shifted jets
+            # [f^(j), ..., f^(j+p)] for j = 0..q (see `step`): one product per step.
+            forcing = np.hstack([h ** (j + 1) * phi[j + 1] @ self.W for j in range(q + 1)])
             hit = self._cache[key] = (phi[0], forcing)
         return hit
 
@@ -129,11 +133,8 @@ class _ExpmPropagator:
         p = self.c._order
         if f.is_constant:
             # g is constant: only the j = 0 term
-            return x_new + forcing[0] @ f.jet(t, p).reshape(-1)
-        jet = f.jet(t, p + self.q)
-        for j in range(self.q + 1):
-            x_new = x_new + forcing[j] @ jet[j : j + p + 1].reshape(-1)
-        return x_new
+            return x_new + forcing[:, : (p + 1) * self.n] @ f.jet(t, p).reshape(-1)
+        return x_new + forcing @ f.jet(t, p + self.q)[self._shifted].reshape(-1)
 
 
 def _solve_expm(completion, t0, t1, x0, t_eval, options):

@@ -97,7 +97,6 @@ class Problem:
         return f"Problem({self.name!r}, n={self.dae.n}, index={self.index}, t_span={self.t_span})"
 
 
-
 class StateSpace:
     """The hand-derived alternatives to completing a gallery DAE.
 
@@ -162,8 +161,7 @@ def _canonical_state_space(problem, d, E, Ab, P, Q, nu, P_jet=None, Q_jet=None):
             return Q
     else:  # orthogonal P(t), Q(t): inverses are transposes, derivatives by the Leibniz rule
         def h_jet(t, order):  # jet of P(t)^T f(t)
-            P, f = P_jet(t, order), f_jet(t, order)
-            return np.array([sum(_binom(m, j) * (f[m - j] @ P[j]) for j in range(m + 1)) for m in range(order + 1)])
+            return _jet_matmul(np.transpose(P_jet(t, order), (0, 2, 1)), f_jet(t, order))
 
         def V_jet(t, order):
             return np.transpose(Q_jet(t, order), (0, 2, 1))
@@ -191,12 +189,6 @@ def _canonical_state_space(problem, d, E, Ab, P, Q, nu, P_jet=None, Q_jet=None):
     t0 = problem.t_span[0]
     y0 = V_jet(t0, 0)[0, :d] @ problem.x0
     return StateSpace(y0, rhs, -C, output, residual, residual_jac)
-
-
-def _binom(m, j):
-    from math import comb
-
-    return comb(m, j)
 
 
 class _Sinusoids:
@@ -600,21 +592,21 @@ def stiff_index1(kappa=1000.0, t_span=(0.0, 2.0)):
     problem = _sympy_problem(f"stiff_index1(kappa={kappa:g})", A, B, x, t, t_span, 1, (1,))
     dae = problem.dae
 
-    def x2(t, x1):  # the algebraic row solved by hand
-        f = dae.f_jet(t, 0)[0]
+    def x2(t, x1, f):  # the algebraic row solved by hand
         return (f[1] - t * x1) / (1 + t * t)
 
     def rate(t):
         return kappa * (1 + 0.5 * np.sin(t))
 
     def rhs(t, y):
-        return np.array([dae.f_jet(t, 0)[0][0] - rate(t) * y[0] + x2(t, y[0])])
+        f = dae.f_jet(t, 0)[0]
+        return np.array([f[0] - rate(t) * y[0] + x2(t, y[0], f)])
 
     def jac(t, y):
         return np.array([[-rate(t) - t / (1 + t * t)]])
 
     def output(t, y):
-        return np.array([y[0], x2(t, y[0])])
+        return np.array([y[0], x2(t, y[0], dae.f_jet(t, 0)[0])])
 
     def residual(t, x, xp):
         return dae.residual(t, x, xp)
@@ -639,19 +631,16 @@ _LEIBNIZ = {}
 
 def _leibniz(m):
     """Leibniz weights as an (m, m*m) matrix: ``(XY)^(d) = sum_(p+q=d) binom(d, p) X^(p) Y^(q)``."""
+    from math import comb
+
     W = _LEIBNIZ.get(m)
     if W is None:
         W = np.zeros((m, m, m))
         for d in range(m):
             for p in range(d + 1):
-                W[d, p, d - p] = _BINOMIALS[d][p]
+                W[d, p, d - p] = comb(d, p)
         W = _LEIBNIZ[m] = W.reshape(m, m * m)
     return W
-
-
-_BINOMIALS = [[1.0]]
-for _row in range(1, 16):
-    _BINOMIALS.append([1.0] + [_BINOMIALS[-1][_j - 1] + _BINOMIALS[-1][_j] for _j in range(1, _row)] + [1.0])
 
 
 def _last_values(fn, size=8):
@@ -669,6 +658,7 @@ def _last_values(fn, size=8):
         return out[: order + 1]
 
     return cached
+
 
 def _rotation_jet(n, rates, t, order):
     """Jet of ``R(t) = prod_i R_(i, i+1)(rate_i t)``: plane rotations, exact derivatives."""
@@ -727,7 +717,7 @@ def rotating_canonical(index=3, omega=1.0, t_span=(0.0, 5.0)):
     rates = [omega * r for r in (1.0, 0.7, 1.3, 0.9, 1.1, 0.6, 1.2, 0.8)[: n - 1]]
     y_star = _Sinusoids(amp=np.ones(n), omega=1 + 0.3 * np.arange(n), phase=np.arange(n, dtype=float), offset=0.5 * np.ones(n))
 
-    # A, B and f at one t all need P and Q: compute each jet once per (t, order).
+    # A, B and f at one t all need P and Q: compute each jet once per t (the deepest order asked).
     P_jet = _last_values(lambda t, order: _rotation_jet(n, rates, t, order))
     Q_jet = _last_values(lambda t, order: _rotation_jet(n, rates[::-1], t, order))
 

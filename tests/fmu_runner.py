@@ -109,6 +109,23 @@ def main():
                       "status": status, "logs": logs, "rollback": rollback}), flush=True)
 
 
+def _instances(md, unzipped, count):
+    """`count` instantiated slaves of one unzipped FMU (the probes' common start)."""
+    from fmpy.fmi2 import FMU2Slave
+
+    for i in range(count):
+        fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName=f"instance{i}")
+        fmu.instantiate()
+        yield fmu
+
+
+def _free(fmus):
+    for fmu in fmus:
+        fmu.terminate()
+        fmu.fmi2FreeInstance(fmu.component)
+
+
 def probe_module_refcount(md, unzipped, instances):
     """Instantiate the FMU `instances` times; after each, print how far the slave
     module dict's reference count is above the number of objects holding it
@@ -116,23 +133,17 @@ def probe_module_refcount(md, unzipped, instances):
     import gc
     import os
 
-    from fmpy.fmi2 import FMU2Slave
-
     with open(os.path.join(unzipped, "resources", "slavemodule.txt")) as fh:
         module = fh.read().strip()
     surplus, keep = [], []
-    for i in range(instances):
-        fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
-                        instanceName=f"instance{i}")
-        fmu.instantiate()
+    for fmu in _instances(md, unzipped, instances):
         keep.append(fmu)
         owners = len(gc.get_referrers(sys.modules[module].__dict__))
         # getrefcount counts its own argument once
         surplus.append(sys.getrefcount(sys.modules[module].__dict__) - 1 - owners)
-    for fmu in keep:
-        fmu.terminate()
-        fmu.fmi2FreeInstance(fmu.component)
+    _free(keep)
     print(json.dumps({"surplus": surplus}), flush=True)
+
 
 def probe_exit_hook(md, unzipped, instances):
     """Instantiate the FMU `instances` times and report the libraries whose
@@ -140,20 +151,11 @@ def probe_exit_hook(md, unzipped, instances):
     handlers the instantiations added."""
     import atexit
 
-    from fmpy.fmi2 import FMU2Slave
-
     before = atexit._ncallbacks()
-    keep = []
-    for i in range(instances):
-        fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
-                        instanceName=f"instance{i}")
-        fmu.instantiate()
-        keep.append(fmu)
+    keep = list(_instances(md, unzipped, instances))
     added = atexit._ncallbacks() - before
     runtime = next(m for name, m in sys.modules.items() if name.endswith("_lsc._fmu_runtime"))
-    for fmu in keep:
-        fmu.terminate()
-        fmu.fmi2FreeInstance(fmu.component)
+    _free(keep)
     keep[0].freeLibrary()
     print(json.dumps({"hooks": sorted(runtime._EXIT_HOOKS), "atexit_added": added}), flush=True)
 
