@@ -48,6 +48,12 @@ _ONE_FULL_TOL = np.sqrt(np.finfo(float).eps)
 _CACHE_SIZE = 4
 
 
+def _norm2_if_above(X, tol):
+    """``||X||_2`` when it may exceed `tol`; the cheaper Frobenius norm (an upper bound) otherwise."""
+    frobenius = np.sqrt(np.einsum("ij,ij->", X, X))
+    return frobenius if frobenius <= tol else np.linalg.norm(X, 2)
+
+
 class _Factors:
     """The standard derivative array at one time, factorized once.
 
@@ -66,7 +72,9 @@ class _Factors:
         self.n, self.t = n, float(t)
         self.jets = jets = array_jets(dae, k, t, None, q)
         J = jets.J[0]
-        self.U, self.s, self.Vt = scipy.linalg.svd(J)
+        # numpy's svd (LAPACK gesdd, like scipy's) has a fraction of scipy's call overhead, which
+        # dominates a time-varying rhs for arrays of a few dozen rows; the jets are finite (checked).
+        self.U, self.s, self.Vt = np.linalg.svd(J)
         self.rank = numerical_rank(self.s, J.shape, rcond, what=f"derivative array J (k={k}, t={t:g})")
         if expected_rank is not None and self.rank != expected_rank:
             raise IndexDeterminationError(
@@ -75,7 +83,7 @@ class _Factors:
                 "the completion would jump."
             )
         # 1-fullness: the null space of J must not move x' (x' unique).
-        null_x = np.linalg.norm(self.Vt[self.rank :, :n], 2) if self.rank < J.shape[1] else 0.0
+        null_x = _norm2_if_above(self.Vt[self.rank :, :n], _ONE_FULL_TOL) if self.rank < J.shape[1] else 0.0
         if null_x > _ONE_FULL_TOL:
             raise IndexDeterminationError(
                 f"the derivative array with k={k} differentiations does not determine x' at t={t!r} "
@@ -98,7 +106,7 @@ class _Factors:
     def _c_svd(self):
         if self._C_svd is None:
             a = self.C.shape[0]
-            Uc, sc, Vct = scipy.linalg.svd(self.C)
+            Uc, sc, Vct = np.linalg.svd(self.C)
             rank_C = numerical_rank(sc, self.C.shape, None, what="constraint matrix Z2^T F")
             if rank_C != a:
                 raise IndexDeterminationError(
@@ -476,7 +484,7 @@ class AlternativeCompletion(Completion):
         B = jets.F[0][:n]
         Z2, C = fac.Z2, fac.C
         AT2 = A @ fac.T2
-        Z1, s1, _ = scipy.linalg.svd(AT2, full_matrices=False)
+        Z1, s1, _ = np.linalg.svd(AT2, full_matrices=False)
         if numerical_rank(s1, AT2.shape, self.rcond, what="A T2") < AT2.shape[1]:
             raise IndexDeterminationError(f"A T2 is rank deficient at t={t!r}: the DAE is not solvable.")
         M = np.vstack([Z1.T @ A, C])
@@ -490,8 +498,9 @@ class AlternativeCompletion(Completion):
         lam = self._lam_jet(t)[0]
         G_num = np.vstack([-Z1.T @ B, -lam * C + Y @ jets.F[0] - Z2.T @ jets.F[1]])
         W_num = np.concatenate([Z1.T @ fac.f0, (lam * Z2.T - Y) @ fac.Lg[0] + Z2.T @ fac.Lg[1]], axis=0)
-        lu = scipy.linalg.lu_factor(M)
-        return scipy.linalg.lu_solve(lu, G_num), scipy.linalg.lu_solve(lu, W_num)
+        # one LU for both right-hand sides (W_num is a matrix or, time-varying, a vector)
+        sol = np.linalg.solve(M, np.column_stack([G_num, W_num]))
+        return sol[:, :n], sol[:, n:].reshape(W_num.shape)
 
 
 COMPLETIONS = {

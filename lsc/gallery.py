@@ -660,21 +660,40 @@ def _last_values(fn, size=8):
     return cached
 
 
-def _rotation_jet(n, rates, t, order):
-    """Jet of ``R(t) = prod_i R_(i, i+1)(rate_i t)``: plane rotations, exact derivatives."""
-    R = np.zeros((order + 1, n, n))
-    R[0] = np.eye(n)
-    d = np.arange(order + 1)
-    for i, w in enumerate(rates):
-        j = (i + 1) % n
-        a = w * t + d * np.pi / 2
-        c, s = (w**d) * np.cos(a), (w**d) * np.sin(a)
-        g = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)  # jet of the 2x2 block, (order+1, 2, 2)
-        # R G changes columns i and j only (G is the identity elsewhere and its derivatives vanish there).
-        cols = R[:, :, [i, j]]
-        products = np.einsum("pak,qkl->pqal", cols, g)
-        R[:, :, [i, j]] = (_leibniz(order + 1) @ products.reshape((order + 1) ** 2, -1)).reshape(cols.shape)
-    return R
+class _RotationJet:
+    """Jet of ``R(t) = prod_i R_(i, i+1)(rate_i t)``: plane rotations, exact derivatives.
+
+    A rotation by ``w t`` in the plane of columns ``(i, j)`` multiplies
+    ``u = col_i - 1j col_j`` by ``exp(1j w t)``; by the Leibniz rule the jet of
+    the product is ``T @ (jet of u)`` with the lower triangular
+    ``T[d, p] = binom(d, p) (1j w)^(d - p) exp(1j w t)``. The factors of ``T``
+    that do not depend on t are kept per order.
+    """
+
+    def __init__(self, n, rates):
+        self.n, self.rates = n, list(rates)
+        self._bases = {}
+
+    def _base(self, m):
+        base = self._bases.get(m)
+        if base is None:
+            from math import comb
+
+            d = np.arange(m)
+            lag = np.subtract.outer(d, d)
+            binom = np.array([[comb(a, b) if b <= a else 0 for b in range(m)] for a in range(m)], dtype=float)
+            base = self._bases[m] = [binom * (1j * w) ** lag.clip(0) for w in self.rates]
+        return base
+
+    def __call__(self, t, order):
+        n = self.n
+        R = np.zeros((order + 1, n, n))
+        R[0] = np.eye(n)
+        for i, (w, base) in enumerate(zip(self.rates, self._base(order + 1))):
+            j = (i + 1) % n
+            u = (base * np.exp(1j * w * t)) @ (R[:, :, i] - 1j * R[:, :, j])
+            R[:, :, i], R[:, :, j] = u.real, -u.imag
+        return R
 
 
 def rotating_canonical(index=3, omega=1.0, t_span=(0.0, 5.0)):
@@ -718,14 +737,16 @@ def rotating_canonical(index=3, omega=1.0, t_span=(0.0, 5.0)):
     y_star = _Sinusoids(amp=np.ones(n), omega=1 + 0.3 * np.arange(n), phase=np.arange(n, dtype=float), offset=0.5 * np.ones(n))
 
     # A, B and f at one t all need P and Q: compute each jet once per t (the deepest order asked).
-    P_jet = _last_values(lambda t, order: _rotation_jet(n, rates, t, order))
-    Q_jet = _last_values(lambda t, order: _rotation_jet(n, rates[::-1], t, order))
+    P_jet = _last_values(_RotationJet(n, rates))
+    Q_jet = _last_values(_RotationJet(n, rates[::-1]))
 
     def transpose(X):
         return np.transpose(X, (0, 2, 1))
 
     def A_jet(t, order):
-        return _jet_matmul(_jet_matmul(P_jet(t, order), _constant_jet(E, order)), transpose(Q_jet(t, order)))
+        # Q to one order more, as B_jet will ask at this t: one rotation jet per t, not two
+        Q = Q_jet(t, order + 1)[: order + 1]
+        return _jet_matmul(_jet_matmul(P_jet(t, order), _constant_jet(E, order)), transpose(Q))
 
     def B_jet(t, order):
         Q = Q_jet(t, order + 1)
