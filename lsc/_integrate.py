@@ -3,6 +3,7 @@
 import numpy as np
 from scipy.integrate import BDF, LSODA, OdeSolver, Radau, solve_ivp
 
+from ._chebyshev import ChebyshevCoefficients, EvaluationFailed
 from ._completion import Completion, complete
 from ._derivative_array import lam_jet
 from ._validate import check_state, check_t_span
@@ -203,7 +204,8 @@ def stiffness_ratio(completion, t_span):
 
 
 def solve_completion(
-    completion, t_span, x0, *, method="RK45", t_eval=None, rtol=1e-3, atol=1e-6, project=False, **options
+    completion, t_span, x0, *, method="RK45", t_eval=None, rtol=1e-3, atol=1e-6, project=False, interpolate=None,
+    **options
 ):
     """Integrate a completion ``x' = G x + g(t)`` with `scipy.integrate.solve_ivp`.
 
@@ -237,6 +239,20 @@ def solve_completion(
     project : bool, optional
         Replace `x0` by the nearest consistent point (`Completion.project`)
         before integrating.
+    interpolate : bool or float, optional
+        Time-varying completions only (ignored for constant coefficients,
+        whose ``G`` is computed once). None or True (the default): before
+        integrating, build piecewise Chebyshev interpolants of ``G(t)`` and
+        ``g(t)`` on `t_span` from a few dozen evaluations of the completion,
+        accurate to ``max(1e-3 * rtol, 1e-12)`` relative to the largest
+        entries of ``G`` and of ``g``, and let the solver evaluate those: one
+        factorization of the derivative array per Chebyshev point instead of
+        one per solver stage (measured 4-20x fewer evaluations). A float sets
+        that relative accuracy. False evaluates the completion at every
+        stage (exact to rounding; the way to go when the run may stop early,
+        e.g. at a terminal event, or the coefficients are not smooth). Pieces
+        the construction cannot resolve within 500 evaluations are evaluated
+        pointwise; the result's message says what was built.
     **options
         Passed to solve_ivp (``dense_output``, ``max_step``, ``first_step``,
         ``events``, ...).
@@ -277,7 +293,16 @@ def solve_completion(
     # non-finite values at t0) raises here, with its own message.
     completion.rhs(t0, x0)
 
-    rhs = completion.rhs
+    rhs, jac, built = completion.rhs, completion.jac, ""
+    tol = _interpolation_tol(interpolate, rtol)
+    if tol is not None and not completion.dae.is_constant and t1 != t0:
+        try:
+            coefficients = ChebyshevCoefficients(completion, (t0, t1), tol)
+            rhs, jac, built = coefficients.rhs, coefficients.jac, f"; {coefficients.describe()}"
+        except EvaluationFailed as exc:
+            # The forcing or a rank check failed at a Chebyshev point: integrate pointwise, so a
+            # failure is reported where the integration itself breaks (the earliest such time).
+            built = f"; no interpolation (evaluating the completion failed at t={exc.t!r})"
 
     def fun(t, x):
         try:
@@ -286,18 +311,13 @@ def solve_completion(
             raise _ForcingFailed(t, exc) from exc
 
     if _is_implicit(method) and "jac" not in options:
-        options["jac"] = completion.jac(t0, x0) if completion.dae.is_constant else completion.jac
+        options["jac"] = completion.jac(t0, x0) if completion.dae.is_constant else jac
     try:
         sol = solve_ivp(fun, (t0, t1), x0, method=method, t_eval=t_eval, rtol=rtol, atol=atol, **options)
     except _ForcingFailed as exc:
-        n = completion.n
-        return CompletionResult(
-            t=np.zeros(0), x=np.zeros((n, 0)), residual=np.zeros(0), success=False, status=-2,
-            message=f"evaluating the right-hand side failed at t={float(exc.t)!r}: {exc.exc}",
-            nfev=0, njev=0, nlu=0, sol=None, completion=completion,
-        )
+        return _failed(completion, exc.t, exc.exc)
     x = sol.y
-    message = sol.message
+    message = sol.message + built
     if not _is_implicit(method) and stiffness > _STIFF:
         message += (f" (the completion is stiff on this interval: |rate| x length = {stiffness:.3g}; "
                     "method='Radau' or 'auto' takes far fewer steps)")
@@ -306,6 +326,26 @@ def solve_completion(
     return CompletionResult(
         t=sol.t, x=x, success=bool(sol.success), status=sol.status, message=message,
         nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=sol.sol, completion=completion,
+    )
+
+
+def _interpolation_tol(interpolate, rtol):
+    """The relative accuracy of the Chebyshev interpolants, or None for pointwise evaluation."""
+    if interpolate is None or interpolate is True:
+        return max(1e-3 * float(np.min(rtol)), 1e-12)
+    if interpolate is False:
+        return None
+    if isinstance(interpolate, (int, float)) and not isinstance(interpolate, bool) and 0.0 < interpolate < 1.0:
+        return float(interpolate)
+    raise ValueError(f"`interpolate` must be None, True, False or a relative accuracy in (0, 1); found {interpolate!r}.")
+
+
+def _failed(completion, t, exc):
+    where = f" at t={float(t)!r}"
+    return CompletionResult(
+        t=np.zeros(0), x=np.zeros((completion.n, 0)), residual=np.zeros(0), success=False, status=-2,
+        message=f"evaluating the right-hand side failed{where}: {exc}",
+        nfev=0, njev=0, nlu=0, sol=None, completion=completion,
     )
 
 
