@@ -25,10 +25,11 @@ method missed its tolerance). Also ``nfev`` and the constraint residual
 ``|Z2^T (F x - g)|`` at the final time (the same measure for every row).
 ``setup`` is the one-off time of ``lsc.complete`` (not in ``time``).
 
-Writes ``out/work_precision.csv`` and ``out/work_precision.png`` (repository root) and prints the
-targets of issue 5 as ratios measured in this run.
+Writes ``out/work_precision.csv`` and ``out/work_precision.png`` (repository root; with
+``--only X``: ``work_precision_X.*``; the CSV after every problem) and prints the targets of
+issue 5 as ratios measured in this run.
 
-Run: ``python examples/work_precision.py [--quick] [--repeats R]``.
+Run: ``python examples/work_precision.py [--quick] [--repeats R] [--only constant|time-varying]``.
 """
 
 import argparse
@@ -52,13 +53,14 @@ OUT = Path(__file__).resolve().parent.parent / "out"  # like main_job.py: gitign
 N_OUT = 51
 
 
-def problems(quick):
+def problems(quick, only=None):
     const = [gallery.nilpotent_chain(k, seed=0) for k in ((1, 3, 5) if quick else (1, 2, 3, 4, 5))]
     const.append(gallery.random_pencil(n=12, blocks=(3, 2)))
     varying = [gallery.rotating_canonical(3), gallery.stiff_index1(100.0)]
     if not quick:
         varying.insert(0, gallery.rotating_canonical(2, omega=2.0))
-    return [(p, True) for p in const] + [(p, False) for p in varying]
+    return ([(p, True) for p in const] if only != "time-varying" else []) + \
+        ([(p, False) for p in varying] if only != "constant" else [])
 
 
 def timed(run, repeats):
@@ -268,18 +270,21 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer problems, tolerances and step sizes")
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--only", choices=["constant", "time-varying"],
+                        help="one half of the problems (two halves can run side by side on two cores)")
     args = parser.parse_args()
     OUT.mkdir(exist_ok=True)
+    stem = "work_precision" + (f"_{args.only}" if args.only else "")
     residual_of = _residual_function()
     rows = []
-    for p, constant in problems(args.quick):
+    for p, constant in problems(args.quick, args.only):
         t0 = time.perf_counter()
         rows += bench_problem(p, constant, args, residual_of)
         print(f"{p.name}: {time.perf_counter() - t0:.1f} s", flush=True)
-    with open(OUT / "work_precision.csv", "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+        with open(OUT / f"{stem}.csv", "w", newline="") as fh:  # after every problem: a long run keeps its rows
+            writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
     if IDA is None:
         print("scikit-sundae is not installed: no IDA rows (pip install scikit-sundae)")
     print(f"{'problem':45s} {'family':8s} {'method':11s} {'lam':>4s} {'solver':13s} {'rtol':>7s} {'time ms':>9s} "
@@ -290,8 +295,8 @@ def main():
               f"{1e3 * r['time']:9.2f} {r['err']:8.1e} {r['err_tol']:8.1e} {r['nfev']:6d} {r['residual_end']:8.1e}")
     print()
     print(report(rows))
-    if plot(rows, OUT / "work_precision.png"):
-        print(f"\nwrote {OUT / 'work_precision.csv'} and {OUT / 'work_precision.png'}")
+    if plot(rows, OUT / f"{stem}.png"):
+        print(f"\nwrote {OUT / f'{stem}.csv'} and {OUT / f'{stem}.png'}")
 
 
 if __name__ == "__main__":
