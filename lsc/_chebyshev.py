@@ -84,7 +84,8 @@ class ChebyshevCoefficients:
 
     def __init__(self, completion, t_span, tol, max_evaluations=500):
         self.completion = completion
-        self.n = n = completion.n
+        self.n = completion.n
+        self._nn = self.n * self.n  # G's entries come first in a sample, g's after them
         self.tol = tol
         a, b = sorted(map(float, t_span))
         self.evaluations = 0
@@ -109,7 +110,6 @@ class ChebyshevCoefficients:
         self._ks = {}
         self._values = None  # only needed while fitting
         self._last = (None, None, None)
-        self._nn = n * n
 
     def _sample(self, t):
         v = self._values.get(t)
@@ -120,12 +120,12 @@ class ChebyshevCoefficients:
                 raise EvaluationFailed(t, exc) from exc
             v = self._values[t] = np.concatenate([G.ravel(), g])
             self.evaluations += 1
-            nn = self.n * self.n
+            nn = self._nn
             self._scale = np.maximum(self._scale, [np.abs(v[:nn]).max(initial=0.0), np.abs(v[nn:]).max(initial=0.0)])
         return v
 
     def _fit(self, lo, hi):
-        nn = self.n * self.n
+        nn = self._nn
         for m in _DEGREES:
             ts = 0.5 * (hi + lo) + 0.5 * (hi - lo) * _extreme_points(m)
             ts[0], ts[-1] = hi, lo
