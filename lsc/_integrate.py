@@ -278,6 +278,7 @@ def solve_completion(
         raise TypeError(f"`completion` must be an lsc Completion (see lsc.complete); found {type(completion).__name__}.")
     t0, t1 = check_t_span(t_span)
     x0 = check_state("x0", x0, completion.n)
+    tol = _interpolation_tol(interpolate, rtol)  # bad input fails here, whatever the method
     if method == "expm":
         if project:
             x0 = completion.project(t0, x0)
@@ -294,7 +295,6 @@ def solve_completion(
     completion.rhs(t0, x0)
 
     rhs, jac, built = completion.rhs, completion.jac, ""
-    tol = _interpolation_tol(interpolate, rtol)
     if tol is not None and not completion.dae.is_constant and t1 != t0:
         try:
             coefficients = ChebyshevCoefficients(completion, (t0, t1), tol)
@@ -341,10 +341,9 @@ def _interpolation_tol(interpolate, rtol):
 
 
 def _failed(completion, t, exc):
-    where = f" at t={float(t)!r}"
     return CompletionResult(
         t=np.zeros(0), x=np.zeros((completion.n, 0)), residual=np.zeros(0), success=False, status=-2,
-        message=f"evaluating the right-hand side failed{where}: {exc}",
+        message=f"evaluating the right-hand side failed at t={float(t)!r}: {exc}",
         nfev=0, njev=0, nlu=0, sol=None, completion=completion,
     )
 

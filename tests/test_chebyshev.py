@@ -93,3 +93,11 @@ def test_bad_interpolate_is_refused(bad):
     c = complete(p.dae, "alternative", lam=1.0)
     with pytest.raises(ValueError, match="`interpolate` must be None, True, False or a relative accuracy"):
         solve_completion(c, p.t_span, p.x0, interpolate=bad)
+
+
+def test_bad_interpolate_is_refused_for_every_method():
+    # checked before dispatching, so 'expm' (which never interpolates) refuses it too
+    p = gallery.nilpotent_chain(2)
+    c = complete(p.dae, "alternative", lam=1.0)
+    with pytest.raises(ValueError, match="`interpolate` must be None, True, False or a relative accuracy"):
+        solve_completion(c, p.t_span, p.x0, method="expm", interpolate=2.0)
