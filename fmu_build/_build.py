@@ -222,6 +222,9 @@ class {name}(Fmi2Slave):
     def do_step(self, current_time, step_size):
         return self.rt.step(current_time, step_size)
 
+    def get_real(self, vrs):
+        return self.rt.get_real(vrs, super().get_real)
+
     def _get_fmu_state(self):
         return self.rt.get_state()
 

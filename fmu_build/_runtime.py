@@ -42,28 +42,65 @@ SOLVERS = ("RK45", "DOP853", "Radau", "BDF")
 _SOLVER_CLASSES = {"RK45": RK45, "DOP853": DOP853, "Radau": Radau, "BDF": BDF}
 
 
-def _evaluate_dense(dense, t):
-    """Evaluate a solver's last-step interpolant at one time, cheaply.
+_DOP853_WEIGHTS = {}  # number of F terms -> power coefficients of their weights
 
-    DOP853's interpolant (scipy's ``Dop853DenseOutput``) is
-    ``y_old + F6 x (1-x) ... `` evaluated by seven small array updates; as
-    ``y_old + sum_k w_k F_k`` with scalar weights it is one product, which
-    matters at one evaluation per communication step. Other interpolants are
-    called as they are.
+
+def _dop853_weights(m):
+    """Power-basis coefficients (m, m + 1) of the weights of scipy's DOP853 dense output.
+
+    ``Dop853DenseOutput`` evaluates ``y_old + ...`` by a Horner-like loop over
+    its ``m`` arrays ``F`` that multiplies alternately by ``x`` and ``1 - x``;
+    ``F[k]`` ends up multiplied by the factors of passes ``m-1-k .. m-1``.
+    Expanding those products once gives ``y = y_old + sum_j x**j (W.T @ F)[j]``.
     """
-    F = getattr(dense, "F", None)
-    if F is None or not hasattr(dense, "y_old"):
-        return dense(t)
-    x = (t - dense.t_old) / dense.h
-    m = len(F)
-    weights = np.empty(m)
-    w = 1.0
-    # F[k] is multiplied by the factors of passes i = m-1-k .. m-1 of the
-    # Horner-like loop, where pass i multiplies by x (i even) or 1 - x (i odd).
-    for i in range(m - 1, -1, -1):
-        w *= x if i % 2 == 0 else 1.0 - x
-        weights[m - 1 - i] = w
-    return dense.y_old + weights @ F
+    if m not in _DOP853_WEIGHTS:
+        from numpy.polynomial import polynomial as P
+
+        W = np.zeros((m, m + 1))
+        w = np.array([1.0])
+        for i in range(m - 1, -1, -1):
+            w = P.polymul(w, [0.0, 1.0] if i % 2 == 0 else [1.0, -1.0])
+            W[m - 1 - i, : w.size] = w
+        _DOP853_WEIGHTS[m] = W
+    return _DOP853_WEIGHTS[m]
+
+
+class _Interpolant:
+    """A solver's last-step interpolant as ``y_old + (x ** powers) @ C``, ``x = (t - t_old) / h``.
+
+    scipy's interpolants are general (array ``t``, argument checks) and cost
+    10-20 us per scalar call; a communication step reads one point, so the
+    polynomial is put in power form once per solver step and each read is two
+    small array operations. RK45, DOP853 and Radau interpolants are
+    polynomials in ``x`` with known coefficients; any other (BDF) is called as
+    it is.
+    """
+
+    __slots__ = ("t_old", "t", "inv_h", "powers", "C", "dense")
+
+    def __init__(self, dense, t_old, t):
+        self.t_old, self.t, self.dense = t_old, t, None
+        kind = type(dense).__name__
+        h = t - t_old
+        self.inv_h = 1.0 / h if h else 0.0
+        if kind in ("RkDenseOutput", "RadauDenseOutput"):
+            # y = y_old + s Q @ [x, x^2, ...], s = h for Runge-Kutta, 1 for Radau
+            C = np.vstack([dense.y_old, (dense.Q * (h if kind == "RkDenseOutput" else 1.0)).T])
+        elif kind == "Dop853DenseOutput":
+            F = np.asarray(dense.F)
+            C = _dop853_weights(len(F)).T @ F
+            C[0] += dense.y_old
+        else:
+            self.dense = dense
+            return
+        # y_old sits in the row of x**0; the result differs from scipy's evaluation by rounding
+        # only (at most 1 ulp of y, measured)
+        self.C, self.powers = C, np.arange(C.shape[0])
+
+    def __call__(self, t):
+        if self.dense is not None:
+            return self.dense(t)
+        return ((t - self.t_old) * self.inv_h) ** self.powers @ self.C
 
 
 def give_back_loader_reference(module_globals):
@@ -206,7 +243,7 @@ class LscRuntime:
         self._dirty = True  # a value the completion depends on may have changed
         self.t_stop = M["stop"]
         self._solver = None
-        self._dense = None  # (t_lo, t_hi, interpolant) of the solver's last step
+        self._dense = None  # _Interpolant of the solver's last step
 
         par, out, inp = Fmi2Causality.parameter, Fmi2Causality.output, Fmi2Causality.input
         order_max = M["k"] + 2
@@ -247,12 +284,28 @@ class LscRuntime:
             reg(Real(u["name"], causality=inp, variability=cont, start=u["start"], description=u["description"],
                      getter=lambda name=u["name"]: self.inputs[name].value,
                      setter=lambda v, name=u["name"]: self._set_input(name, v)))
+        self._state_of_vr = {}  # value reference -> state index, for the fast get_real
         for i, s in enumerate(M["states"]):
-            reg(Real(s["name"], causality=out, variability=cont, description=s["description"],
-                     getter=lambda i=i: float(self.x[i])))
+            var = Real(s["name"], causality=out, variability=cont, description=s["description"],
+                       getter=lambda i=i: float(self.x[i]))
+            reg(var)
+            self._state_of_vr[var.value_reference] = i
         reg(Real("constraint_residual", causality=out, variability=cont,
                  description="norm of the constraint residual Z2^T (F x - g): distance from the solution manifold",
                  getter=self._residual_norm))
+
+    def get_real(self, vrs, general):
+        """Values of Real variables; states straight from ``x``, anything else through ``general``.
+
+        pythonfmu's ``get_real`` calls one getter per variable with a type
+        check each (about 2 us for three states); a master reads the states at
+        every communication step.
+        """
+        index, x = self._state_of_vr, self.x.tolist()
+        try:
+            return [x[index[vr]] for vr in vrs]
+        except KeyError:  # not all states: the general path (it also reports unknown references)
+            return general(vrs)
 
     # -- values set by a master ----------------------------------------------
     def _set(self, name, value):
@@ -368,11 +421,19 @@ class LscRuntime:
         self._dense = None
 
     def step(self, t, h):
+        target = t + h
+        dense = self._dense
+        if (dense is not None and t == self.t and dense.t_old <= target <= dense.t and not self._dirty
+                and not self.errors and not self.inputs and dense.dense is None):
+            # Fast path: the solver's last step already covers this communication step
+            # (dozens of communication steps per solver step at fine output grids).
+            self.x = dense(target)
+            self.t = target
+            return True
         if self.errors:
             for name, msg in self.errors.items():
                 self._log_error(f"doStep at t={t!r} discarded: {name} was set to an invalid value ({msg})")
             return False
-        target = t + h
         try:
             c = self.completion()
             if abs(t - self.t) > 1e-12 * max(1.0, abs(t)):
@@ -395,19 +456,16 @@ class LscRuntime:
                     self._solver = None
                     self._log_error(f"doStep at t={t!r}, h={h!r} failed: {message}")
                     return False
-                self._dense = (solver.t_old, solver.t, solver.dense_output())
-            if target == solver.t:
-                x = solver.y.copy()
-            else:
-                lo, hi, interpolant = self._dense
-                x = _evaluate_dense(interpolant, target)
+                self._dense = _Interpolant(solver.dense_output(), solver.t_old, solver.t)
+                # Checked once per solver step: every read of this step interpolates finite data.
+                if not (np.isfinite(solver.y).all() and (self._dense.dense is not None or np.isfinite(self._dense.C).all())):
+                    self._solver = None
+                    self._log_error(f"doStep at t={t!r}, h={h!r} produced non-finite values")
+                    return False
+            x = solver.y.copy() if target == solver.t else self._dense(target)
         except Exception as exc:
             self._solver = None
             self._log_error(f"doStep at t={t!r} failed: {type(exc).__name__}: {exc}")
-            return False
-        if not np.all(np.isfinite(x)):
-            self._solver = None
-            self._log_error(f"doStep at t={t!r}, h={h!r} produced non-finite values")
             return False
         self.x = x
         self.t = target

@@ -409,3 +409,22 @@ def test_value_only_input_converges_at_second_order(tmp_path):
         errors.append(abs(r["values"]["x"][-1] - exact))
     assert errors[1] < 5e-5
     assert errors[0] / errors[1] > 2**1.8, errors
+
+
+@pytest.mark.parametrize("solver", ["RK45", "DOP853", "Radau", "BDF"])
+def test_power_form_interpolant_equals_scipys(solver):
+    # the FMU reads each communication point from the solver's last step through _Interpolant
+    import scipy.integrate
+
+    from fmu_build._runtime import _Interpolant
+
+    def f(t, y):
+        return np.array([y[1], -4.0 * y[0] + np.sin(3.0 * t), -0.5 * y[2]])
+
+    s = getattr(scipy.integrate, solver)(f, 0.0, np.array([1.0, 0.5, 2.0]), 10.0, rtol=1e-8, atol=1e-10)
+    for _ in range(6):
+        s.step()
+    dense = s.dense_output()
+    interpolant = _Interpolant(dense, s.t_old, s.t)
+    for t in np.linspace(s.t_old, s.t, 9):
+        np.testing.assert_allclose(interpolant(t), dense(t), rtol=0, atol=4 * np.finfo(float).eps * 2.0)
