@@ -14,13 +14,16 @@ completion and a default experiment::
     [parameters]
     m = { value = 1.0, unit = "kg", tunable = false, description = "mass" }
 
-    [inputs]                       # optional; may appear in f only
+    [inputs]                       # optional; in A, B, f and outputs
     p = { unit = "m", description = "path", start = 0.0 }
 
     [equations]
     A = [[1, 0, 0], [0, "m", 0], [0, 0, 0]]
     B = [[0, -1, 0], ["k", "c", -1], [1, 0, 0]]
     f = [0, 0, "sin(t) + 0.5*sin(3*t)"]
+
+    [outputs]                      # optional; every state and constraint_residual are outputs anyway
+    energy = { expr = "0.5*m*v**2 + 0.5*k*y**2", unit = "J", description = "..." }
 
     [completion]
     method = "alternative"         # standard | stabilized | alternative
@@ -68,6 +71,9 @@ class ModelSpec:
         ``name``, ``unit``, ``description``, ``start``.
     parameters : list of dict
         ``name``, ``value``, ``unit``, ``tunable``, ``description``.
+    outputs : list of dict
+        Custom outputs: ``name``, ``expr`` (sympy, in the states, parameters,
+        inputs and ``t``), ``unit``, ``description``.
     A, B : sympy.Matrix, shape (n, n)
     f : sympy.Matrix, shape (n, 1)
     t : sympy.Symbol
@@ -159,9 +165,6 @@ def parse_spec(data, source="spec"):
         _identifier(name, "model.name", problems)
     description = model.get("description", "")
 
-    if data.get("outputs"):
-        problems.append("outputs: custom outputs are not supported yet; every state and constraint_residual are outputs")
-
     states = []
     for sname, info in (data.get("states") or {}).items():
         field = f"states.{sname}"
@@ -216,10 +219,8 @@ def parse_spec(data, source="spec"):
     B = _matrix(eq.get("B"), "equations.B", (n, n), names, problems)
     f_raw = eq.get("f", [0] * n)
     f = _matrix([[v] for v in f_raw] if isinstance(f_raw, list) else f_raw, "equations.f", (n, 1), names, problems, vector=True)
-    for label, M in (("A", A), ("B", B)):
-        used = sorted(str(u) for u in (M.free_symbols if M is not None else set()) if str(u) in input_symbols)
-        if used:
-            problems.append(f"equations.{label}: inputs may appear in f only (found {', '.join(used)})")
+
+    outputs = _outputs(data.get("outputs") or {}, states, names, problems)
 
     comp = data.get("completion") or {}
     method = comp.get("method", "alternative")
@@ -240,8 +241,43 @@ def parse_spec(data, source="spec"):
     if problems:
         raise SpecError(problems, source=source)
     return ModelSpec(name=name, description=description, states=states, parameters=parameters, A=A, B=B, f=f, t=t,
-                     symbols=symbols, inputs=inputs, input_symbols=input_symbols, method=method, lam=lam, k=k,
+                     symbols=symbols, inputs=inputs, input_symbols=input_symbols, outputs=outputs, method=method, lam=lam, k=k,
                      experiment={"start": start, "stop": stop, "step": step})
+
+
+def _outputs(table, states, names, problems):
+    """Custom outputs: expressions in the states, parameters, inputs and ``t``."""
+    import sympy
+
+    if not isinstance(table, dict):
+        problems.append(f"outputs: expected a table of name = {{ expr = ... }}, got {table!r}")
+        return []
+    state_symbols = {s["name"]: sympy.Symbol(s["name"], real=True) for s in states if _IDENT.match(s["name"])}
+    scope = {**names, **state_symbols}
+    outputs = []
+    for oname, info in table.items():
+        field = f"outputs.{oname}"
+        if not isinstance(info, dict):
+            info = {"expr": info}
+        ok = _identifier(oname, field, problems)
+        if ok and (oname in RESERVED or oname in scope):
+            problems.append(f"{field}: {oname!r} clashes with a state, a parameter, an input or a name reserved by the FMU")
+            ok = False
+        unknown = sorted(set(info) - {"expr", "unit", "description"})
+        if unknown:
+            problems.append(f"{field}: unknown key(s) {', '.join(unknown)} (known: description, expr, unit)")
+        if "expr" not in info:
+            problems.append(f"{field}.expr: missing (an expression in the states, parameters, inputs and t)")
+            continue
+        try:
+            expr = parse_expression(info["expr"], scope, f"{field}.expr")
+        except ExpressionError as exc:
+            problems.append(str(exc))
+            continue
+        if ok:
+            outputs.append({"name": oname, "expr": expr, "unit": info.get("unit", ""),
+                            "description": info.get("description", f"output {oname} = {info['expr']}")})
+    return outputs
 
 
 def _matrix(rows, field, shape, names, problems, vector=False):

@@ -210,6 +210,7 @@ def test_spec_reports_every_problem_at_once():
         "equations": {"A": [[1, 0], [0, "__import__('os')"]], "B": [[1, "x.real"], ["q", 0]], "f": [0, "open('f')"]},
         "completion": {"method": "magic", "lam": -1},
         "experiment": {"start": 1.0, "stop": 0.5},
+        "outputs": {"x": {"expr": "2*x"}, "e": {"expr": "x.real"}, "g": {"unit": "m"}, "h": {"expr": "x", "scale": 2}},
     }
     with pytest.raises(SpecError) as info:
         parse_spec(bad)
@@ -225,9 +226,13 @@ def test_spec_reports_every_problem_at_once():
         "completion.method: must be one of",
         "completion.lam: must be positive",
         "experiment.stop: must be greater than experiment.start",
+        "outputs.x: 'x' clashes with a state",
+        "outputs.e.expr: attribute access not allowed",
+        "outputs.g.expr: missing",
+        "outputs.h: unknown key(s) scale",
     ]:
         assert fragment in msg, fragment
-    assert len(info.value.problems) == 10
+    assert len(info.value.problems) == 14
 
 
 def test_unsolvable_spec_writes_no_fmu(tmp_path):
@@ -376,11 +381,64 @@ def test_only_needed_input_derivatives_are_estimated(tmp_path):
     assert _model_data(build_fmu(spec, tmp_path / "b"), "Lag")["input_orders"] == {"w": 0}
 
 
-def test_inputs_in_A_or_B_are_refused():
-    spec = {"model": {"name": "Bad"}, "states": {"x": {}}, "inputs": {"w": {}},
-            "equations": {"A": [["w"]], "B": [[1]], "f": [0]}}
-    with pytest.raises(SpecError, match="equations.A: inputs may appear in f only"):
-        parse_spec(spec)
+# The path problem with the damping c as an input in B: for any c(t), y = p, v = p',
+# u = m p'' + c p' + k p exactly. Custom outputs read states, parameters and the input.
+DAMPER_SPEC = {
+    "model": {"name": "PathDamper"},
+    "states": {"y": {"unit": "m"}, "v": {"unit": "m/s", "start": 2.5}, "u": {"unit": "N", "start": 1.25}},
+    "parameters": {"m": {"value": 1.0, "unit": "kg"}, "k": {"value": 2.0, "unit": "N/m"}},
+    "inputs": {"c": {"unit": "N.s/m", "start": 0.5}},
+    "outputs": {"power": {"expr": "c*v**2", "unit": "W", "description": "damper power"},
+                "energy": {"expr": "0.5*m*v**2 + 0.5*k*y**2", "unit": "J"}},
+    "equations": {"A": [[1, 0, 0], [0, "m", 0], [0, 0, 0]], "B": [[0, -1, 0], ["k", "c", -1], [1, 0, 0]],
+                  "f": [0, 0, "sin(t) + 0.5*sin(3*t)"]},
+    "completion": {"method": "alternative", "lam": 10.0},
+}
+
+
+def _damper_exact(t):
+    p, dp, ddp = np.sin(t) + 0.5 * np.sin(3 * t), np.cos(t) + 1.5 * np.cos(3 * t), -np.sin(t) - 4.5 * np.sin(3 * t)
+    return np.array([p, dp, ddp + (0.5 + 0.2 * np.sin(t)) * dp + 2.0 * p])
+
+
+def test_input_in_B_follows_the_exact_solution(tmp_path):
+    # B reads the input c(t) = 0.5 + 0.2 sin t; the completion needs c and its derivatives to
+    # order k + 1 = 4, estimated from the received values. The first steps know too few values
+    # (c' = 0 at the first): an O(h) start-up error, which the alternative completion damps
+    # like exp(-lam t).
+    fmu = build_fmu(DAMPER_SPEC, tmp_path)
+    assert fmpy_validation.validate_fmu(str(fmu)) == []
+    assert _model_data(fmu, "PathDamper")["input_orders"] == {"c": 4}
+    startup = []
+    for dt in (0.05, 0.025):
+        steps = int(round(2.0 / dt))
+        ts = dt * np.arange(steps)
+        r = run({"fmu": str(fmu), "dt": dt, "steps": steps, "outputs": ["y", "v", "u", "power", "energy"],
+                 "start_values": TOL, "input_series": {"c": (0.5 + 0.2 * np.sin(ts)).tolist()}})
+        assert r["status"] == ["ok"] * steps
+        t = np.array(r["time"])
+        X = np.array([r["values"][n] for n in ("y", "v", "u")])
+        np.testing.assert_allclose(X[:, -1], _damper_exact(t[-1]), rtol=0, atol=1e-8)
+        startup.append(np.abs(X - _damper_exact(t)).max())
+        # outputs read the latest received input (its start value, then the value set at each
+        # step's start) and the state at the step's end
+        received = np.concatenate([[0.5], 0.5 + 0.2 * np.sin(ts)])
+        np.testing.assert_allclose(r["values"]["power"], received * X[1] ** 2, rtol=1e-14)
+        np.testing.assert_allclose(r["values"]["energy"], 0.5 * X[1] ** 2 + X[0] ** 2, rtol=1e-14)
+    assert 1e-3 < startup[1] < 2e-2 and startup[0] / startup[1] > 1.8, startup  # first order, then damped
+
+
+def test_custom_outputs_in_the_model_description(tmp_path):
+    from fmpy import read_model_description
+
+    md = read_model_description(str(build_fmu(DAMPER_SPEC, tmp_path)))
+    var = {v.name: v for v in md.modelVariables}
+    assert var["power"].unit == "W" and var["power"].description == "damper power" and var["energy"].unit == "J"
+    outputs = {u.variable.name: u for u in md.outputs}
+    assert set(outputs) == {"y", "v", "u", "power", "energy", "constraint_residual"}
+    # power reads the input (direct feedthrough), energy and the states do not
+    assert [v.name for v in outputs["power"].dependencies] == ["c"]
+    assert outputs["energy"].dependencies == [] and outputs["u"].dependencies == []
 
 
 def test_rollback_with_inputs_is_bit_for_bit(tmp_path):
