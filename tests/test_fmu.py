@@ -260,6 +260,10 @@ def test_example_spec_loads():
     assert spec.name == "PrescribedPath" and spec.n == 3 and spec.method == "alternative"
 
 
+def test_input_example_spec_builds_a_valid_fmu(tmp_path):
+    assert fmpy_validation.validate_fmu(str(build_fmu(INPUT_SPEC, tmp_path))) == []
+
+
 def run_cosim(scenario):
     out = subprocess.run([sys.executable, str(HERE / "cosim_runner.py")], input=json.dumps(scenario), capture_output=True,
                          text=True, timeout=600)
@@ -383,17 +387,7 @@ def test_only_needed_input_derivatives_are_estimated(tmp_path):
 
 # The path problem with the damping c as an input in B: for any c(t), y = p, v = p',
 # u = m p'' + c p' + k p exactly. Custom outputs read states, parameters and the input.
-DAMPER_SPEC = {
-    "model": {"name": "PathDamper"},
-    "states": {"y": {"unit": "m"}, "v": {"unit": "m/s", "start": 2.5}, "u": {"unit": "N", "start": 1.25}},
-    "parameters": {"m": {"value": 1.0, "unit": "kg"}, "k": {"value": 2.0, "unit": "N/m"}},
-    "inputs": {"c": {"unit": "N.s/m", "start": 0.5}},
-    "outputs": {"power": {"expr": "c*v**2", "unit": "W", "description": "damper power"},
-                "energy": {"expr": "0.5*m*v**2 + 0.5*k*y**2", "unit": "J"}},
-    "equations": {"A": [[1, 0, 0], [0, "m", 0], [0, 0, 0]], "B": [[0, -1, 0], ["k", "c", -1], [1, 0, 0]],
-                  "f": [0, 0, "sin(t) + 0.5*sin(3*t)"]},
-    "completion": {"method": "alternative", "lam": 10.0},
-}
+DAMPER_SPEC = ROOT / "examples" / "specs" / "path_damper.toml"
 
 
 def _damper_exact(t):
@@ -413,7 +407,7 @@ def test_input_in_B_follows_the_exact_solution(tmp_path):
     for dt in (0.05, 0.025):
         steps = int(round(2.0 / dt))
         ts = dt * np.arange(steps)
-        r = run({"fmu": str(fmu), "dt": dt, "steps": steps, "outputs": ["y", "v", "u", "power", "energy"],
+        r = run({"fmu": str(fmu), "dt": dt, "steps": steps, "outputs": ["y", "v", "u", "damper_power", "energy"],
                  "start_values": TOL, "input_series": {"c": (0.5 + 0.2 * np.sin(ts)).tolist()}})
         assert r["status"] == ["ok"] * steps
         t = np.array(r["time"])
@@ -423,7 +417,7 @@ def test_input_in_B_follows_the_exact_solution(tmp_path):
         # outputs read the latest received input (its start value, then the value set at each
         # step's start) and the state at the step's end
         received = np.concatenate([[0.5], 0.5 + 0.2 * np.sin(ts)])
-        np.testing.assert_allclose(r["values"]["power"], received * X[1] ** 2, rtol=1e-14)
+        np.testing.assert_allclose(r["values"]["damper_power"], received * X[1] ** 2, rtol=1e-14)
         np.testing.assert_allclose(r["values"]["energy"], 0.5 * X[1] ** 2 + X[0] ** 2, rtol=1e-14)
     assert 1e-3 < startup[1] < 2e-2 and startup[0] / startup[1] > 1.8, startup  # first order, then damped
 
@@ -433,11 +427,12 @@ def test_custom_outputs_in_the_model_description(tmp_path):
 
     md = read_model_description(str(build_fmu(DAMPER_SPEC, tmp_path)))
     var = {v.name: v for v in md.modelVariables}
-    assert var["power"].unit == "W" and var["power"].description == "damper power" and var["energy"].unit == "J"
+    assert var["damper_power"].unit == "W" and var["energy"].unit == "J"
+    assert var["damper_power"].description == "power dissipated in the damper"
     outputs = {u.variable.name: u for u in md.outputs}
-    assert set(outputs) == {"y", "v", "u", "power", "energy", "constraint_residual"}
-    # power reads the input (direct feedthrough), energy and the states do not
-    assert [v.name for v in outputs["power"].dependencies] == ["c"]
+    assert set(outputs) == {"y", "v", "u", "damper_power", "energy", "constraint_residual"}
+    # damper_power reads the input (direct feedthrough), energy and the states do not
+    assert [v.name for v in outputs["damper_power"].dependencies] == ["c"]
     assert outputs["energy"].dependencies == [] and outputs["u"].dependencies == []
 
 
