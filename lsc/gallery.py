@@ -622,7 +622,8 @@ def _jet_matmul(X, Y):
     """Jet of the product of two matrix jets (Leibniz rule), length of the shorter."""
     m = min(len(X), len(Y))
     X, Y = np.asarray(X[:m]), np.asarray(Y[:m])
-    products = np.einsum("pab,qb...->pqa...", X, Y)  # every X^(p) Y^(q) (Y: matrices or vectors)
+    # every X^(p) Y^(q) by one stacked matmul (BLAS per product: 4x faster than einsum at n = 100)
+    products = np.matmul(X[:, None], Y[None]) if Y.ndim == 3 else np.matmul(X[:, None], Y[None, ..., None])[..., 0]
     return (_leibniz(m) @ products.reshape(m * m, -1)).reshape((m,) + products.shape[2:])
 
 
@@ -747,12 +748,12 @@ def rotating_canonical(index=3, omega=1.0, t_span=(0.0, 5.0)):
         # Q to one order more, as B_jet will ask at this t: one rotation jet per t, not two
         Q = Q_jet(t, order + 1)[: order + 1]
         # E is constant: P E needs no Leibniz sum
-        return _jet_matmul(np.einsum("dij,jk->dik", P_jet(t, order), E), transpose(Q))
+        return _jet_matmul(P_jet(t, order) @ E, transpose(Q))
 
     def B_jet(t, order):
         Q = Q_jet(t, order + 1)
         # Q[1:] is the jet of Q' (one order shorter than Q).
-        inner = _constant_jet(Ab, order) - np.einsum("ij,djk->dik", E, _jet_matmul(transpose(Q[:-1]), Q[1:]))
+        inner = _constant_jet(Ab, order) - E @ _jet_matmul(transpose(Q[:-1]), Q[1:])
         return _jet_matmul(_jet_matmul(P_jet(t, order), inner), transpose(Q[:-1]))
 
 
@@ -831,12 +832,16 @@ def moving_pencil(n=10, blocks=(3,), seed=0, rate=0.5, t_span=(0.0, 1.0)):
             out[1] = M1
         return out
 
+    P0L = P0 @ L
+
+    @_last_values  # A, B and f all need it at each t
     def P_jet(t, order):
-        return linear_jet(P0, P0 @ L, t, order)
+        return linear_jet(P0, P0L, t, order)
 
     def Q_jet(t, order):
         return linear_jet(Q0, Q0 @ K, t, order)
 
+    @_last_values  # A and B both need it at each t
     def Qinv_jet(t, order):
         Q = Q0 @ (np.eye(n) + t * K)
         R0 = np.linalg.inv(Q)
@@ -848,13 +853,13 @@ def moving_pencil(n=10, blocks=(3,), seed=0, rate=0.5, t_span=(0.0, 1.0)):
         return out
 
     def A_jet(t, order):
-        return _jet_matmul(P_jet(t, order), np.einsum("ij,djk->dik", E, Qinv_jet(t, order)))
+        return _jet_matmul(P_jet(t, order), E @ Qinv_jet(t, order))
 
     def B_jet(t, order):
         R = Qinv_jet(t, order)
         Qd = np.zeros((order + 1, n, n))
         Qd[0] = Q0 @ K
-        inner = _constant_jet(Ab, order) - np.einsum("ij,djk->dik", E, _jet_matmul(R, Qd))
+        inner = _constant_jet(Ab, order) - E @ _jet_matmul(R, Qd)
         return _jet_matmul(_jet_matmul(P_jet(t, order), inner), R)
 
 
