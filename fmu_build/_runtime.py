@@ -440,8 +440,10 @@ class LscRuntime:
     def step(self, t, h):
         target = t + h
         dense = self._dense
-        if (dense is not None and t == self.t and dense.t_old <= target <= dense.t and not self._dirty
-                and not self.errors and not self.inputs and dense.dense is None):
+        # (the interpolant outlives its solver: every reset -- snapshot, tolerance, solver -- sets
+        # _solver to None, and _dirty covers the completion's values)
+        if (dense is not None and self._solver is not None and t == self.t and dense.t_old <= target <= dense.t
+                and not self._dirty and not self.errors and not self.inputs and dense.dense is None):
             # Fast path: the solver's last step already covers this communication step
             # (dozens of communication steps per solver step at fine output grids).
             self.x = dense(target)
