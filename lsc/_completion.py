@@ -203,6 +203,7 @@ class Completion:
     method = None
     uses_lam = False
     extra_order = 0
+    _fastest_rate = None  # max |Re eig(G)| for constant coefficients, cached by lsc.stiffness_ratio
 
     def __init__(self, dae, *, lam=None, k=None, rcond=None, t_span=None):
         check_dae(dae)

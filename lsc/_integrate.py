@@ -195,7 +195,7 @@ def stiffness_ratio(completion, t_span):
     if completion.lam is not None:
         rates += [float(lam_jet(completion.lam, t, 0)[0]) for t in (t0, t1)]
     if completion.dae.is_constant:
-        rate = getattr(completion, "_fastest_rate", None)
+        rate = completion._fastest_rate
         if rate is None:  # once per completion: G does not change
             G, _ = completion.matrices(t0)
             rate = completion._fastest_rate = float(np.max(np.abs(np.linalg.eigvals(G).real), initial=0.0))

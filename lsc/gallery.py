@@ -756,7 +756,6 @@ def rotating_canonical(index=3, omega=1.0, t_span=(0.0, 5.0)):
         inner = _constant_jet(Ab, order) - E @ _jet_matmul(transpose(Q[:-1]), Q[1:])
         return _jet_matmul(_jet_matmul(P_jet(t, order), inner), transpose(Q[:-1]))
 
-
     def f_jet(t, order):
         y = y_star.jet(t, order + 1)
         h = y[1:] @ E.T + y[:-1] @ Ab.T
@@ -832,22 +831,21 @@ def moving_pencil(n=10, blocks=(3,), seed=0, rate=0.5, t_span=(0.0, 1.0)):
             out[1] = M1
         return out
 
-    P0L = P0 @ L
+    P0L, Q0K = P0 @ L, Q0 @ K  # constant: formed once, not per evaluation
 
     @_last_values  # A, B and f all need it at each t
     def P_jet(t, order):
         return linear_jet(P0, P0L, t, order)
 
     def Q_jet(t, order):
-        return linear_jet(Q0, Q0 @ K, t, order)
+        return linear_jet(Q0, Q0K, t, order)
 
     @_last_values  # A and B both need it at each t
     def Qinv_jet(t, order):
-        Q = Q0 @ (np.eye(n) + t * K)
-        R0 = np.linalg.inv(Q)
+        R0 = np.linalg.inv(Q0 + t * Q0K)
         out = np.zeros((order + 1, n, n))
         out[0] = R0
-        step = R0 @ (Q0 @ K)
+        step = R0 @ Q0K
         for j in range(1, order + 1):
             out[j] = -j * step @ out[j - 1]
         return out
@@ -858,7 +856,7 @@ def moving_pencil(n=10, blocks=(3,), seed=0, rate=0.5, t_span=(0.0, 1.0)):
     def B_jet(t, order):
         R = Qinv_jet(t, order)
         Qd = np.zeros((order + 1, n, n))
-        Qd[0] = Q0 @ K
+        Qd[0] = Q0K
         inner = _constant_jet(Ab, order) - E @ _jet_matmul(R, Qd)
         return _jet_matmul(_jet_matmul(P_jet(t, order), inner), R)
 

@@ -18,17 +18,22 @@ def max_rel_error(res, p):
     return float(np.max(np.abs(res.x - X) / (1 + np.abs(X))))
 
 
-def solved_or_refused(make_completion, p, bound, **solve):
-    """Integrate from the exact start and assert the error bound, or accept a clear refusal."""
-    try:
-        c = make_completion()
-    except (lsc.IndexDeterminationError, lsc.RankDecisionWarning):  # the warning is an error in the test run
-        return "refused"
+def solved(c, p, bound, **solve):
+    """Integrate from the exact start to 21 output times and assert success and the error bound."""
     res = lsc.solve_completion(c, p.t_span, p.x0, t_eval=np.linspace(*p.t_span, 21), **solve)
     assert res.success, res.message
     err = max_rel_error(res, p)
     assert err <= bound, (p.name, err)
-    return err
+    return res
+
+
+def solved_or_refused(make_completion, p, bound, **solve):
+    """`solved`, or accept a clear refusal of the completion."""
+    try:
+        c = make_completion()
+    except (lsc.IndexDeterminationError, lsc.RankDecisionWarning):  # the warning is an error in the test run
+        return "refused"
+    return solved(c, p, bound, **solve)
 
 
 # --- index up to 6 --------------------------------------------------------------------------------
@@ -36,13 +41,9 @@ def solved_or_refused(make_completion, p, bound, **solve):
 @pytest.mark.parametrize("method, lam", [("standard", None), ("stabilized", 1.0), ("alternative", 1.0)])
 def test_high_index(index, method, lam):
     p = gallery.nilpotent_chain(index, seed=index)
-    c = lsc.complete(p.dae, method, lam=lam)
-    res = lsc.solve_completion(c, p.t_span, p.x0, method="DOP853", rtol=1e-10, atol=1e-12,
-                               t_eval=np.linspace(*p.t_span, 21))
-    assert res.success
     # Measured: at most 1.2e-8 (alternative, index 5) over index 1..6 and the three methods;
     # high index costs no accuracy beyond the tolerance's amplification by cond(Q) = 10.
-    assert max_rel_error(res, p) <= 1e-7
+    solved(lsc.complete(p.dae, method, lam=lam), p, 1e-7, method="DOP853", rtol=1e-10, atol=1e-12)
 
 
 # --- size ---------------------------------------------------------------------------------------
@@ -69,10 +70,7 @@ def test_large_time_varying_system(n):
 def test_alternative_over_six_decades_of_lambda(lam):
     p = gallery.nilpotent_chain(3, seed=0)
     c = lsc.complete(p.dae, "alternative", lam=lam)
-    res = lsc.solve_completion(c, p.t_span, p.x0, method="auto", rtol=1e-9, atol=1e-11,
-                               t_eval=np.linspace(*p.t_span, 21))
-    assert res.success, res.message
-    assert max_rel_error(res, p) <= 1e-6
+    res = solved(c, p, 1e-6, method="auto", rtol=1e-9, atol=1e-11)
     stiff = lsc.stiffness_ratio(c, p.t_span) > 100
     assert stiff == (lam >= 1e2)
     if stiff:  # 'auto' chose the implicit method: a few hundred evaluations, not ~lam * length
@@ -92,11 +90,7 @@ def test_stabilized_large_lambda_is_accurate_or_says_why(lam):
     # The stabilized LSC's added block is non-normal like lam^(index-1): the
     # ODE stays exact in exact arithmetic, and 'auto' integrates it implicitly.
     p = gallery.nilpotent_chain(3, seed=0)
-    c = lsc.complete(p.dae, "stabilized", lam=lam)
-    res = lsc.solve_completion(c, p.t_span, p.x0, method="auto", rtol=1e-10, atol=1e-12,
-                               t_eval=np.linspace(*p.t_span, 21))
-    assert res.success
-    assert max_rel_error(res, p) <= 1e-5
+    solved(lsc.complete(p.dae, "stabilized", lam=lam), p, 1e-5, method="auto", rtol=1e-10, atol=1e-12)
 
 
 # --- horizons to t = 1000: drift --------------------------------------------------------------------
