@@ -13,7 +13,7 @@ import numpy as np
 import lsc
 
 from ._runtime import start_name
-from ._spec import METHODS, ModelSpec, SpecError, load_spec, parse_spec
+from ._spec import METHODS, ModelSpec, SpecError, load_spec, model_name_problems, parse_spec
 
 __all__ = ["build_fmu"]
 
@@ -331,8 +331,9 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
     if lam is not None:
         spec.lam = lsc._validate.check_lam_value(lam)
     if model_name is not None:
-        if not re.match(r"^[A-Za-z_][A-Za-z0-9_]*$", model_name):
-            raise ValueError(f"`model_name` must be an identifier; found {model_name!r}.")
+        problems = model_name_problems(model_name, field="model_name")
+        if problems:
+            raise SpecError(problems, source="build_fmu")
         spec.name = model_name
     if k is not None:
         spec.k = k
