@@ -154,7 +154,7 @@ def _unknown_keys(table, where, problems):
     for key in table:
         if key in known:
             continue
-        close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
+        close = [k for k in known if k.lower() == str(key).lower()] or difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
         if not where:
             hint = f"; did you mean [{close[0]}]?" if close else f" (known: {', '.join(known)})"
             problems.append(f"{key}: unknown table [{key}]{hint}")
