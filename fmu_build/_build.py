@@ -341,8 +341,7 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
     # Solvability check on the real data before anything is written.
     dae = _numeric_dae(spec)
     span = (spec.experiment["start"], spec.experiment["stop"])
-    completion = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=spec.k,
-                              t_span=None if dae.is_constant else span)
+    completion = _complete_at_start(dae, spec, span)
     k_used = completion.k
 
     name = spec.name
@@ -481,6 +480,43 @@ def _forget_modules(name, model_module, package):
     """
     for mod in [m for m in sys.modules if m in (name, model_module, package) or m.startswith(package + ".")]:
         del sys.modules[mod]
+
+
+def _complete_at_start(dae, spec, span):
+    """The completion, refused with the entries named when it has no finite value at the start time.
+
+    The spec checks A, B, f themselves at the start time; the completion also uses their
+    derivatives (``f = sqrt(t)`` is finite at 0, its derivative is not), which would make
+    every step of the FMU fail.
+    """
+    t0 = span[0]
+    try:
+        completion = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=spec.k,
+                                  t_span=None if dae.is_constant else span)
+        with np.errstate(all="ignore"):
+            G, g = completion.matrices(t0)
+        if np.all(np.isfinite(G)) and np.all(np.isfinite(g)):
+            return completion
+        k, reason = completion.k, "its right-hand side is not finite there"
+    except ArithmeticError as exc:
+        k, reason = spec.k if spec.k is not None else 3, f"{type(exc).__name__}: {exc}"
+    bad = []
+    for label, tf, vector in (("A", dae.A, False), ("B", dae.B, False), ("f", dae.f, True)):
+        for d in range(k + 2):
+            try:
+                with np.errstate(all="ignore"):
+                    values = np.asarray(tf.jet(t0, d)[d], dtype=float).reshape(tf.shape)
+            except ArithmeticError:
+                bad.append(f"{label} (derivative {d})")
+                break
+            entries = [f"equations.{label}[{i[0]}]" if vector else f"equations.{label}[{i[0]}][{i[1]}]"
+                       for i in zip(*np.nonzero(~np.isfinite(values)))]
+            if entries:
+                bad.append(f"{', '.join(entries)} (derivative {d})")
+                break
+    where = "; ".join(bad) if bad else "A, B or f"
+    raise SpecError([f"{where}: the completion has no finite value at t = {t0!r} (experiment.start): {reason}"],
+                    source=spec.name)
 
 
 def _numeric_dae(spec):

@@ -188,3 +188,36 @@ def test_build_fmu_model_name_override_is_checked(name, message, tmp_path):
     with pytest.raises(SpecError, match=message):
         build_fmu(tomllib.loads(BASE), tmp_path, model_name=name)
     assert list(tmp_path.iterdir()) == [] and set(sys.modules) >= modules
+
+
+SQRT_SPEC = """
+[model]
+name = "RootForcing"
+[states]
+x = {}
+y = {}
+[equations]
+A = [[0, 1], [0, 0]]
+B = [[1, 0], [0, 1]]
+f = [0, "sqrt(t)"]
+"""
+
+
+@pytest.mark.parametrize("start, refused", [(0.0, True), (0.25, False)])
+def test_build_refuses_a_completion_not_finite_at_the_start(start, refused, tmp_path):
+    # y = sqrt(t), x = -y': f is finite at t = 0, its derivative (which the completion uses) is not
+    from fmu_build._build import _complete_at_start, _numeric_dae
+
+    data = tomllib.loads(SQRT_SPEC)
+    data["experiment"] = {"start": start, "stop": start + 1.0}
+    spec = parse_spec(data)
+    if refused:
+        with pytest.raises(SpecError, match=r"f \(derivative 1\): the completion has no finite value at t = 0.0"):
+            build_fmu(spec, tmp_path)
+        assert list(tmp_path.iterdir()) == []
+    else:
+        completion = _complete_at_start(_numeric_dae(spec), spec, (start, start + 1.0))
+        # on the solution x = -1/(2 sqrt t), y = sqrt t the completion gives its exact derivative
+        exact = [-0.5 * start**-0.5, start**0.5]
+        derivative = [0.25 * start**-1.5, 0.5 * start**-0.5]
+        assert completion.rhs(start, exact) == pytest.approx(derivative, rel=1e-9)
