@@ -96,8 +96,8 @@ def _forbidden(children):
     )
 
 
-expressions = st.recursive(atoms, lambda children: st.one_of(_allowed(children), _forbidden(children)), max_leaves=25)
-allowed_expressions = st.recursive(atoms, _allowed, max_leaves=25)
+expressions = st.recursive(atoms, lambda children: st.one_of(_allowed(children), _forbidden(children)), max_leaves=15)
+allowed_expressions = st.recursive(atoms, _allowed, max_leaves=15)
 
 
 def _spec(f_entry):
