@@ -13,7 +13,7 @@ import numpy as np
 import lsc
 
 from ._runtime import start_name
-from ._spec import METHODS, ModelSpec, SpecError, load_spec, model_name_problems, parse_spec
+from ._spec import MAX_K, METHODS, ModelSpec, SpecError, load_spec, model_name_problems, parse_spec
 
 __all__ = ["build_fmu"]
 
@@ -336,6 +336,8 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
             raise SpecError(problems, source="build_fmu")
         spec.name = model_name
     if k is not None:
+        if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k <= MAX_K:
+            raise ValueError(f"`k` must be an integer from 0 to {MAX_K}; found {k!r}.")
         spec.k = k
 
     # Solvability check on the real data before anything is written.

@@ -221,3 +221,9 @@ def test_build_refuses_a_completion_not_finite_at_the_start(start, refused, tmp_
         exact = [-0.5 * start**-0.5, start**0.5]
         derivative = [0.25 * start**-1.5, 0.5 * start**-0.5]
         assert completion.rhs(start, exact) == pytest.approx(derivative, rel=1e-9)
+
+
+def test_build_fmu_k_override_is_bounded(tmp_path):
+    with pytest.raises(ValueError, match="`k` must be an integer from 0 to 20; found 1000000"):
+        build_fmu(tomllib.loads(BASE), tmp_path, k=1_000_000)
+    assert list(tmp_path.iterdir()) == []
