@@ -330,7 +330,8 @@ def parse_spec(data, source="spec"):
         raise SpecError([f"expected a table of tables (parsed TOML), got {_show(data)}"], source=source)
     _unknown_keys(data, "", problems)
     for section in ("model", "equations", "completion", "experiment"):
-        _unknown_keys(_table(data.get(section), section, problems), section, problems)
+        if isinstance(data.get(section), dict):  # not a table: reported where it is read
+            _unknown_keys(data[section], section, problems)
 
     model = _table(data.get("model"), "model", problems)
     name = model.get("name")
@@ -475,6 +476,8 @@ def _matrix(rows, field, shape, names, problems, vector=False):
         return None
     if not isinstance(rows, list) or not all(isinstance(r, list) for r in rows):
         problems.append(f"{field}: expected a list of rows (a list of lists)" if not vector else f"{field}: expected a list")
+        return None
+    if shape[0] == 0:  # no valid states: reported under [states]
         return None
     got = (len(rows), len(rows[0]) if rows else 0)
     if got[0] != shape[0] or any(len(r) != shape[1] for r in rows):
