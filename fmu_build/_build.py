@@ -509,7 +509,7 @@ def _complete_at_start(dae, spec, span):
                 with np.errstate(all="ignore"):
                     values = np.asarray(tf.jet(t0, d)[d], dtype=float).reshape(tf.shape)
             except ArithmeticError:
-                bad.append(f"{label} (derivative {d})")
+                bad.append(f"{_entries_failing(tf, d, t0, label, vector) or label} (derivative {d})")
                 break
             entries = [f"equations.{label}[{i[0]}]" if vector else f"equations.{label}[{i[0]}][{i[1]}]"
                        for i in zip(*np.nonzero(~np.isfinite(values)))]
@@ -519,6 +519,27 @@ def _complete_at_start(dae, spec, span):
     where = "; ".join(bad) if bad else "A, B or f"
     raise SpecError([f"{where}: the completion has no finite value at t = {t0!r} (experiment.start): {reason}"],
                     source=spec.name)
+
+
+def _entries_failing(tf, d, t0, label, vector):
+    """The entries of a sympy coefficient whose d-th derivative cannot be evaluated at t0 (text)."""
+    import sympy
+
+    if not hasattr(tf, "expr"):
+        return ""
+    M = sympy.Matrix(tf.expr).reshape(*((tf.shape[0], 1) if vector else tf.shape))
+    t = getattr(tf, "_t", sympy.Symbol("t"))  # the coefficient's time symbol
+    names = []
+    for i in range(M.rows):
+        for j in range(M.cols):
+            try:
+                value = complex(sympy.lambdify(t, M[i, j].diff(t, d), "math")(t0))
+                ok = np.isfinite(value) and value.imag == 0
+            except (ArithmeticError, ValueError, TypeError):
+                ok = False
+            if not ok:
+                names.append(f"equations.{label}[{i}]" if vector else f"equations.{label}[{i}][{j}]")
+    return ", ".join(names)
 
 
 def _numeric_dae(spec):

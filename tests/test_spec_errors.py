@@ -212,7 +212,7 @@ def test_build_refuses_a_completion_not_finite_at_the_start(start, refused, tmp_
     data["experiment"] = {"start": start, "stop": start + 1.0}
     spec = parse_spec(data)
     if refused:
-        with pytest.raises(SpecError, match=r"f \(derivative 1\): the completion has no finite value at t = 0.0"):
+        with pytest.raises(SpecError, match=r"equations\.f\[1\] \(derivative 1\): the completion has no finite value at t = 0.0"):
             build_fmu(spec, tmp_path)
         assert list(tmp_path.iterdir()) == []
     else:
