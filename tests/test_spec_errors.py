@@ -117,8 +117,7 @@ ROWS = [
     ('[model]\nname = "pythonfmu"', REFUSED, "model.name: 'pythonfmu' is a name the generated FMU code uses"),
     *[(f'[model]\nname = "{module}"', REFUSED, f"model.name: '{module}' would shadow the importable module '{module}'")
       for module in ("json", "os", "numpy", "ctypes", "fmpy", "lsc", "sys", "math", "scipy", "sympy")],
-    ('[model]\nname = "fmu"', REFUSED, "model.name: 'fmu' would shadow the importable module 'fmu_build'")
-    if False else ('[model]\nname = "__init__"', REFUSED, "model.name: '__init__' is reserved"),
+    ('[model]\nname = "__init__"', REFUSED, "model.name: '__init__' is reserved"),
     ('[equations]\nf = [0, "1/t"]', REFUSED,
      "equations.f[1]: '1/t' has no finite real value at t = 0.0 (experiment.start), with the parameters' values"),
     ('[equations]\nf = [0, "log(t - 1)"]', REFUSED, "equations.f[1]: 'log(t - 1)' has no finite real value at t = 0.0"),
