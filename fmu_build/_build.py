@@ -13,7 +13,7 @@ import numpy as np
 import lsc
 
 from ._runtime import start_name
-from ._spec import METHODS, ModelSpec, SpecError, load_spec, parse_spec
+from ._spec import MAX_K, METHODS, ModelSpec, SpecError, load_spec, model_name_problems, parse_spec
 
 __all__ = ["build_fmu"]
 
@@ -61,15 +61,30 @@ def _spec_from_dae(dae):
                      k=None, experiment={"start": 0.0, "stop": 1.0, "step": 0.01})
 
 
+# Generated names start with "_lsc" and spec names never do (fmu_build._spec refuses them),
+# so the generated code can name spec parameters, inputs, states and its own locals apart.
+def _mangled(kind, name, j=None):
+    """The generated-code name of a parameter (kind 'p'), state ('x') or input derivative ('u', order j)."""
+    return f"_lsc_{kind}{'' if j is None else j}_{name}"
+
+
+def _mangle(expr, spec_names):
+    """`expr` with the symbols named in `spec_names` ({name: kind}) renamed by `_mangled`."""
+    import sympy
+
+    return expr.xreplace({s: sympy.Symbol(_mangled(spec_names[s.name], s.name), real=True)
+                          for s in expr.free_symbols if s.name in spec_names})
+
+
 def _input_derivatives(expr_matrix, t, input_symbols, order_max):
     """Derivatives 0..order_max of a matrix with inputs as functions of t.
 
     Returns a list of matrices in which the j-th derivative of input ``u`` is
-    the symbol ``u__j`` (chain rule done by sympy at build time).
+    the symbol ``_mangled("u", "u", j)`` (chain rule done by sympy at build time).
     """
     import sympy
 
-    funcs = {u: sympy.Function(f"{name}__fn")(t) for name, u in input_symbols.items()}
+    funcs = {u: sympy.Function(f"_lsc_fn_{name}")(t) for name, u in input_symbols.items()}
     M = sympy.Matrix(expr_matrix).subs(funcs)
     out = []
     for d in range(order_max + 1):
@@ -77,8 +92,8 @@ def _input_derivatives(expr_matrix, t, input_symbols, order_max):
         for name, u in input_symbols.items():
             fn = funcs[u]
             for j in range(d, 0, -1):
-                D = D.subs(fn.diff(t, j), sympy.Symbol(f"{name}__{j}", real=True))
-            D = D.subs(fn, sympy.Symbol(f"{name}__0", real=True))
+                D = D.subs(fn.diff(t, j), sympy.Symbol(_mangled("u", name, j), real=True))
+            D = D.subs(fn, sympy.Symbol(_mangled("u", name, 0), real=True))
         out.append(D)
     return out
 
@@ -92,16 +107,16 @@ def _jet_source(name, M, t, params, order_max, shape, input_symbols=None):
     from sympy.printing.pycode import pycode
 
     input_symbols = input_symbols or {}
-    # argument names cannot clash with spec names (identifiers never start with "_lsc_")
-    lines = [f"def {name}(t, _lsc_params, order{', _lsc_inputs' if input_symbols else ''}):"]
+    # every name but t (reserved in specs) starts with "_lsc": no spec name can shadow one
+    lines = [f"def {name}(t, _lsc_params, _lsc_order{', _lsc_inputs' if input_symbols else ''}):"]
     for pname in params:
-        lines.append(f"    {pname} = _lsc_params[{pname!r}]")
+        lines.append(f"    {_mangled('p', pname)} = _lsc_params[{pname!r}]")
     for iname in input_symbols:
         for j in range(order_max + 1):
-            lines.append(f"    {iname}__{j} = _lsc_inputs[{iname!r}][{j}]")
-    lines.append(f"    out = np.zeros((order + 1,) + {shape!r})")
-    lines.append(f"    if order > {order_max}:")
-    lines.append(f"        raise ValueError('{name}: derivatives up to order {order_max} were generated; {{order}} asked'.format(order=order))")
+            lines.append(f"    {_mangled('u', iname, j)} = _lsc_inputs[{iname!r}][{j}]")
+    lines.append(f"    _lsc_out = np.zeros((_lsc_order + 1,) + {shape!r})")
+    lines.append(f"    if _lsc_order > {order_max}:")
+    lines.append(f"        raise ValueError('{name}: derivatives up to order {order_max} were generated; {{order}} asked'.format(order=_lsc_order))")
     derivs = _input_derivatives(M, t, input_symbols, order_max) if input_symbols else None
     D = sympy.Matrix(M)
     for d in range(order_max + 1):
@@ -113,13 +128,14 @@ def _jet_source(name, M, t, params, order_max, shape, input_symbols=None):
             if derivs is None:
                 break
             continue
+        D = _mangle(D, dict.fromkeys(params, "p"))
         rows = [[pycode(sympy.nsimplify(e) if e.is_Rational else e) for e in D.row(i)] for i in range(D.rows)]
         body = "[" + ", ".join("[" + ", ".join(r) + "]" for r in rows) + "]"
         if len(shape) == 1:
             body = "[" + ", ".join(r[0] for r in rows) + "]"
-        lines.append(f"    if order >= {d}:")
-        lines.append(f"        out[{d}] = {body}")
-    lines.append("    return out")
+        lines.append(f"    if _lsc_order >= {d}:")
+        lines.append(f"        _lsc_out[{d}] = {body}")
+    lines.append("    return _lsc_out")
     return "\n".join(lines)
 
 
@@ -154,7 +170,7 @@ def _needed_input_orders(spec, dae, k):
             for i in range(n):
                 if used[d, i]:
                     names = {str(s) for s in derivs[d][i].free_symbols}
-                    orders += [j for j in range(order + 1) if f"{name}__{j}" in names]
+                    orders += [j for j in range(order + 1) if _mangled("u", name, j) in names]
         # A and B enter the arrays with derivatives up to k + 1 (the alternative completion
         # differentiates the array once more): so do the inputs in them (chain rule)
         need[name] = order if name in in_coefficients else max(orders)
@@ -171,15 +187,17 @@ def _outputs_source(spec):
     from sympy.printing.pycode import pycode
 
     states = [s["name"] for s in spec.states]
+    kinds = {**dict.fromkeys(states, "x"), **{p["name"]: "p" for p in spec.parameters},
+             **{u["name"]: "u0" for u in spec.inputs}}
     lines = []
     for j, out in enumerate(spec.outputs):
         used = {str(sym) for sym in out["expr"].free_symbols}
         lines.append(f"def output_{j}(t, _lsc_x, _lsc_params, _lsc_inputs):")
         lines.append(f"    \"\"\"{out['name']}\"\"\"")
-        lines += [f"    {name} = _lsc_x[{i}]" for i, name in enumerate(states) if name in used]
-        lines += [f"    {p['name']} = _lsc_params[{p['name']!r}]" for p in spec.parameters if p["name"] in used]
-        lines += [f"    {u['name']} = _lsc_inputs[{u['name']!r}]" for u in spec.inputs if u["name"] in used]
-        lines.append(f"    return float({pycode(out['expr'])})")
+        lines += [f"    {_mangled('x', name)} = _lsc_x[{i}]" for i, name in enumerate(states) if name in used]
+        lines += [f"    {_mangled('p', p['name'])} = _lsc_params[{p['name']!r}]" for p in spec.parameters if p["name"] in used]
+        lines += [f"    {_mangled('u0', u['name'])} = _lsc_inputs[{u['name']!r}]" for u in spec.inputs if u["name"] in used]
+        lines.append(f"    return float({pycode(_mangle(out['expr'], kinds))})")
         lines.append("")
     lines.append(f"OUTPUTS = [{', '.join(f'output_{j}' for j in range(len(spec.outputs)))}]")
     return "\n".join(lines)
@@ -313,17 +331,19 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
     if lam is not None:
         spec.lam = lsc._validate.check_lam_value(lam)
     if model_name is not None:
-        if not re.match(r"^[A-Za-z_][A-Za-z0-9_]*$", model_name):
-            raise ValueError(f"`model_name` must be an identifier; found {model_name!r}.")
+        problems = model_name_problems(model_name, field="model_name")
+        if problems:
+            raise SpecError(problems, source="build_fmu")
         spec.name = model_name
     if k is not None:
+        if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k <= MAX_K:
+            raise ValueError(f"`k` must be an integer from 0 to {MAX_K}; found {k!r}.")
         spec.k = k
 
     # Solvability check on the real data before anything is written.
     dae = _numeric_dae(spec)
     span = (spec.experiment["start"], spec.experiment["stop"])
-    completion = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=spec.k,
-                              t_span=None if dae.is_constant else span)
+    completion = _complete_at_start(dae, spec, span)
     k_used = completion.k
 
     name = spec.name
@@ -462,6 +482,64 @@ def _forget_modules(name, model_module, package):
     """
     for mod in [m for m in sys.modules if m in (name, model_module, package) or m.startswith(package + ".")]:
         del sys.modules[mod]
+
+
+def _complete_at_start(dae, spec, span):
+    """The completion, refused with the entries named when it has no finite value at the start time.
+
+    The spec checks A, B, f themselves at the start time; the completion also uses their
+    derivatives (``f = sqrt(t)`` is finite at 0, its derivative is not), which would make
+    every step of the FMU fail.
+    """
+    t0 = span[0]
+    try:
+        completion = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=spec.k,
+                                  t_span=None if dae.is_constant else span)
+        with np.errstate(all="ignore"):
+            G, g = completion.matrices(t0)
+        if np.all(np.isfinite(G)) and np.all(np.isfinite(g)):
+            return completion
+        k, reason = completion.k, "its right-hand side is not finite there"
+    except ArithmeticError as exc:
+        k, reason = spec.k if spec.k is not None else 3, f"{type(exc).__name__}: {exc}"
+    bad = []
+    for label, tf, vector in (("A", dae.A, False), ("B", dae.B, False), ("f", dae.f, True)):
+        for d in range(k + 2):
+            try:
+                with np.errstate(all="ignore"):
+                    values = np.asarray(tf.jet(t0, d)[d], dtype=float).reshape(tf.shape)
+            except ArithmeticError:
+                bad.append(f"{_entries_failing(tf, d, t0, label, vector) or label} (derivative {d})")
+                break
+            entries = [f"equations.{label}[{i[0]}]" if vector else f"equations.{label}[{i[0]}][{i[1]}]"
+                       for i in zip(*np.nonzero(~np.isfinite(values)))]
+            if entries:
+                bad.append(f"{', '.join(entries)} (derivative {d})")
+                break
+    where = "; ".join(bad) if bad else "A, B or f"
+    raise SpecError([f"{where}: the completion has no finite value at t = {t0!r} (experiment.start): {reason}"],
+                    source=spec.name)
+
+
+def _entries_failing(tf, d, t0, label, vector):
+    """The entries of a sympy coefficient whose d-th derivative cannot be evaluated at t0 (text)."""
+    import sympy
+
+    if not hasattr(tf, "expr"):
+        return ""
+    M = sympy.Matrix(tf.expr).reshape(*((tf.shape[0], 1) if vector else tf.shape))
+    t = getattr(tf, "_t", sympy.Symbol("t"))  # the coefficient's time symbol
+    names = []
+    for i in range(M.rows):
+        for j in range(M.cols):
+            try:
+                value = complex(sympy.lambdify(t, M[i, j].diff(t, d), "math")(t0))
+                ok = np.isfinite(value) and value.imag == 0
+            except (ArithmeticError, ValueError, TypeError):
+                ok = False
+            if not ok:
+                names.append(f"equations.{label}[{i}]" if vector else f"equations.{label}[{i}][{j}]")
+    return ", ".join(names)
 
 
 def _numeric_dae(spec):

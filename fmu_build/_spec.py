@@ -35,20 +35,50 @@ completion and a default experiment::
     stop = 10.0
     step = 0.01
 
-Every problem found is reported at once in one `SpecError`.
+Every problem found is reported at once in one `SpecError`: unknown or
+misspelled keys (with a suggestion), wrong types, texts the model
+description cannot hold, names that clash with each other, with the FMU's own
+variables or with names the build generates, model names that would shadow
+an importable module, numbers that are not finite, expressions that are not
+allowed, and coefficients that cannot be evaluated at the start time. The
+full reference is docs/spec_reference.md.
 """
 
+import difflib
+import importlib.util
 import keyword
+import math
 import re
+import sys
 import tomllib
+import unicodedata
 
-from ._expressions import ExpressionError, parse_expression
+from ._expressions import ExpressionError, evaluate, parse_expression
 
-__all__ = ["SpecError", "ModelSpec", "load_spec", "parse_spec"]
+__all__ = ["SpecError", "ModelSpec", "load_spec", "parse_spec", "model_name_problems"]
 
 METHODS = ("standard", "stabilized", "alternative")
 # Names the FMU itself defines.
 RESERVED = {"t", "time", "lambda", "method", "constraint_residual", "project_initial", "rtol", "atol", "solver"}
+# The keys of every table; entries of [states], [parameters], [inputs], [outputs] are tables too.
+KEYS = {
+    "": ("model", "states", "parameters", "inputs", "equations", "outputs", "completion", "experiment"),
+    "model": ("name", "description"),
+    "states": ("start", "unit", "description"),
+    "parameters": ("value", "tunable", "unit", "description"),
+    "inputs": ("start", "unit", "description"),
+    "equations": ("A", "B", "f"),
+    "outputs": ("expr", "unit", "description"),
+    "completion": ("method", "lam", "k"),
+    "experiment": ("start", "stop", "step"),
+}
+MAX_NAME = 100  # characters of a state, parameter, input or output name
+MAX_MODEL_NAME = 64  # characters of the model name (it names files and a class)
+MAX_TEXT = 10_000  # characters of a description or unit
+MAX_K = 20  # differentiations: a bound against runaway builds, not a statement of accuracy
+# Names the generated slave module defines next to the class named after the model.
+_SLAVE_NAMES = {"MODEL", "Fmi2Slave", "DefaultExperiment", "LscRuntime", "give_back_loader_reference",
+                "release_loader_state_at_exit", "pythonfmu"}
 _IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
@@ -71,6 +101,8 @@ class ModelSpec:
         ``name``, ``unit``, ``description``, ``start``.
     parameters : list of dict
         ``name``, ``value``, ``unit``, ``tunable``, ``description``.
+    inputs : list of dict
+        ``name``, ``unit``, ``description``, ``start``.
     outputs : list of dict
         Custom outputs: ``name``, ``expr`` (sympy, in the states, parameters,
         inputs and ``t``), ``unit``, ``description``.
@@ -79,6 +111,8 @@ class ModelSpec:
     t : sympy.Symbol
     symbols : dict
         Parameter name -> sympy symbol.
+    input_symbols : dict
+        Input name -> sympy symbol.
     method : str
     lam : float
     k : int or None
@@ -113,21 +147,160 @@ def load_spec(path):
     return parse_spec(data, source=str(path))
 
 
+def _unknown_keys(table, where, problems):
+    """One problem per key of `table` not in ``KEYS[kind]``, with the closest known key."""
+    kind = where.split(".")[0] if where else ""
+    known = KEYS[kind]
+    for key in table:
+        if key in known:
+            continue
+        close = [k for k in known if k.lower() == str(key).lower()] or difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
+        if not where:
+            hint = f"; did you mean [{close[0]}]?" if close else f" (known: {', '.join(known)})"
+            problems.append(f"{key}: unknown table [{key}]{hint}")
+        else:
+            hint = f"; did you mean {close[0]!r}?" if close else f" (known: {', '.join(known)})"
+            problems.append(f"{where}.{key}: unknown key {key!r} in [{where}]{hint}")
+
+
+def _table(value, field, problems, what="a table"):
+    """`value` if it is a table (dict); else a problem and an empty table."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        problems.append(f"{field}: expected {what}, got {_show(value)}")
+        return {}
+    return value
+
+
+def _show(value):
+    """A short repr for messages."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:60] + "..."
+
+
+def _name_problem(name, max_length=MAX_NAME):
+    """Why `name` cannot name a variable (or the model), or None."""
+    if not isinstance(name, str):
+        return f"expected a name (text), got {_show(name)}"
+    if not _IDENT.match(name) or keyword.iskeyword(name):
+        return f"{_show(name)} is not a valid identifier (letters, digits, _; not a Python keyword)"
+    if len(name) > max_length:
+        return f"a name of {len(name)} characters is too long (at most {max_length})"
+    if "__" in name or name.lower().startswith("_lsc"):
+        return f"{name!r} is reserved: names containing '__' or starting with '_lsc' are left to the names the build generates"
+    return None
+
+
 def _identifier(name, field, problems):
-    if not isinstance(name, str) or not _IDENT.match(name) or keyword.iskeyword(name):
-        problems.append(f"{field}: {name!r} is not a valid identifier (letters, digits, _; not a Python keyword)")
+    problem = _name_problem(name)
+    if problem is None and name in RESERVED:
+        problem = f"{name!r} is reserved by the FMU (reserved: {', '.join(sorted(RESERVED))})"
+    if problem is not None:
+        problems.append(f"{field}: {problem}")
         return False
     return True
 
 
-def _number(value, field, problems, positive=False):
+def model_name_problems(name, field="model.name"):
+    """Problems of a model name: a list of messages, empty when the name is fine.
+
+    The name becomes a Python module, a class and the FMU's file name, so it
+    must be an identifier of at most `MAX_MODEL_NAME` characters and must
+    not shadow a module importable in the building Python (``os``,
+    ``json``, ``numpy``, ``lsc``, ...) or a name the generated slave
+    module uses (``MODEL``, ``Fmi2Slave``, ...).
+
+    Examples
+    --------
+    >>> model_name_problems("PrescribedPath")
+    []
+    >>> model_name_problems("json")
+    ["model.name: 'json' would shadow the importable module 'json' inside the FMU; choose another name"]
+    """
+    problem = _name_problem(name, MAX_MODEL_NAME)
+    if problem is not None:
+        return [f"{field}: {problem}"]
+    if name in _SLAVE_NAMES:
+        return [f"{field}: {name!r} is a name the generated FMU code uses ({', '.join(sorted(_SLAVE_NAMES))}); choose another name"]
+    for module in (name, f"{name}_lsc", f"{name}_model"):
+        if _importable(module):
+            return [f"{field}: {name!r} would shadow the importable module {module!r} inside the FMU; choose another name"]
+    return []
+
+
+def _importable(module):
+    """Whether a top-level module of that name can be imported here (found, never imported)."""
+    if module in sys.builtin_module_names or module in sys.stdlib_module_names or module in sys.modules:
+        return True
+    try:
+        return importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):
+        return True
+
+
+def _text(info, key, field, problems, default=""):
+    """A description or unit: text without control characters (it goes into XML)."""
+    value = info.get(key, default)
+    if not isinstance(value, str):
+        problems.append(f"{field}.{key}: expected text, got {_show(value)}")
+        return default
+    if len(value) > MAX_TEXT:
+        problems.append(f"{field}.{key}: text of {len(value)} characters is too long (at most {MAX_TEXT})")
+        return default
+    for i, ch in enumerate(value):
+        if unicodedata.category(ch) in ("Cc", "Cs") or ch in "\ufffe\uffff":
+            problems.append(f"{field}.{key}: control character {ch!r} at position {i} (not allowed in a model description)")
+            return default
+    return value
+
+
+def _number(value, field, problems, positive=False, default=None):
+    if value is None:
+        problems.append(f"{field}: missing (expected a number)")
+        return default
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        problems.append(f"{field}: expected a number, got {value!r}")
-        return None
+        problems.append(f"{field}: expected a number, got {_show(value)}")
+        return default
+    try:
+        value = float(value)
+    except OverflowError:
+        problems.append(f"{field}: number out of range (at most about 1.8e308), got an integer of {len(str(abs(value)))} digits")
+        return default
+    if not math.isfinite(value):
+        problems.append(f"{field}: expected a finite number, got {value!r}")
+        return default
     if positive and not value > 0:
         problems.append(f"{field}: must be positive, got {value!r}")
-        return None
-    return float(value)
+        return default
+    return value
+
+
+def _boolean(info, key, field, problems):
+    value = info.get(key, False)
+    if not isinstance(value, bool):
+        problems.append(f"{field}.{key}: expected true or false, got {_show(value)}")
+        return False
+    return value
+
+
+def _entries(data, section, problems, bare=None):
+    """The (name, table) pairs of a section whose entries are tables.
+
+    `bare` names the key a bare value stands for (``m = 1.0`` in [parameters]).
+    """
+    table = _table(data.get(section), section, problems, f"a table of name = {{ ... }} entries")
+    out = []
+    for name, info in table.items():
+        field = f"{section}.{name}"
+        if bare is not None and not isinstance(info, dict):
+            info = {bare: info}
+        elif not isinstance(info, dict):
+            problems.append(f"{field}: expected a table {{ {', '.join(f'{k} = ...' for k in KEYS[section])} }}, got {_show(info)}")
+            info = {}
+        _unknown_keys(info, field, problems)
+        out.append((name, field, info))
+    return out
 
 
 def parse_spec(data, source="spec"):
@@ -143,100 +316,108 @@ def parse_spec(data, source="spec"):
     >>> spec.n, spec.method, str(spec.f[0])
     (1, 'alternative', 'exp(-t)')
     >>> parse_spec({"model": {"name": "Bad"}, "states": {"x": {}},
-    ...             "equations": {"A": [["x.real"]], "B": [[1]]}})
+    ...             "equations": {"A": [["x.real"]], "B": [[1]]}, "completion": {"lamda": 5.0}})
     Traceback (most recent call last):
     ...
-    fmu_build._spec.SpecError: spec has 1 problem(s):
+    fmu_build._spec.SpecError: spec has 2 problem(s):
+      - completion.lamda: unknown key 'lamda' in [completion]; did you mean 'lam'?
       - equations.A[0][0]: attribute access not allowed in 'x.real'
     """
     import sympy
 
     problems = []
-    known = {"model", "states", "parameters", "inputs", "equations", "completion", "experiment", "outputs"}
-    for key in data:
-        if key not in known:
-            problems.append(f"{key}: unknown section (known: {', '.join(sorted(known))})")
+    if not isinstance(data, dict):
+        raise SpecError([f"expected a table of tables (parsed TOML), got {_show(data)}"], source=source)
+    _unknown_keys(data, "", problems)
+    for section in ("model", "equations", "completion", "experiment"):
+        if isinstance(data.get(section), dict):  # not a table: reported where it is read
+            _unknown_keys(data[section], section, problems)
 
-    model = data.get("model", {})
+    model = _table(data.get("model"), "model", problems)
     name = model.get("name")
     if name is None:
         problems.append("model.name: missing")
     else:
-        _identifier(name, "model.name", problems)
-    description = model.get("description", "")
+        problems += model_name_problems(name)
+    description = _text(model, "description", "model", problems)
+
+    # every FMU variable name -> what it is, to report clashes
+    taken = {}
+
+    def claim(vname, field, what):
+        if vname in taken:
+            problems.append(f"{field}: {vname!r} clashes with {taken[vname]}")
+            return False
+        taken[vname] = what
+        return True
 
     states = []
-    for sname, info in (data.get("states") or {}).items():
-        field = f"states.{sname}"
-        info = info if isinstance(info, dict) else {}
-        if _identifier(sname, field, problems) and sname in RESERVED:
-            problems.append(f"{field}: {sname!r} is reserved by the FMU")
-        start = _number(info.get("start", 0.0), f"{field}.start", problems)
-        states.append({"name": sname, "unit": info.get("unit", ""), "description": info.get("description", f"state {sname}"),
-                       "start": start if start is not None else 0.0})
+    for sname, field, info in _entries(data, "states", problems):
+        ok = _identifier(sname, field, problems) and claim(sname, field, "a state of that name")
+        start = _number(info.get("start", 0.0), f"{field}.start", problems, default=0.0)
+        unit = _text(info, "unit", field, problems)
+        desc = _text(info, "description", field, problems, default=f"state {sname}")
+        # a state with a bad name still counts: A and B are checked against the number of states
+        states.append({"name": sname, "unit": unit, "description": desc, "start": start, "ok": ok})
+    for s in states:
+        if s.pop("ok"):
+            # the FMU's start-value parameter of each state (fmu_build._runtime.start_name)
+            claim(f"{s['name']}_0", f"states.{s['name']}", f"the start value of the state {s['name']!r}")
     if not states:
         problems.append("states: at least one state is needed")
 
     t = sympy.Symbol("t")
     parameters, symbols = [], {}
-    for pname, info in (data.get("parameters") or {}).items():
-        field = f"parameters.{pname}"
-        if not isinstance(info, dict):
-            info = {"value": info}
-        ok = _identifier(pname, field, problems)
-        if ok and (pname in RESERVED or pname in {s["name"] for s in states}):
-            problems.append(f"{field}: {pname!r} clashes with a state or a name reserved by the FMU")
-            ok = False
-        value = _number(info.get("value"), f"{field}.value", problems)
-        tunable = info.get("tunable", False)
-        if not isinstance(tunable, bool):
-            problems.append(f"{field}.tunable: expected true or false, got {tunable!r}")
-            tunable = False
+    for pname, field, info in _entries(data, "parameters", problems, bare="value"):
+        ok = _identifier(pname, field, problems) and claim(pname, field, "a parameter of that name")
+        value = _number(info.get("value"), f"{field}.value", problems, default=0.0)
+        tunable = _boolean(info, "tunable", field, problems)
+        unit = _text(info, "unit", field, problems)
+        desc = _text(info, "description", field, problems, default=f"parameter {pname}")
         if ok:
             symbols[pname] = sympy.Symbol(pname, real=True)
-            parameters.append({"name": pname, "value": value if value is not None else 0.0, "unit": info.get("unit", ""),
-                               "tunable": tunable, "description": info.get("description", f"parameter {pname}")})
+            parameters.append({"name": pname, "value": value, "unit": unit, "tunable": tunable, "description": desc})
 
     inputs, input_symbols = [], {}
-    taken = {s["name"] for s in states} | set(symbols) | RESERVED
-    for iname, info in (data.get("inputs") or {}).items():
-        field = f"inputs.{iname}"
-        info = info if isinstance(info, dict) else {}
-        ok = _identifier(iname, field, problems)
-        if ok and iname in taken:
-            problems.append(f"{field}: {iname!r} clashes with a state, a parameter or a name reserved by the FMU")
-            ok = False
-        start = _number(info.get("start", 0.0), f"{field}.start", problems)
+    for iname, field, info in _entries(data, "inputs", problems):
+        ok = _identifier(iname, field, problems) and claim(iname, field, "an input of that name")
+        start = _number(info.get("start", 0.0), f"{field}.start", problems, default=0.0)
+        unit = _text(info, "unit", field, problems)
+        desc = _text(info, "description", field, problems, default=f"input {iname}")
         if ok:
             input_symbols[iname] = sympy.Symbol(iname, real=True)
-            inputs.append({"name": iname, "unit": info.get("unit", ""), "description": info.get("description", f"input {iname}"),
-                           "start": start if start is not None else 0.0})
+            inputs.append({"name": iname, "unit": unit, "description": desc, "start": start})
 
     n = len(states)
     names = {"t": t, **symbols, **input_symbols}
-    eq = data.get("equations") or {}
+    eq = _table(data.get("equations"), "equations", problems)
     A = _matrix(eq.get("A"), "equations.A", (n, n), names, problems)
     B = _matrix(eq.get("B"), "equations.B", (n, n), names, problems)
     f_raw = eq.get("f", [0] * n)
     f = _matrix([[v] for v in f_raw] if isinstance(f_raw, list) else f_raw, "equations.f", (n, 1), names, problems, vector=True)
 
-    outputs = _outputs(data.get("outputs") or {}, states, names, problems)
+    outputs = _outputs(data, states, names, claim, problems)
 
-    comp = data.get("completion") or {}
+    comp = _table(data.get("completion"), "completion", problems)
     method = comp.get("method", "alternative")
     if method not in METHODS:
-        problems.append(f"completion.method: must be one of {', '.join(METHODS)}; got {method!r}")
+        problems.append(f"completion.method: must be one of {', '.join(METHODS)}; got {_show(method)}")
     lam = _number(comp.get("lam", 1.0), "completion.lam", problems, positive=True)
     k = comp.get("k")
-    if k is not None and (isinstance(k, bool) or not isinstance(k, int) or k < 0):
-        problems.append(f"completion.k: must be a non-negative integer; got {k!r}")
+    if k is not None and (isinstance(k, bool) or not isinstance(k, int) or not 0 <= k <= MAX_K):
+        problems.append(f"completion.k: must be an integer from 0 to {MAX_K}; got {_show(k)}")
 
-    exp = data.get("experiment") or {}
+    exp = _table(data.get("experiment"), "experiment", problems)
     start = _number(exp.get("start", 0.0), "experiment.start", problems)
     stop = _number(exp.get("stop", 1.0), "experiment.stop", problems)
     step = _number(exp.get("step", 0.01), "experiment.step", problems, positive=True)
     if start is not None and stop is not None and not stop > start:
         problems.append(f"experiment.stop: must be greater than experiment.start ({start}); got {stop}")
+
+    if start is not None and all(M is not None for M in (A, B, f)):
+        values = {t: start, **{symbols[p["name"]]: p["value"] for p in parameters},
+                  **{input_symbols[u["name"]]: u["start"] for u in inputs}}
+        _check_at_start(A, B, f, values, start, problems)
 
     if problems:
         raise SpecError(problems, source=source)
@@ -245,38 +426,44 @@ def parse_spec(data, source="spec"):
                      experiment={"start": start, "stop": stop, "step": step})
 
 
-def _outputs(table, states, names, problems):
+def _check_at_start(A, B, f, values, start, problems):
+    """Every coefficient must have a finite real value at the start time (``1/t`` at 0 does not)."""
+    for label, M, vector in (("A", A, False), ("B", B, False), ("f", f, True)):
+        for i in range(M.rows):
+            for j in range(M.cols):
+                expr = M[i, j]
+                if expr.is_Number:
+                    continue
+                where = f"equations.{label}[{i}]" if vector else f"equations.{label}[{i}][{j}]"
+                try:
+                    evaluate(expr, values)
+                except (ArithmeticError, ValueError, TypeError, KeyError) as exc:
+                    problems.append(f"{where}: {_show(str(expr))} has no finite real value at t = {start!r} "
+                                    f"(experiment.start), with the parameters' values and the inputs' start values "
+                                    f"({type(exc).__name__}: {exc})")
+
+
+def _outputs(data, states, names, claim, problems):
     """Custom outputs: expressions in the states, parameters, inputs and ``t``."""
     import sympy
 
-    if not isinstance(table, dict):
-        problems.append(f"outputs: expected a table of name = {{ expr = ... }}, got {table!r}")
-        return []
-    state_symbols = {s["name"]: sympy.Symbol(s["name"], real=True) for s in states if _IDENT.match(s["name"])}
+    state_symbols = {s["name"]: sympy.Symbol(s["name"], real=True) for s in states if isinstance(s["name"], str)}
     scope = {**names, **state_symbols}
     outputs = []
-    for oname, info in table.items():
-        field = f"outputs.{oname}"
-        if not isinstance(info, dict):
-            info = {"expr": info}
-        ok = _identifier(oname, field, problems)
-        if ok and (oname in RESERVED or oname in scope):
-            problems.append(f"{field}: {oname!r} clashes with a state, a parameter, an input or a name reserved by the FMU")
-            ok = False
-        unknown = sorted(set(info) - {"expr", "unit", "description"})
-        if unknown:
-            problems.append(f"{field}: unknown key(s) {', '.join(unknown)} (known: description, expr, unit)")
+    for oname, field, info in _entries(data, "outputs", problems, bare="expr"):
+        ok = _identifier(oname, field, problems) and claim(oname, field, "an output of that name")
+        unit = _text(info, "unit", field, problems)
         if "expr" not in info:
             problems.append(f"{field}.expr: missing (an expression in the states, parameters, inputs and t)")
             continue
+        desc = _text(info, "description", field, problems, default=f"output {oname} = {info['expr']}")
         try:
             expr = parse_expression(info["expr"], scope, f"{field}.expr")
         except ExpressionError as exc:
             problems.append(str(exc))
             continue
         if ok:
-            outputs.append({"name": oname, "expr": expr, "unit": info.get("unit", ""),
-                            "description": info.get("description", f"output {oname} = {info['expr']}")})
+            outputs.append({"name": oname, "expr": expr, "unit": unit, "description": desc})
     return outputs
 
 
@@ -290,13 +477,16 @@ def _matrix(rows, field, shape, names, problems, vector=False):
     if not isinstance(rows, list) or not all(isinstance(r, list) for r in rows):
         problems.append(f"{field}: expected a list of rows (a list of lists)" if not vector else f"{field}: expected a list")
         return None
+    if shape[0] == 0:  # no valid states: reported under [states]
+        return None
     got = (len(rows), len(rows[0]) if rows else 0)
     if got[0] != shape[0] or any(len(r) != shape[1] for r in rows):
         want = f"{shape[0]} entries" if vector else f"{shape[0]}x{shape[1]}"
-        found = f"{got[0]} entries" if vector else f"{got[0]} rows of lengths {[len(r) for r in rows]}"
+        found = f"{got[0]} entries" if vector else f"{got[0]} rows of lengths {[len(r) for r in rows][:10]}"
         problems.append(f"{field}: expected {want} (one per state), got {found}")
         return None
     out = sympy.zeros(*shape)
+    ok = True
     for i, row in enumerate(rows):
         for j, value in enumerate(row):
             where = f"{field}[{i}]" if vector else f"{field}[{i}][{j}]"
@@ -304,4 +494,5 @@ def _matrix(rows, field, shape, names, problems, vector=False):
                 out[i, j] = parse_expression(value, names, where)
             except ExpressionError as exc:
                 problems.append(str(exc))
-    return out
+                ok = False
+    return out if ok else None

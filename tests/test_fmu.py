@@ -238,7 +238,7 @@ def test_spec_reports_every_problem_at_once():
         "outputs.x: 'x' clashes with a state",
         "outputs.e.expr: attribute access not allowed",
         "outputs.g.expr: missing",
-        "outputs.h: unknown key(s) scale",
+        "outputs.h.scale: unknown key 'scale' in [outputs.h]",
     ]:
         assert fragment in msg, fragment
     assert len(info.value.problems) == 14
