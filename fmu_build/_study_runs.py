@@ -123,10 +123,6 @@ def _run_fmu(fmu, point, settings, start):
     from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
     from fmpy.logging import addLoggerProxy
 
-    if point.get("__crash__"):  # a test hook: a run that takes its worker process down
-        import signal
-
-        os.kill(os.getpid(), signal.SIGKILL)
     folder = _extract(fmu)
     unzipped = os.path.join(folder, "unzipped")
     md = read_model_description(unzipped)

@@ -337,7 +337,7 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
         tight = {}
 
     rows = dict(finished)
-    curves_out = {}
+    curves_out = ResidualCurves()
     done_count = [len(finished)]
     failed_count = [sum(1 for r in finished.values() if not r["success"])]
     waiting = {}  # group key -> list of (run, result) waiting for their reference
@@ -362,7 +362,11 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
                 row["message"] = f"{row['message']}; metric {name!r} failed: {exc}"
         rows[run] = row
         if curves and result.get("residual") is not None:
-            curves_out[run] = (np.asarray(result["t"]), np.asarray(result["residual"]))
+            t_run, r_run = np.asarray(result["t"]), np.asarray(result["residual"])
+            if t_run.size > 400:  # a curve for a plot, not the trajectory
+                keep = np.unique(np.linspace(0, t_run.size - 1, 400).astype(int))
+                t_run, r_run = t_run[keep], r_run[keep]
+            curves_out[run] = (t_run, r_run)
         if stream is not None:
             pd.DataFrame([row], columns=columns).to_csv(stream, mode="a", header=False, index=False)
         done_count[0] += 1
@@ -413,6 +417,22 @@ def _build_spec(spec):
 
     folder = tempfile.mkdtemp(prefix="lsc_study_spec_")
     return os.fspath(build_fmu(spec, folder))
+
+
+class ResidualCurves(dict):
+    """Run -> (t, residual) of a study, kept in ``df.attrs['curves']``.
+
+    Shared, not copied, by the frames pandas derives from the study (pandas
+    deep-copies and compares ``attrs`` on every operation).
+    """
+
+    def __eq__(self, other):
+        return self is other
+
+    __hash__ = object.__hash__
+
+    def __deepcopy__(self, memo):
+        return self
 
 
 class _Progress:
@@ -525,7 +545,7 @@ class Recommendation:
         with pd.option_context("display.width", 160, "display.max_columns", 20, "display.max_colwidth", 40):
             head = (f"no run reaches error <= {self.error_target:g}" if self.row is None else
                     f"recommended (error <= {self.error_target:g} at least {self.cost}): "
-                    + ", ".join(f"{k}={v!r}" for k, v in self.row.items() if k not in METRICS))
+                    + ", ".join(f"{k}={getattr(v, 'item', lambda: v)()!r}" for k, v in self.row.items() if k not in METRICS))
             return f"{head}\n{self.rule}\nevidence:\n{self.evidence.to_string()}"
 
 
@@ -578,20 +598,13 @@ def recommend(df, error_target, *, cost="run_time", horizon=None, eigenvalues=No
     ranked = ok.sort_values([cost, "error"], kind="stable")
     best = ranked.iloc[0]
     cheaper_missing = df[(df[cost] <= best[cost]) & ~(df["success"] & (df["error"] <= error_target))]
-    evidence = _concat([best.to_frame().T, cheaper_missing.sort_values(cost).head(4), ranked.iloc[1:4]])
+    chosen = [ranked.index[0], *cheaper_missing.sort_values(cost).index[:4], *ranked.index[1:4]]
+    evidence = df.loc[list(dict.fromkeys(chosen))]
     t_span = df.attrs.get("t_span")
     if horizon is None and t_span:
         horizon = t_span[1] - t_span[0]
     rule = _rule(best, horizon, error_target, eigenvalues, step, offset)
     return Recommendation(best[inputs + list(METRICS)], evidence, error_target, cost, rule)
-
-
-def _concat(frames):
-    import pandas as pd
-
-    frames = [f for f in frames if not f.empty]
-    out = pd.concat(frames)
-    return out[~out.index.duplicated()]
 
 
 def _rule(best, horizon, error_target, eigenvalues, step, offset):
