@@ -457,12 +457,26 @@ class _Progress:
             self.bar.close()
 
 
+def _local(client):
+    """True if the client's workers run on this machine (they can read the FMU's path)."""
+    import socket
+
+    hosts = {"127.0.0.1", "localhost", "::1", socket.gethostname()}
+    try:
+        hosts.add(socket.gethostbyname(socket.gethostname()))
+    except OSError:
+        pass
+    addresses = list(client.scheduler_info().get("workers", {})) or [client.scheduler.address]
+    return all(any(f"//{h}:" in a or f"//[{h}]:" in a for h in hosts) for a in addresses)
+
+
 def _crash_result(exc):
     from distributed import KilledWorker
 
     if isinstance(exc, KilledWorker):
-        reason = ("the worker process running it died (killed, or crashed e.g. by a segmentation fault in the FMU); "
-                  f"{exc}")
+        worker = getattr(getattr(exc, "last_worker", None), "address", None)
+        reason = ("the worker process running it died (killed, or crashed e.g. by a segmentation fault in the FMU)"
+                  + (f": {worker}" if worker else ""))
     else:
         reason = f"{type(exc).__name__}: {exc}"
     return dict(success=False, message=reason, residual_final=math.nan, residual_peak=math.nan, run_time=math.nan,
@@ -475,8 +489,10 @@ def _execute(runner, payload, settings, jobs, accept, scheduler, n_workers, bar)
             bar.update(1)
             accept(tag, runner(payload, point, settings))
         return
+    from concurrent.futures import CancelledError
+
     import dask
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import Client, KilledWorker, LocalCluster, as_completed
 
     cluster = None
     if scheduler is None:
@@ -490,27 +506,40 @@ def _execute(runner, payload, settings, jobs, accept, scheduler, n_workers, bar)
     else:
         client = scheduler
     try:
-        if isinstance(payload, str) and payload.lower().endswith(".fmu"):
+        if isinstance(payload, str) and payload.lower().endswith(".fmu") and not _local(client):
             with open(payload, "rb") as fh:  # workers elsewhere need not share a file system
                 payload = fh.read()
-        payload_future = client.scatter(payload, broadcast=True) if jobs else None
-        futures = {}
-        for tag, point in jobs:
-            fut = client.submit(runner, payload_future, point, settings, pure=False, retries=0)
-            futures[fut] = tag
-        pending = len(futures)
         slots = max(sum(client.nthreads().values()), 1)
-        bar.update(min(pending, slots))
-        for fut in as_completed(list(futures)):
-            tag = futures.pop(fut)
-            pending -= 1
+        # At most one run in flight per worker thread: a worker that dies then takes down only
+        # the run it was computing, and a run caught in the crash of another is retried once.
+        queue, futures, tries = list(jobs), {}, {}
+        running = as_completed()
+
+        def submit():
+            while queue and len(futures) < slots:
+                tag, point = queue.pop(0)
+                fut = client.submit(runner, payload, point, settings, pure=False, retries=0)
+                futures[fut] = (tag, point)
+                running.add(fut)
+
+        submit()
+        bar.update(len(futures))
+        for fut in running:
+            tag, point = futures.pop(fut)
             try:
                 result = fut.result()
             except Exception as exc:
+                tries[tag] = tries.get(tag, 0) + 1
+                if isinstance(exc, (KilledWorker, CancelledError)) and tries[tag] < 2:
+                    queue.insert(0, (tag, point))
+                    fut.release()
+                    submit()
+                    continue
                 result = _crash_result(exc)
             accept(tag, result)
             fut.release()
-            bar.update(min(pending, slots))
+            submit()
+            bar.update(len(futures))
     finally:
         if cluster is not None:
             client.close()
