@@ -404,7 +404,9 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
     df.attrs["t_span"] = t_span
     if output is not None and os.fspath(output).lower().endswith(".parquet"):
         tmp = f"{os.fspath(output)}.tmp{os.getpid()}"
-        df.to_parquet(tmp)
+        plain = df.copy()
+        plain.attrs = {}  # the residual curves are for plots, not for the file
+        plain.to_parquet(tmp)
         os.replace(tmp, output)
         os.remove(stream)
     return df

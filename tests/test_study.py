@@ -241,3 +241,15 @@ def test_cli_sweep_writes_plots_and_recommends(tmp_path, capsys):
     assert pd.read_csv(output).columns.tolist() == ["run", "lam", "offset", *study.METRICS]
     assert main(["sweep", "gallery:nothing", "--grid", "lam=1", "-o", str(output)]) == 2
     assert "gallery:NAME must name an lsc.gallery problem" in capsys.readouterr().err
+
+
+def test_parquet_output(tmp_path):
+    pytest.importorskip("pyarrow")
+    problem = gallery.prescribed_path(t_span=T_SPAN)
+    output = tmp_path / "study.parquet"
+    df = sweep(problem, {"lam": [1.0, 4.0]}, scheduler="serial", progress=False, output=output)
+    back = pd.read_parquet(output)
+    assert back.index.name == "run" and back["error"].tolist() == df["error"].tolist()
+    assert not (tmp_path / "study.parquet.partial.csv").exists()
+    resumed = sweep(problem, {"lam": [1.0, 4.0]}, scheduler="serial", progress=False, output=output)
+    assert resumed["run_time"].tolist() == df["run_time"].tolist()  # read back, not recomputed
