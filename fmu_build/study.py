@@ -167,7 +167,7 @@ def _read_finished(output, names, points):
     frames = []
     stream = _stream_path(output)
     if os.fspath(output).lower().endswith(".parquet") and os.path.exists(output):
-        frames.append(pd.read_parquet(output))
+        frames.append(pd.read_parquet(output).reset_index())
     if os.path.exists(stream) and os.path.getsize(stream) > 0:
         # an interrupted write leaves at most a broken last line: skip what does not parse
         frames.append(pd.read_csv(stream, on_bad_lines="skip", engine="python"))
