@@ -16,6 +16,7 @@ import numpy as np
 NUMERICAL = ("lam", "step", "rtol", "atol", "method")
 
 _EXTRACTED = {}  # sha256 of an FMU's bytes -> its extraction folder, per worker process
+_DESCRIPTIONS = {}  # extraction folder -> model description, per worker process
 _LOADED = {}  # FMU model identifier -> GUID loaded in this process (pythonfmu modules are shared)
 
 
@@ -59,13 +60,17 @@ def _run_dae(problem, point, settings, start):
                               k=point.get("k"), t_span=None if dae.is_constant else t_span)
     offset = float(point.get("offset", 0.0))
     if offset:
-        # move x0 off the solution manifold by `offset` (2-norm), along the part of (1, ..., 1)
-        # the projection removes: the on-manifold part would not decay at the rate lam
-        trial = x0 + np.ones_like(x0)
-        away = trial - completion.project(t_span[0], trial)
-        norm = np.linalg.norm(away)
-        if not norm > 0:
-            raise ValueError("`offset` needs a direction off the solution manifold; the manifold is the whole space")
+        # move x0 off the solution manifold by `offset` (2-norm), along the part of a trial direction
+        # the projection removes (the on-manifold part would not decay at the rate lam); the trial
+        # directions: (1, ..., 1), then the unit vectors, the first with a part off the manifold
+        n = x0.size
+        for trial in (np.ones(n), *np.eye(n)):
+            away = x0 + trial - completion.project(t_span[0], x0 + trial)
+            norm = np.linalg.norm(away)
+            if norm > 1e-8 * np.linalg.norm(trial):
+                break
+        else:
+            raise ValueError("`offset` needs a direction off the solution manifold; the DAE constrains no direction")
         x0 = x0 + offset * away / norm
     options = {"method": point.get("method", settings.get("method", "RK45")),
                "rtol": point.get("rtol", 1e-6), "atol": point.get("atol", 1e-9)}
@@ -125,7 +130,9 @@ def _run_fmu(fmu, point, settings, start):
 
     folder = _extract(fmu)
     unzipped = os.path.join(folder, "unzipped")
-    md = read_model_description(unzipped)
+    md = _DESCRIPTIONS.get(folder)
+    if md is None:
+        md = _DESCRIPTIONS[folder] = read_model_description(unzipped)
     ident = md.coSimulation.modelIdentifier
     if _LOADED.get(ident, md.guid) != md.guid:
         return _failed(f"another FMU with model identifier {ident!r} (a different GUID) was loaded by this worker "

@@ -562,25 +562,29 @@ class Recommendation:
     error_target : float
     cost : str
         The column minimized.
+    on : str
+        The column held to the target.
     rule : str
         The rule of thumb the recommended point suggests: ``lam`` relative to
         the horizon, to the fastest kept eigenvalue and to the step.
     """
 
-    def __init__(self, row, evidence, error_target, cost, rule):
+    def __init__(self, row, evidence, error_target, cost, rule, on="error"):
         self.row, self.evidence, self.error_target, self.cost, self.rule = row, evidence, error_target, cost, rule
+        self.on = on
 
     def __str__(self):
         import pandas as pd
 
         with pd.option_context("display.width", 160, "display.max_columns", 20, "display.max_colwidth", 40):
-            head = (f"no run reaches error <= {self.error_target:g}" if self.row is None else
-                    f"recommended (error <= {self.error_target:g} at least {self.cost}): "
+            head = (f"no run reaches {self.on} <= {self.error_target:g}" if self.row is None else
+                    f"recommended ({self.on} <= {self.error_target:g} at least {self.cost}): "
                     + ", ".join(f"{k}={getattr(v, 'item', lambda: v)()!r}" for k, v in self.row.items() if k not in METRICS))
             return f"{head}\n{self.rule}\nevidence:\n{self.evidence.to_string()}"
 
 
-def recommend(df, error_target, *, cost="run_time", horizon=None, eigenvalues=None, step=None, offset=None):
+def recommend(df, error_target, *, cost="run_time", on="error", horizon=None, eigenvalues=None, step=None,
+              offset=None):
     """The cheapest run that reaches an error target, with the evidence.
 
     Parameters
@@ -588,10 +592,15 @@ def recommend(df, error_target, *, cost="run_time", horizon=None, eigenvalues=No
     df : pandas.DataFrame
         From `sweep`.
     error_target : float
-        Largest acceptable ``error``.
+        Largest acceptable value of the `on` column.
     cost : str, optional
         Column to minimize: 'run_time' (default) or 'steps' (deterministic).
         Ties go to the smaller error.
+    on : str, optional
+        The column held to `error_target`: 'error' (default) or
+        'residual_final' (the drift from the constraints, which is what λ
+        governs; the state error also carries whatever part of an initial
+        offset the completion moves along the solution manifold).
     horizon : float, optional
         Time over which the initial offset must decay (default: the study's
         horizon from ``df.attrs['t_span']`` minus nothing); used for the rule.
@@ -620,22 +629,24 @@ def recommend(df, error_target, *, cost="run_time", horizon=None, eigenvalues=No
         raise ValueError(f"`cost` must be a column of `df`; found {cost!r}.")
     if not error_target > 0:
         raise ValueError(f"`error_target` must be positive; found {error_target!r}.")
-    ok = df[df["success"] & (df["error"] <= error_target)]
+    if on not in ("error", "residual_final"):
+        raise ValueError(f"`on` must be 'error' or 'residual_final'; found {on!r}.")
+    ok = df[df["success"] & (df[on] <= error_target)]
     inputs = [c for c in df.columns if c not in METRICS and c in df.columns[: list(df.columns).index("success")]]
     if ok.empty:
-        evidence = df[df["success"]].sort_values("error").head(5)
+        evidence = df[df["success"]].sort_values(on).head(5)
         return Recommendation(None, evidence, error_target, cost, "no rule: the study never reaches the target; "
                               "widen the grid (larger lam, smaller step or tolerances).")
-    ranked = ok.sort_values([cost, "error"], kind="stable")
+    ranked = ok.sort_values([cost, on], kind="stable")
     best = ranked.iloc[0]
-    cheaper_missing = df[(df[cost] <= best[cost]) & ~(df["success"] & (df["error"] <= error_target))]
+    cheaper_missing = df[(df[cost] <= best[cost]) & ~(df["success"] & (df[on] <= error_target))]
     chosen = [ranked.index[0], *cheaper_missing.sort_values(cost).index[:4], *ranked.index[1:4]]
     evidence = df.loc[list(dict.fromkeys(chosen))]
     t_span = df.attrs.get("t_span")
     if horizon is None and t_span:
         horizon = t_span[1] - t_span[0]
     rule = _rule(best, horizon, error_target, eigenvalues, step, offset)
-    return Recommendation(best[inputs + list(METRICS)], evidence, error_target, cost, rule)
+    return Recommendation(best[inputs + list(METRICS)], evidence, error_target, cost, rule, on)
 
 
 def _rule(best, horizon, error_target, eigenvalues, step, offset):
