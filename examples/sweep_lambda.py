@@ -49,7 +49,7 @@ def throughput(fmu, grid, workers):
                    reference=gallery.prescribed_path(t_span=T_SPAN))
         elapsed = time.perf_counter() - start
     assert df["success"].all(), df[~df["success"]]
-    return len(df) / elapsed, len(df)
+    return len(df) / elapsed, len(df), df["run_time"].mean()
 
 
 def throughput_table(folder):
@@ -57,21 +57,24 @@ def throughput_table(folder):
     rows = []
     for label, fmu in (("pythonfmu", build_fmu(SPEC, folder)), ("native", native_fmu(folder / "native"))):
         if fmu is None:
-            rows.append(f"| {label} | not available in this installation | | |")
+            rows.append(f"| {label} | not available in this installation | | | | |")
             continue
         # measured side by side, alternating, best of two: the machine is shared and noisy
         one, two = [], []
         for _ in range(2):
-            rate, n = throughput(fmu, grid, 1)
-            one.append(rate)
-            rate, n = throughput(fmu, grid, 2)
-            two.append(rate)
-        rows.append(f"| {label} | {max(one):.1f} | {max(two):.1f} | {max(two) / max(one):.2f} |")
+            one.append(throughput(fmu, grid, 1))
+            two.append(throughput(fmu, grid, 2))
+        (r1, n, t1), (r2, _, t2) = max(one), max(two)
+        rows.append(f"| {label} | {r1:.1f} | {r2:.1f} | {r2 / r1:.2f} | {1e3 * t1:.0f} | {1e3 * t2:.0f} |")
         print(rows[-1])
+    load = os.getloadavg()[0]
     return (f"Study of {n} runs of the prescribed-path FMU (λ × communication step × initial offset, horizon "
-            f"{T_SPAN[1]:g} s, 100-200 steps each) on a `distributed.LocalCluster` of worker processes; cluster "
-            "start-up excluded, best of two alternating measurements on a shared 2-core machine.\n\n"
-            "| FMU | runs/s, 1 worker | runs/s, 2 workers | speed-up |\n|---|---|---|---|\n" + "\n".join(rows) + "\n")
+            f"{T_SPAN[1]:g} s, 100-200 communication steps each) on a `distributed.LocalCluster` of worker "
+            "processes; cluster start-up excluded, best of two alternating measurements, on a machine with "
+            f"{os.cpu_count()} cores and a load average of {load:.1f} while measuring. The mean time of one run "
+            "shows the contention: when it doubles with 2 workers, there was no free core to gain.\n\n"
+            "| FMU | runs/s, 1 worker | runs/s, 2 workers | speed-up | ms per run, 1 worker | ms per run, 2 workers |\n"
+            "|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n")
 
 
 PROBLEMS = [

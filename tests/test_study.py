@@ -177,6 +177,21 @@ def test_recommendation_agrees_with_a_finer_grid():
     assert "evidence:" in str(rec)
 
 
+@pytest.mark.parametrize("make", [lambda: gallery.nilpotent_chain(3, t_span=T_SPAN),
+                                  lambda: gallery.mechanical(t_span=T_SPAN)], ids=["nilpotent_chain", "mechanical"])
+def test_residual_rule_across_the_gallery(make):
+    """An offset off the manifold decays like exp(-lam t) in the residual: lam * horizon ~ ln(offset / target)."""
+    problem, target, offset = make(), 1e-4, 0.1
+    lams = np.geomspace(1.0, 16.0, 13)
+    df = sweep(problem, {"lam": list(lams), "offset": [offset]}, scheduler="serial", progress=False)
+    rec = recommend(df, target, cost="steps", on="residual_final")
+    reached = df[df["residual_final"] <= target]["lam"]
+    assert rec.row["lam"] == reached.min()  # cost grows with lam here: the smallest lam that reaches it
+    ratio = reached.min() * T_SPAN[1] / math.log(offset / target)
+    assert 0.9 < ratio < 1.35
+    assert df.loc[df["lam"] < reached.min(), "residual_final"].min() > target
+
+
 def test_latin_hypercube_points():
     points, names = study._points((16, {"lam": (0.5, 50.0), "c": (0.1, 0.9)}), seed=3)
     assert names == ["lam", "c"] and len(points) == 16
