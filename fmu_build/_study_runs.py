@@ -8,7 +8,6 @@ any exception becomes ``success=False`` with the exception as message.
 """
 import math
 import time
-import traceback
 
 import numpy as np
 
@@ -234,22 +233,44 @@ def _start_name(name):
     return f"{name}_0"
 
 
+def cosimulate_function():
+    """``fmu_build.cosimulate`` if this installation has it, else None (imported lazily)."""
+    import fmu_build
+
+    function = getattr(fmu_build, "cosimulate", None)
+    if function is None:
+        try:
+            from fmu_build.cosim import cosimulate as function
+        except ImportError:
+            return None
+    return function
+
+
 def run_ssp(scenario, point, settings):
-    """Run an SSP scenario through `fmu_build.cosimulate` at one point of the grid."""
+    """Run an SSP scenario through ``fmu_build.cosimulate`` at one point of the grid.
+
+    The point's values are passed as keyword arguments, with ``t_span`` when
+    the study sets one; the result is read through its attributes ``t``
+    (shape (m,)), ``x`` (shape (n, m)), and where present ``residual``
+    (shape (m,)), ``success`` and ``message``.
+    """
     start = time.perf_counter()
     try:
         bad = _bad_value(point)
         if bad:
             return _failed(bad, start)
-        from fmu_build import cosim  # noqa: F401  (checked by the client before submitting)
-
-        result = cosim.cosimulate(scenario, **settings.get("cosim_options", {}), **point)
+        cosimulate = cosimulate_function()
+        if cosimulate is None:
+            return _failed("fmu_build.cosimulate is not available in this worker's installation", start)
+        options = {"t_span": settings["t_span"]} if settings.get("t_span") else {}
+        result = cosimulate(scenario, **options, **point)
         t = np.asarray(result.t, dtype=float)
         x = np.asarray(result.x, dtype=float)
         residual = np.asarray(getattr(result, "residual", np.full(t.size, math.nan)), dtype=float)
+        finite = residual[np.isfinite(residual)]
         return dict(success=bool(getattr(result, "success", True)), message=str(getattr(result, "message", "")),
                     residual_final=float(residual[-1]) if residual.size else math.nan,
-                    residual_peak=float(np.nanmax(residual)) if residual.size and np.isfinite(residual).any() else math.nan,
+                    residual_peak=float(np.max(finite)) if finite.size else math.nan,
                     run_time=time.perf_counter() - start, steps=int(max(t.size - 1, 0)), t=t, x=x, residual=residual)
     except Exception as exc:
-        return _failed(f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=2)}", start)
+        return _failed(f"{type(exc).__name__}: {exc}", start)

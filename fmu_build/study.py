@@ -103,11 +103,9 @@ def _target(target, t_span, x0):
 
 
 def _cosimulate_available():
-    try:
-        from . import cosim
-    except ImportError:
-        return False
-    return hasattr(cosim, "cosimulate")
+    from ._study_runs import cosimulate_function
+
+    return cosimulate_function() is not None
 
 
 # -- errors against a reference ------------------------------------------------
@@ -349,6 +347,8 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
                 row[m] = result[m]
         ref = reference if callable(reference) else references.get(_group_key(points[run]))
         row["error"] = math.nan
+        if result["success"] and ref is None:
+            row["message"] = f"{row['message']}; no error: the reference run (the tightest point) failed"
         if result["success"] and ref is not None:
             try:
                 row["error"] = _error(result["t"], result["x"], ref, error_from)

@@ -268,3 +268,28 @@ def test_parquet_output(tmp_path):
     assert not (tmp_path / "study.parquet.partial.csv").exists()
     resumed = sweep(problem, {"lam": [1.0, 4.0]}, scheduler="serial", progress=False, output=output)
     assert resumed["run_time"].tolist() == df["run_time"].tolist()  # read back, not recomputed
+
+
+def test_ssp_target_runs_through_cosimulate(tmp_path, monkeypatch):
+    """The dispatch: an SSP target calls fmu_build.cosimulate(scenario, t_span=..., **point)."""
+    import types
+
+    import fmu_build
+
+    scenario = tmp_path / "scenario.ssp"
+    scenario.write_bytes(b"")
+    calls = []
+
+    def cosimulate(path, t_span, lam):
+        calls.append((path, t_span, lam))
+        t = np.linspace(*t_span, 11)
+        return types.SimpleNamespace(t=t, x=np.vstack([np.sin(t), np.exp(-lam * t)]), residual=np.exp(-lam * t),
+                                     success=True, message="done")
+
+    monkeypatch.setattr(fmu_build, "cosimulate", cosimulate, raising=False)
+    exact = lambda t: np.vstack([np.sin(t), np.zeros_like(t)])  # noqa: E731
+    df = sweep(scenario, {"lam": [1.0, 4.0]}, reference=exact, t_span=(0.0, 1.0), scheduler="serial", progress=False)
+    assert calls == [(os.fspath(scenario), (0.0, 1.0), 1.0), (os.fspath(scenario), (0.0, 1.0), 4.0)]
+    np.testing.assert_allclose(df["error"], [1.0, 1.0])  # exp(0) at t = 0
+    np.testing.assert_allclose(df["residual_final"], np.exp([-1.0, -4.0]))
+    assert df["steps"].tolist() == [10, 10] and df["message"].tolist() == ["done", "done"]
