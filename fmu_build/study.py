@@ -295,6 +295,12 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
     if kind == "spec":
         payload = _build_spec(payload)
         kind = "fmu"
+    if kind == "fmu" and t_span is None:  # the FMU's default experiment (read from the archive, not run)
+        from fmpy import read_model_description
+
+        experiment = read_model_description(payload).defaultExperiment
+        if experiment is not None and experiment.stopTime is not None:
+            t_span = (float(experiment.startTime or 0.0), float(experiment.stopTime))
 
     import lsc
 
@@ -329,10 +335,10 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
     todo = [i for i in range(len(points)) if i not in finished]
 
     references = {}
-    if reference == "tightest":
-        tight = {k: p for k, p in _tightest([points[i] for i in todo if _valid(points[i])]).items()}
-    else:
-        tight = {}
+    tight = {}
+    if reference == "tightest":  # over the whole grid, so resumed rows and new ones share a reference
+        needed = {_group_key(points[i]) for i in todo}
+        tight = {k: p for k, p in _tightest([p for p in points if _valid(p)]).items() if k in needed}
 
     rows = dict(finished)
     curves_out = ResidualCurves()
