@@ -13,7 +13,11 @@ def main(argv=None):
     build.add_argument("--lam", type=float, help="override the stabilization rate")
     build.add_argument("--name", help="override the model name")
     sub.add_parser("env", help="print the shell exports a native (non-Python) FMI host needs")
+    _add_sweep_parser(sub)
     args = parser.parse_args(argv)
+
+    if args.command == "sweep":
+        return sweep_command(args)
 
     if args.command == "env":
         from ._host import native_host_env
@@ -32,6 +36,82 @@ def main(argv=None):
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2
     print(path)
+    return 0
+
+
+def _add_sweep_parser(sub):
+    sweep = sub.add_parser("sweep", help="run a parameter study (lam, steps, tolerances, parameters) on Dask",
+                           description="Run one simulation per point of a grid on Dask and write one row per run.")
+    sweep.add_argument("target", help="an .fmu, a .toml spec, an SSP scenario, or gallery:NAME (an lsc.gallery problem)")
+    sweep.add_argument("--grid", action="append", default=[], metavar="NAME=V1,V2,...",
+                       help="values of one input (repeat: every combination is run)")
+    sweep.add_argument("--lhs", type=int, metavar="N", help="Latin hypercube sample of N points of the --range inputs")
+    sweep.add_argument("--range", action="append", default=[], metavar="NAME=LOW:HIGH", help="range of one input (with --lhs)")
+    sweep.add_argument("-o", "--output", required=True, help="result file (.csv or .parquet); an existing one is resumed")
+    sweep.add_argument("--reference", default=None, help="'exact' (gallery targets), 'tightest' (default otherwise) or 'monolithic'")
+    sweep.add_argument("--t-span", type=float, nargs=2, metavar=("T0", "T1"), help="horizon (default: the target's)")
+    sweep.add_argument("--error-from", type=float, help="the error counts from this time on")
+    sweep.add_argument("--scheduler", help="address of an existing Dask scheduler, or 'serial' (default: an embedded cluster)")
+    sweep.add_argument("--workers", type=int, default=2, help="worker processes of the embedded cluster (default: 2)")
+    sweep.add_argument("--seed", type=int, default=0, help="seed of the Latin hypercube")
+    sweep.add_argument("--plot", help="write the summary plots to this PNG")
+    sweep.add_argument("--recommend", type=float, metavar="ERROR", help="print the cheapest point reaching this error")
+    sweep.add_argument("--cost", default="run_time", choices=["run_time", "steps"], help="cost the recommendation minimizes")
+    sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _value(text):
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def sweep_command(args):
+    """``lsc-fmu sweep``: run a study, write it, optionally plot and recommend."""
+    from .study import plot_study, recommend, sweep
+
+    try:
+        if args.lhs is not None:
+            if args.grid or not args.range:
+                raise ValueError("--lhs takes --range NAME=LOW:HIGH inputs (and no --grid)")
+            ranges = {}
+            for item in args.range:
+                name, _, span = item.partition("=")
+                low, _, high = span.partition(":")
+                ranges[name.strip()] = (float(low), float(high))
+            grid = (args.lhs, ranges)
+        else:
+            if not args.grid or args.range:
+                raise ValueError("give --grid NAME=V1,V2,... (or --lhs N with --range)")
+            grid = {}
+            for item in args.grid:
+                name, sep, values = item.partition("=")
+                if not sep or not values:
+                    raise ValueError(f"--grid must read NAME=V1,V2,...; found {item!r}")
+                grid[name.strip()] = [_value(v.strip()) for v in values.split(",")]
+        target = args.target
+        if target.startswith("gallery:"):
+            import lsc
+
+            name = target.split(":", 1)[1]
+            if name not in lsc.gallery.__all__ or name in ("Problem", "StateSpace"):
+                raise ValueError(f"gallery:NAME must name an lsc.gallery problem; found {name!r}")
+            target = getattr(lsc.gallery, name)()
+        df = sweep(target, grid, reference=args.reference, scheduler=args.scheduler, progress=not args.no_progress,
+                   output=args.output, t_span=args.t_span, error_from=args.error_from, n_workers=args.workers,
+                   seed=args.seed)
+    except (ValueError, TypeError, OSError, ImportError, NotImplementedError) as exc:
+        print(f"lsc-fmu: error: {exc}", file=sys.stderr)
+        return 2
+    failed = int((~df["success"]).sum())
+    print(f"{len(df)} runs ({failed} failed) written to {args.output}")
+    if args.plot:
+        print(plot_study(df, args.plot, cost=args.cost))
+    if args.recommend is not None:
+        print(recommend(df, args.recommend, cost=args.cost))
     return 0
 
 

@@ -1,0 +1,276 @@
+"""One run of a parameter study, as executed in a worker process.
+
+Each function takes a description of the target (picklable), one point of
+the grid and the study's settings, and returns a plain dict: the metrics
+that need no reference (success, message, residuals, run time, steps) and
+the trajectory ``t``, ``x`` the error is computed from. A run never raises:
+any exception becomes ``success=False`` with the exception as message.
+"""
+import math
+import time
+
+import numpy as np
+
+# Names of the grid that set how a run is computed rather than the model.
+NUMERICAL = ("lam", "step", "rtol", "atol", "method")
+
+_EXTRACTED = {}  # sha256 of an FMU's bytes -> its extraction folder, per worker process
+_DESCRIPTIONS = {}  # extraction folder -> model description, per worker process
+_LOADED = {}  # FMU model identifier -> GUID loaded in this process (pythonfmu modules are shared)
+
+
+def _failed(message, start, **extra):
+    return dict(success=False, message=message, residual_final=math.nan, residual_peak=math.nan,
+                run_time=time.perf_counter() - start, steps=0, t=None, x=None, residual=None, **extra)
+
+
+def _bad_value(point):
+    """The reason a point cannot be run, or None."""
+    for name, value in point.items():
+        if isinstance(value, (float, int, np.floating, np.integer)) and not isinstance(value, bool):
+            if not math.isfinite(value):
+                return f"`{name}` is {value!r}: not a finite number"
+    for name in ("lam", "step", "rtol", "atol"):
+        if name in point and not point[name] > 0:
+            return f"`{name}` must be positive; found {point[name]!r}"
+    return None
+
+
+def run_dae(problem, point, settings):
+    """Complete and integrate a LinearDAE at one point of the grid."""
+    start = time.perf_counter()
+    try:
+        bad = _bad_value(point)
+        if bad:
+            return _failed(bad, start)
+        return _run_dae(problem, point, settings, start)
+    except Exception as exc:  # a run reports, it never raises into the study
+        return _failed(f"{type(exc).__name__}: {exc}", start)
+
+
+def _run_dae(problem, point, settings, start):
+    import lsc
+
+    dae, t_span, x0 = problem["dae"], settings["t_span"], np.asarray(problem["x0"], dtype=float)
+    model = {k: v for k, v in point.items() if k not in NUMERICAL + ("offset", "completion", "k")}
+    if model:
+        raise ValueError(f"a LinearDAE target takes no model parameters; found {sorted(model)}")
+    completion = lsc.complete(dae, point.get("completion", "alternative"), lam=point.get("lam", 1.0),
+                              k=point.get("k"), t_span=None if dae.is_constant else t_span)
+    offset = float(point.get("offset", 0.0))
+    if offset:
+        # move x0 off the solution manifold by `offset` (2-norm), along the part of a trial direction
+        # the projection removes (the on-manifold part would not decay at the rate lam); the trial
+        # directions: (1, ..., 1), then the unit vectors, the first with a part off the manifold
+        n = x0.size
+        for trial in (np.ones(n), *np.eye(n)):
+            away = x0 + trial - completion.project(t_span[0], x0 + trial)
+            norm = np.linalg.norm(away)
+            if norm > 1e-8 * np.linalg.norm(trial):
+                break
+        else:
+            raise ValueError("`offset` needs a direction off the solution manifold; the DAE constrains no direction")
+        x0 = x0 + offset * away / norm
+    options = {"method": point.get("method", settings.get("method", "RK45")),
+               "rtol": point.get("rtol", 1e-6), "atol": point.get("atol", 1e-9)}
+    if "step" in point:
+        options["max_step"] = point["step"]
+    result = lsc.solve_completion(completion, t_span, x0, **options)
+    residual = np.asarray(result.residual, dtype=float)
+    steps = int(max(result.t.size - 1, 0))
+    return dict(success=bool(result.success), message=str(result.message),
+                residual_final=float(residual[-1]) if residual.size else math.nan,
+                residual_peak=float(np.max(residual)) if residual.size else math.nan,
+                run_time=time.perf_counter() - start, steps=steps, t=result.t, x=result.x, residual=residual)
+
+
+def _extract(fmu):
+    """The extraction folder of an FMU given as bytes (cached per process) or a path."""
+    import hashlib
+    import os
+    import tempfile
+    import zipfile
+
+    if isinstance(fmu, (str, os.PathLike)):
+        with open(fmu, "rb") as fh:
+            fmu = fh.read()
+    key = hashlib.sha256(fmu).hexdigest()
+    folder = _EXTRACTED.get(key)
+    if folder is None or not os.path.isdir(folder):
+        folder = tempfile.mkdtemp(prefix=f"lsc_study_{key[:12]}_")
+        archive = os.path.join(folder, "model.fmu")
+        with open(archive, "wb") as fh:
+            fh.write(fmu)
+        with zipfile.ZipFile(archive) as zf:
+            zf.extractall(os.path.join(folder, "unzipped"))
+        _EXTRACTED[key] = folder
+    return folder
+
+
+def run_fmu(fmu, point, settings):
+    """Run an FMI 2.0 Co-Simulation FMU (bytes or path) at one point of the grid."""
+    start = time.perf_counter()
+    try:
+        bad = _bad_value(point)
+        if bad:
+            return _failed(bad, start)
+        return _run_fmu(fmu, point, settings, start)
+    except Exception as exc:
+        return _failed(f"{type(exc).__name__}: {exc}", start)
+
+
+def _run_fmu(fmu, point, settings, start):
+    import os
+    from ctypes import byref
+
+    from fmpy import read_model_description
+    from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+    from fmpy.logging import addLoggerProxy
+
+    folder = _extract(fmu)
+    unzipped = os.path.join(folder, "unzipped")
+    md = _DESCRIPTIONS.get(folder)
+    if md is None:
+        md = _DESCRIPTIONS[folder] = read_model_description(unzipped)
+    ident = md.coSimulation.modelIdentifier
+    if _LOADED.get(ident, md.guid) != md.guid:
+        return _failed(f"another FMU with model identifier {ident!r} (a different GUID) was loaded by this worker "
+                       "process; a pythonfmu FMU would silently run that one's code: give the model another name",
+                       start)
+    _LOADED[ident] = md.guid
+    var = {v.name: v for v in md.modelVariables}
+    states = [v.name for v in md.modelVariables if v.causality == "output" and _start_name(v.name) in var]
+    residual_var = var.get("constraint_residual")
+
+    logs = []
+
+    def logger(env, instance, status, category, message):
+        logs.append(message.decode("utf-8", "replace"))
+
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+    callbacks.allocateMemory = defaultCallbacks.allocateMemory
+    callbacks.freeMemory = defaultCallbacks.freeMemory
+    addLoggerProxy(byref(callbacks))
+
+    t0, t1 = settings["t_span"] if settings.get("t_span") else (
+        float(md.defaultExperiment.startTime or 0.0), float(md.defaultExperiment.stopTime or 1.0))
+    h = float(point.get("step", settings.get("step") or (md.defaultExperiment.stepSize or (t1 - t0) / 100)))
+    n_steps = max(int(round((t1 - t0) / h)), 1)
+    values = {}
+    for name, value in point.items():
+        if name in ("step", "offset"):
+            continue
+        fmi_name = {"lam": "lambda", "method": "solver"}.get(name, name)
+        if fmi_name not in var:
+            raise ValueError(f"the FMU has no variable {fmi_name!r} to set from the grid's `{name}`")
+        if fmi_name == "solver" and isinstance(value, str):
+            value = ("RK45", "DOP853", "Radau", "BDF").index(value)
+        values[fmi_name] = value
+    offset = float(point.get("offset", 0.0))
+    if offset:
+        for s in states:
+            key = _start_name(s)
+            values[key] = values.get(key, float(var[key].start or 0.0)) + offset / math.sqrt(len(states))
+
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=ident, instanceName="study")
+    slave.instantiate(callbacks=callbacks, loggingOn=True)
+    read_vrs = [var[s].valueReference for s in states] + ([residual_var.valueReference] if residual_var else [])
+    t_out, x_out, r_out = [t0], [], []
+    steps, success, message = 0, True, "the run reached the end of the horizon"
+    try:
+        slave.setupExperiment(startTime=t0, stopTime=t1)
+        slave.enterInitializationMode()
+        for name, value in values.items():
+            v = var[name]
+            if v.type == "Real":
+                slave.setReal([v.valueReference], [float(value)])
+            elif v.type == "Integer":
+                slave.setInteger([v.valueReference], [int(value)])
+            else:
+                slave.setBoolean([v.valueReference], [bool(value)])
+        slave.exitInitializationMode()
+
+        def read():
+            out = slave.getReal(read_vrs)
+            x_out.append(out[:len(states)])
+            r_out.append(out[len(states)] if residual_var else math.nan)
+
+        read()
+        for i in range(n_steps):
+            t = t0 + i * h
+            try:
+                slave.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+            except Exception as exc:
+                success = False
+                reason = logs[-1] if logs else f"{type(exc).__name__}: {exc}"
+                message = f"doStep at t={t!r} failed: {reason}"
+                break
+            steps += 1
+            t_out.append(t + h)
+            read()
+        try:
+            slave.terminate()
+        except Exception:
+            pass
+    finally:
+        slave.freeInstance()
+    x = np.array(x_out, dtype=float).T
+    residual = np.array(r_out, dtype=float)
+    if success and not np.all(np.isfinite(x)):
+        success, message = False, "the run produced non-finite values"
+    return dict(success=success, message=message,
+                residual_final=float(residual[-1]) if residual.size else math.nan,
+                residual_peak=float(np.max(residual)) if residual.size else math.nan,
+                run_time=time.perf_counter() - start, steps=steps,
+                t=np.array(t_out[:x.shape[1]]), x=x, residual=residual)
+
+
+def _start_name(name):
+    if "[" in name:
+        base, rest = name.split("[", 1)
+        return f"{base}_0[{rest}"
+    return f"{name}_0"
+
+
+def cosimulate_function():
+    """``fmu_build.cosimulate`` if this installation has it, else None (imported lazily)."""
+    import fmu_build
+
+    function = getattr(fmu_build, "cosimulate", None)
+    if function is None:
+        try:
+            from fmu_build.cosim import cosimulate as function
+        except ImportError:
+            return None
+    return function
+
+
+def run_ssp(scenario, point, settings):
+    """Run an SSP scenario through ``fmu_build.cosimulate`` at one point of the grid.
+
+    The point's values are passed as keyword arguments, with ``t_span`` when
+    the study sets one; the result is read through its attributes ``t``
+    (shape (m,)), ``x`` (shape (n, m)), and where present ``residual``
+    (shape (m,)), ``success`` and ``message``.
+    """
+    start = time.perf_counter()
+    try:
+        bad = _bad_value(point)
+        if bad:
+            return _failed(bad, start)
+        cosimulate = cosimulate_function()
+        if cosimulate is None:
+            return _failed("fmu_build.cosimulate is not available in this worker's installation", start)
+        options = {"t_span": settings["t_span"]} if settings.get("t_span") else {}
+        result = cosimulate(scenario, **options, **point)
+        t = np.asarray(result.t, dtype=float)
+        x = np.asarray(result.x, dtype=float)
+        residual = np.asarray(getattr(result, "residual", np.full(t.size, math.nan)), dtype=float)
+        finite = residual[np.isfinite(residual)]
+        return dict(success=bool(getattr(result, "success", True)), message=str(getattr(result, "message", "")),
+                    residual_final=float(residual[-1]) if residual.size else math.nan,
+                    residual_peak=float(np.max(finite)) if finite.size else math.nan,
+                    run_time=time.perf_counter() - start, steps=int(max(t.size - 1, 0)), t=t, x=x, residual=residual)
+    except Exception as exc:
+        return _failed(f"{type(exc).__name__}: {exc}", start)

@@ -1,0 +1,295 @@
+"""Parameter studies (fmu_build.study): Dask execution, failures, resuming, recommendation.
+
+FMU runs happen in Dask worker processes or in a subprocess, never in the
+pytest process (a pythonfmu FMU loaded here would run this process's lsc).
+"""
+import json
+import math
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+pd = pytest.importorskip("pandas")
+distributed = pytest.importorskip("distributed")
+
+from lsc import gallery  # noqa: E402
+from fmu_build import build_fmu, recommend, sweep  # noqa: E402
+from fmu_build import study  # noqa: E402
+
+SPECS = os.path.join(os.path.dirname(__file__), os.pardir, "examples", "specs")
+T_SPAN = (0.0, 2.0)
+GRID = {"lam": [0.5, 1.0, 2.0, 5.0, 10.0], "step": [0.05, 0.1], "offset": [0.0, 0.1]}
+
+
+@pytest.fixture(scope="module")
+def fmu(tmp_path_factory):
+    return build_fmu(os.path.join(SPECS, "prescribed_path.toml"), tmp_path_factory.mktemp("fmu"))
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    import dask
+    from distributed import Client, LocalCluster
+
+    # a run that kills its worker is recorded at once, not retried on the other worker
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+        lc = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                          dashboard_address=None, silence_logs=50)
+        client = Client(lc)
+    yield client
+    client.close()
+    lc.close()
+
+
+def _serial_in_subprocess(fmu, grid, output):
+    code = textwrap.dedent(f"""
+        from lsc import gallery
+        from fmu_build import sweep
+        sweep({str(fmu)!r}, {grid!r}, reference=gallery.prescribed_path(t_span={T_SPAN!r}), t_span={T_SPAN!r},
+              scheduler="serial", progress=False, output={str(output)!r})
+    """)
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=300)
+    return pd.read_csv(output).set_index("run")
+
+
+def test_cluster_rows_match_a_serial_run(fmu, cluster, tmp_path):
+    exact = gallery.prescribed_path(t_span=T_SPAN)
+    df = sweep(fmu, GRID, reference=exact, t_span=T_SPAN, scheduler=cluster, progress=False)
+    assert len(df) == 20 and df["success"].all()
+    assert sorted(cluster.nthreads()) and len(cluster.nthreads()) == 2
+    serial = _serial_in_subprocess(fmu, GRID, tmp_path / "serial.csv")
+    for name in GRID:
+        np.testing.assert_array_equal(df[name].to_numpy(), serial[name].to_numpy())
+    np.testing.assert_array_equal(df["steps"].to_numpy(), serial["steps"].to_numpy())
+    for column in ("error", "residual_final", "residual_peak"):
+        np.testing.assert_allclose(df[column].to_numpy(), serial[column].to_numpy(), rtol=1e-12, atol=1e-15)
+    # the numbers are the FMU's: consistent start within 1e-4 of the exact path, an offset
+    # shows up as the error at t0 (offset spread evenly over the three states)
+    assert df.loc[df["offset"] == 0.0, "error"].max() < 1e-4
+    np.testing.assert_allclose(df.loc[df["offset"] == 0.1, "error"], 0.1 / math.sqrt(3), rtol=1e-9)
+    assert (df["steps"] == (T_SPAN[1] / df["step"]).round().astype(int)).all()
+
+
+def _killer_plugin():
+    """A worker plugin (on every worker, restarted ones too): the run at lam = 3 kills its worker mid-run."""
+    from distributed import WorkerPlugin
+
+    class KillAtLam3(WorkerPlugin):  # defined in a function: cloudpickle ships it by value
+        name = "kill-at-lam-3"
+
+        def setup(self, worker):
+            from fmu_build import _study_runs
+
+            original = _study_runs._run_fmu
+
+            def run(fmu, point, settings, start):
+                if point.get("lam") == 3.0:
+                    import signal
+
+                    os.kill(os.getpid(), signal.SIGKILL)
+                return original(fmu, point, settings, start)
+
+            _study_runs._run_fmu = run
+
+    return KillAtLam3()
+
+
+def test_bad_points_and_a_killed_worker_are_recorded(fmu, cluster, tmp_path):
+    cluster.register_plugin(_killer_plugin())
+    grid = {"lam": [-1.0, 0.0, float("nan"), 1.0, 3.0, 5.0, 10.0]}
+    output = tmp_path / "bad.csv"
+    try:
+        df = sweep(fmu, grid, reference=gallery.prescribed_path(t_span=T_SPAN), t_span=T_SPAN, scheduler=cluster,
+                   progress=False, output=output)
+    finally:
+        cluster.unregister_worker_plugin("kill-at-lam-3")
+    assert df["success"].tolist() == [False, False, False, True, False, True, True]
+    assert df.loc[0, "message"] == "`lam` must be positive; found -1.0"
+    assert df.loc[1, "message"] == "`lam` must be positive; found 0.0"
+    assert df.loc[2, "message"] == "`lam` is nan: not a finite number"
+    assert df.loc[4, "message"].startswith("the worker process running it died")
+    assert df.loc[[3, 5, 6], "error"].max() < 1e-4
+    assert df.loc[[0, 1, 2, 4], "error"].isna().all()
+    written = pd.read_csv(output).set_index("run").sort_index()  # streamed in the order the runs finished
+    assert written.index.tolist() == list(range(7))
+    assert written["success"].tolist() == df["success"].tolist()
+    assert written.loc[4, "message"] == df.loc[4, "message"]
+
+
+def test_an_interrupted_study_resumes_with_only_the_missing_rows(tmp_path, monkeypatch):
+    problem = gallery.prescribed_path(t_span=T_SPAN)
+    grid = {"lam": [1.0, 2.0, 4.0, 8.0], "offset": [0.0, 0.1]}
+    output = tmp_path / "study.csv"
+    full = sweep(problem, grid, scheduler="serial", progress=False, output=output)
+    lines = output.read_text().splitlines(keepends=True)
+    # interrupted after 3 rows, in the middle of writing the 4th
+    output.write_text("".join(lines[:4]) + lines[4][: len(lines[4]) // 2])
+    calls = []
+    original = study.run_dae
+    monkeypatch.setattr(study, "run_dae", lambda *a: calls.append(a[1]) or original(*a))
+    resumed = sweep(problem, grid, scheduler="serial", progress=False, output=output)
+    assert calls == [{"lam": lam, "offset": off} for lam in (2.0, 4.0, 8.0) for off in (0.0, 0.1)][1:]
+    assert len(calls) == 5
+    # the 3 finished rows are read back, not recomputed: identical run times
+    np.testing.assert_array_equal(resumed["run_time"].iloc[:3], full["run_time"].iloc[:3])
+    np.testing.assert_allclose(resumed["error"], full["error"], rtol=1e-12)
+    assert pd.read_csv(output)["run"].tolist() == list(range(8))
+    calls.clear()
+    sweep(problem, grid, scheduler="serial", progress=False, output=output)
+    assert calls == []
+
+
+def test_resuming_refuses_another_study(tmp_path):
+    problem = gallery.prescribed_path(t_span=T_SPAN)
+    output = tmp_path / "study.csv"
+    sweep(problem, {"lam": [1.0, 2.0]}, scheduler="serial", progress=False, output=output)
+    with pytest.raises(ValueError, match="holds another study: run 0 has lam=1.0, this study 3.0"):
+        sweep(problem, {"lam": [3.0, 2.0]}, scheduler="serial", progress=False, output=output)
+
+
+def test_recommendation_agrees_with_a_finer_grid():
+    """Coarse grid + recommend == the cheapest point of a brute-force grid 5x finer, to the coarse spacing."""
+    problem = gallery.prescribed_path(t_span=T_SPAN)
+    target, offset, horizon = 1e-4, 0.1, T_SPAN[1]
+    coarse_lams = np.geomspace(0.5, 64.0, 8)
+    coarse = sweep(problem, {"lam": list(coarse_lams), "offset": [offset]}, scheduler="serial", progress=False,
+                   error_from=horizon)
+    rec = recommend(coarse, target, cost="steps")
+    fine = sweep(problem, {"lam": list(np.geomspace(0.5, 64.0, 36)), "offset": [offset]}, scheduler="serial",
+                 progress=False, error_from=horizon)
+    ok = fine[fine["success"] & (fine["error"] <= target)].sort_values(["steps", "error"])
+    best_lam, best_steps = ok["lam"].iloc[0], ok["steps"].iloc[0]
+    lam = rec.row["lam"]
+    # the recommendation is the first coarse point at or above the brute-force optimum ...
+    assert lam == coarse_lams[coarse_lams >= best_lam * (1 - 1e-12)][0]
+    # ... reaches the target, and costs no less than the optimum nor more than the next fine points
+    assert rec.row["error"] <= target and best_steps <= rec.row["steps"] <= 1.3 * best_steps
+    # and the rule of thumb: an off-manifold offset decays like exp(-lam t), so the optimum sits
+    # at lam * horizon ~ ln(offset / target)
+    assert 0.8 < best_lam * horizon / math.log(offset / target) < 1.25
+    assert "lam * horizon = 8" in rec.rule and "ln(offset / error_target) = 6.91" in rec.rule
+    assert rec.evidence.index[0] == rec.row.name if rec.row.name is not None else True
+    assert (rec.evidence["steps"].iloc[1:] >= 0).all() and len(rec.evidence) >= 3
+    assert "evidence:" in str(rec)
+
+
+@pytest.mark.parametrize("make", [lambda: gallery.nilpotent_chain(3, t_span=T_SPAN),
+                                  lambda: gallery.mechanical(t_span=T_SPAN)], ids=["nilpotent_chain", "mechanical"])
+def test_residual_rule_across_the_gallery(make):
+    """An offset off the manifold decays like exp(-lam t) in the residual: lam * horizon ~ ln(offset / target)."""
+    problem, target, offset = make(), 1e-4, 0.1
+    lams = np.geomspace(1.0, 16.0, 13)
+    df = sweep(problem, {"lam": list(lams), "offset": [offset]}, scheduler="serial", progress=False)
+    rec = recommend(df, target, cost="steps", on="residual_final")
+    reached = df[df["residual_final"] <= target]["lam"]
+    assert rec.row["lam"] == reached.min()  # cost grows with lam here: the smallest lam that reaches it
+    ratio = reached.min() * T_SPAN[1] / math.log(offset / target)
+    assert 0.9 < ratio < 1.35
+    assert df.loc[df["lam"] < reached.min(), "residual_final"].min() > target
+
+
+def test_latin_hypercube_points():
+    points, names = study._points((16, {"lam": (0.5, 50.0), "c": (0.1, 0.9)}), seed=3)
+    assert names == ["lam", "c"] and len(points) == 16
+    lam = np.log(np.array([p["lam"] for p in points]) / 0.5) / np.log(100.0)  # log-uniform in lam
+    c = (np.array([p["c"] for p in points]) - 0.1) / 0.8
+    for u in (lam, c):  # one point per stratum of each coordinate
+        assert sorted(np.floor(u * 16).astype(int)) == list(range(16))
+
+
+def test_tightest_reference_on_a_spec(tmp_path):
+    """A spec target is built once; 'tightest' compares with the run at the smallest step and largest lam."""
+    code = textwrap.dedent(f"""
+        import json
+        from fmu_build import sweep
+        df = sweep({os.path.join(SPECS, 'prescribed_path.toml')!r}, {{"lam": [2.0, 10.0], "step": [0.1, 0.02]}},
+                   t_span=(0.0, 1.0), scheduler="serial", progress=False)
+        print(json.dumps(df["error"].tolist()))
+    """)
+    out = subprocess.run([sys.executable, "-c", code], check=True, timeout=300, capture_output=True, text=True)
+    errors = json.loads(out.stdout.strip().splitlines()[-1])
+    # the tightest run (lam 10, step 0.02) is the reference: its own error is 0; the others
+    # differ from it by the FMU's solver error, far below the path's amplitude
+    assert errors[3] == 0.0 and 0.0 < max(errors[:3]) < 1e-4
+
+
+@pytest.mark.parametrize("args, kwargs, exc, message", [
+    ((42, {"lam": [1.0]}), {}, TypeError, "`target` must be"),
+    ((gallery.prescribed_path(), {}), {}, ValueError, "`grid` must name at least one input"),
+    ((gallery.prescribed_path(), {"lam": 1.0}), {}, TypeError, r"`grid\['lam'\]` must be a list"),
+    ((gallery.prescribed_path(), (0, {"lam": (1, 2)})), {}, ValueError, "sample size"),
+    ((gallery.prescribed_path(), (4, {"lam": (2, 1)})), {}, ValueError, "low < high"),
+    ((gallery.prescribed_path().dae, {"lam": [1.0]}), {}, ValueError, "needs `t_span` and `x0`"),
+    ((gallery.prescribed_path(), {"lam": [1.0]}), {"reference": "nearest"}, ValueError, "`reference` must be"),
+    ((gallery.prescribed_path(), {"lam": [1.0]}), {"reference": "monolithic"}, ValueError, "for SSP targets"),
+    ((gallery.prescribed_path(), {"lam": [1.0]}), {"metrics": {"error": len}}, ValueError, "already a column"),
+])
+def test_bad_arguments(args, kwargs, exc, message):
+    with pytest.raises(exc, match=message):
+        sweep(*args, scheduler="serial", progress=False, **kwargs)
+
+
+def test_ssp_target_without_cosimulate(tmp_path):
+    scenario = tmp_path / "scenario.ssp"
+    scenario.write_bytes(b"")
+    if study._cosimulate_available():
+        pytest.skip("fmu_build.cosimulate is installed")
+    with pytest.raises(ImportError, match="runs with fmu_build.cosimulate"):
+        sweep(scenario, {"lam": [1.0]}, scheduler="serial", progress=False)
+
+
+def test_cli_sweep_writes_plots_and_recommends(tmp_path, capsys):
+    from fmu_build.__main__ import main
+
+    output, png = tmp_path / "s.csv", tmp_path / "s.png"
+    code = main(["sweep", "gallery:prescribed_path", "--grid", "lam=1,2,4,8", "--grid", "offset=0.1", "--t-span", "0",
+                 "2", "--error-from", "2", "--scheduler", "serial", "-o", str(output), "--plot", str(png),
+                 "--recommend", "1e-4", "--cost", "steps", "--no-progress"])
+    out = capsys.readouterr().out
+    assert code == 0 and "4 runs (0 failed)" in out
+    assert "recommended (error <= 0.0001 at least steps): lam=4, offset=0.1" in out
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert pd.read_csv(output).columns.tolist() == ["run", "lam", "offset", *study.METRICS]
+    assert main(["sweep", "gallery:nothing", "--grid", "lam=1", "-o", str(output)]) == 2
+    assert "gallery:NAME must name an lsc.gallery problem" in capsys.readouterr().err
+
+
+def test_parquet_output(tmp_path):
+    pytest.importorskip("pyarrow")
+    problem = gallery.prescribed_path(t_span=T_SPAN)
+    output = tmp_path / "study.parquet"
+    df = sweep(problem, {"lam": [1.0, 4.0]}, scheduler="serial", progress=False, output=output)
+    back = pd.read_parquet(output)
+    assert back.index.name == "run" and back["error"].tolist() == df["error"].tolist()
+    assert not (tmp_path / "study.parquet.partial.csv").exists()
+    resumed = sweep(problem, {"lam": [1.0, 4.0]}, scheduler="serial", progress=False, output=output)
+    assert resumed["run_time"].tolist() == df["run_time"].tolist()  # read back, not recomputed
+
+
+def test_ssp_target_runs_through_cosimulate(tmp_path, monkeypatch):
+    """The dispatch: an SSP target calls fmu_build.cosimulate(scenario, t_span=..., **point)."""
+    import types
+
+    import fmu_build
+
+    scenario = tmp_path / "scenario.ssp"
+    scenario.write_bytes(b"")
+    calls = []
+
+    def cosimulate(path, t_span, lam):
+        calls.append((path, t_span, lam))
+        t = np.linspace(*t_span, 11)
+        return types.SimpleNamespace(t=t, x=np.vstack([np.sin(t), np.exp(-lam * t)]), residual=np.exp(-lam * t),
+                                     success=True, message="done")
+
+    monkeypatch.setattr(fmu_build, "cosimulate", cosimulate, raising=False)
+    exact = lambda t: np.vstack([np.sin(t), np.zeros_like(t)])  # noqa: E731
+    df = sweep(scenario, {"lam": [1.0, 4.0]}, reference=exact, t_span=(0.0, 1.0), scheduler="serial", progress=False)
+    assert calls == [(os.fspath(scenario), (0.0, 1.0), 1.0), (os.fspath(scenario), (0.0, 1.0), 4.0)]
+    np.testing.assert_allclose(df["error"], [1.0, 1.0])  # exp(0) at t = 0
+    np.testing.assert_allclose(df["residual_final"], np.exp([-1.0, -4.0]))
+    assert df["steps"].tolist() == [10, 10] and df["message"].tolist() == ["done", "done"]
