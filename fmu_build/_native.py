@@ -160,7 +160,7 @@ def _is_linear_in_states(expr, state_symbols, spec):
         return False
 
 
-def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars, kpars, input_orders):
+def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars, kpars):
     """The generated part: sizes, value references, matrices and the C of f and the outputs."""
     import sympy
 
@@ -174,7 +174,7 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars
     nu, no, nk = len(spec.inputs), len(spec.outputs), len(kpars)
     npar = len(fpars)
     Cpinv = comp._std.C_pinv if nc else np.zeros((n, 1))
-    udeg = min(P + 2, 8)
+    udeg = min(P + 3, 8)  # the history polynomial's degree: derivatives for g and its Taylor terms
     vr = {"LAMBDA": 0, "PAR": 1}
     vr["X0"] = 1 + npar
     vr["U"] = vr["X0"] + n
@@ -207,7 +207,6 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars
         _c_array("PAR_TUNABLE", [int(next(p["tunable"] for p in spec.parameters if p["name"] == q)) for q in fpars], "int"),
         _c_array("X_START", [s["start"] for s in spec.states]),
         _c_array("U_START", [u["start"] for u in spec.inputs]),
-        _c_array("U_ORDER", [input_orders.get(u["name"], nf - 1) for u in spec.inputs], "int"),
         _c_array("K_VALUE", [values[spec.symbols[q]] for q in kpars]),
     ]
     # f and its derivatives, inputs' derivatives u__j read from u[i * NF + j]
@@ -314,7 +313,7 @@ def _compile(src_dir, out_path, compiler, extra_flags=()):
 
 def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=False):
     """Build the native FMU of a resolved `ModelSpec` (see `fmu_build.build_fmu`, ``target='native'``)."""
-    from ._build import _needed_input_orders, _numeric_dae
+    from ._build import _numeric_dae
 
     kpars = _check_expressible(spec, fix_parameters)
     compiler = find_compiler()
@@ -325,13 +324,12 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     k = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=spec.k).k
     G0, G1, W0, W1, comp, lam_tunable = _affine_maps(dae, spec.method, spec.lam, k)
     fpars = [p["name"] for p in spec.parameters if p["name"] not in kpars]
-    input_orders = _needed_input_orders(spec, dae, k)
     ident = spec.name
     digest = hashlib.sha256(repr((ident, G0.tobytes(), G1.tobytes(), W0.tobytes(), W1.tobytes(), str(spec.f),
                                   [o["expr"] for o in spec.outputs], fpars, kpars)).encode()).hexdigest()
     guid = "{" + str(uuid.UUID(digest[:32])) + "}"
     header, info = _model_header(spec, ident=ident, guid=guid, G0=G0, G1=G1, W0=W0, W1=W1, comp=comp,
-                                 lam_tunable=lam_tunable, fpars=fpars, kpars=kpars, input_orders=input_orders)
+                                 lam_tunable=lam_tunable, fpars=fpars, kpars=kpars)
     fixed_note = (f" Parameters in A or B fixed at their spec values: {', '.join(kpars)}." if kpars else "")
     lam_note = {"alternative": "lambda tunable (G and the forcing map are affine in lambda, checked at build time)",
                 "stabilized": "lambda fixed at build time (the stabilized completion is not affine in lambda)",

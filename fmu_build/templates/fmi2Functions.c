@@ -166,7 +166,7 @@ static void input_jets(Instance *c, double t) {
                     basis[0] = -nodes[k] * basis[0];
                 }
             }
-            for (d = 1; d < n && d < NUD && d <= U_ORDER[i]; d++) { fact *= d; uj[d] = a[d] * fact; }
+            for (d = 1; d < n && d < NUD; d++) { fact *= d; uj[d] = a[d] * fact; }
         }
         uj[0] = c->s.u[i];
     }
