@@ -142,7 +142,9 @@ def main():
                             ("negative step", lambda: fmu.doStep(times[-1], -dt)),
                             ("wrong time", lambda: fmu.doStep(times[-1] + 1.0, dt)),
                             ("unknown vr", lambda: fmu.getReal([10 ** 6])),
-                            ("garbage state", lambda: fmu.setFMUstate(fmu.deSerializeFMUstate(b"\0" * 16))),
+                            ("short state", lambda: fmu.setFMUstate(fmu.deSerializeFMUstate(b"\0" * 16))),
+                            ("corrupt state", lambda: fmu.setFMUstate(fmu.deSerializeFMUstate(
+                                b"\xff" * 4 + bytes(fmu.serializeFMUstate(fmu.getFMUstate()))[4:]))),
                             ("good step", lambda: fmu.doStep(times[-1], dt)),
                             ("enter init again", lambda: fmu.enterInitializationMode())):
             try:
