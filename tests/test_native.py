@@ -463,3 +463,21 @@ def test_bad_values_are_rejected_with_a_logged_reason(built):
                    "unknown value reference", "a state of this FMU has", "not a valid state",
                    "call sequence"):
         assert reason in logs, reason
+
+
+def test_missing_compiler_is_named(monkeypatch, tmp_path):
+    monkeypatch.delenv("CC", raising=False)
+    monkeypatch.setenv("PATH", str(tmp_path))  # no cc, gcc or clang here
+    with pytest.raises(NativeTargetError, match="no C compiler found.*gcc"):
+        build_fmu(ROOT / "examples" / "specs" / "prescribed_path.toml", tmp_path, target="native", fix_parameters=True)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cli_native_flag(tmp_path):
+    from fmu_build.__main__ import main
+
+    spec = str(ROOT / "examples" / "specs" / "prescribed_path.toml")
+    assert main(["build", spec, "-o", str(tmp_path), "--native"]) == 2  # tunable c, k enter B
+    assert main(["build", spec, "-o", str(tmp_path), "--native", "--fix-parameters"]) == 0
+    with zipfile.ZipFile(tmp_path / "PrescribedPath.fmu") as zf:
+        assert "sources/model.h" in zf.namelist()
