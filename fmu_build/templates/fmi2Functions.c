@@ -917,6 +917,11 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
         return fmi2Discard;
     }
     if (h == 0.0) return fmi2OK;
+#ifdef LSC_DO_NOTHING
+    /* benchmark floor only (examples/bench_fmu.py): the host's cost of a call, no model work */
+    c->s.t = t + h;
+    return fmi2OK;
+#endif
     record_inputs(c, t);
     if (step_matrices(c, h) != 0) {
         logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the step matrices for h = %g, lambda = %g are not finite",
