@@ -253,11 +253,13 @@ def _variables(spec, *, fpars, kpars, vr, lam_tunable, method, linear):
     """The FMU's variables for the model description, in value-reference order."""
     units = {p["name"]: p["unit"] for p in spec.parameters}
     f_inputs = sorted({str(s) for s in spec.f.free_symbols} & set(spec.input_symbols))
-    variables = [{"name": "lambda", "type": "Real", "vr": 0, "causality": "parameter",
-                  "variability": "tunable" if lam_tunable else "fixed", "initial": "exact", "start": float(spec.lam),
+    variables = [{"name": "lambda", "type": "Real", "vr": 0, "causality": "parameter" if lam_tunable else "local",
+                  "variability": "tunable" if lam_tunable else "constant", "initial": "exact", "start": float(spec.lam),
                   "unit": "1/s",
                   "description": "stabilization rate lam (1/time): off-manifold errors decay like exp(-lam t)"
-                  + ("" if method != "standard" else "; unused by the standard completion")}]
+                  + {"alternative": "", "stabilized": "; a constant of this native FMU (the stabilized completion is "
+                     "not affine in lambda: its matrices are computed at build time)",
+                     "standard": "; unused by the standard completion"}[method]}]
     for i, name in enumerate(fpars):
         p = next(q for q in spec.parameters if q["name"] == name)
         variables.append({"name": name, "type": "Real", "vr": vr["PAR"] + i, "causality": "parameter",

@@ -481,3 +481,13 @@ def test_cli_native_flag(tmp_path):
     assert main(["build", spec, "-o", str(tmp_path), "--native", "--fix-parameters"]) == 0
     with zipfile.ZipFile(tmp_path / "PrescribedPath.fmu") as zf:
         assert "sources/model.h" in zf.namelist()
+
+
+def test_stabilized_lambda_is_a_constant(built):
+    with zipfile.ZipFile(built["chain2_stabilized"]) as zf:
+        xml = zf.read("modelDescription.xml").decode()
+    assert '<ScalarVariable name="lambda" valueReference="0" causality="local" variability="constant"' in xml
+    r = run({"fmu": str(built["chain2_stabilized"]), "dt": 0.01, "steps": 3, "outputs": ["x1"],
+             "start_values": {"lambda": 3.0}})
+    assert any("lambda" in s and s != "ok" for s in r["status"])
+    assert any("lambda is a constant of this FMU" in line for line in r["logs"])

@@ -496,8 +496,12 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
             logmsg(c, fmi2Error, "fmi2SetReal: value reference %u is not a parameter or an input", vr[i]);
             return fmi2Error;
         }
-        if ((kind == 2 && !initial) || (kind == 1 && !initial && !PAR_TUNABLE[vr[i] - VR_PAR])
-            || (kind == 0 && !initial && !LAMBDA_TUNABLE)) {
+        if (kind == 0 && !LAMBDA_TUNABLE) {
+            logmsg(c, fmi2Error, "fmi2SetReal: lambda is a constant of this FMU (the completion is not affine in lambda, "
+                   "so its matrices were computed at build time for this value)");
+            return fmi2Error;
+        }
+        if ((kind == 2 && !initial) || (kind == 1 && !initial && !PAR_TUNABLE[vr[i] - VR_PAR])) {
             logmsg(c, fmi2Error, "fmi2SetReal: value reference %u is fixed after initialization", vr[i]);
             return fmi2Error;
         }
