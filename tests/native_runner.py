@@ -122,8 +122,11 @@ def main():
     out.update(time=times, values=values, status=status)
     if sc.get("output_derivatives"):
         dvrs = [var[name].valueReference for name in sc["output_derivatives"]]
-        out["derivatives"] = [list(fmu.getRealOutputDerivatives(dvrs, [order] * len(dvrs), ))
-                              for order in range(1, md.coSimulation.maxOutputDerivativeOrder + 1)]
+        try:
+            out["derivatives"] = [list(fmu.getRealOutputDerivatives(dvrs, [order] * len(dvrs)))
+                                  for order in range(1, md.coSimulation.maxOutputDerivativeOrder + 1)]
+        except Exception as exc:  # fmpy raises on fmi2Error: the FMU must go on
+            out["derivatives_error"] = str(exc)
     if "rollback_state" in out:
         state = out.pop("rollback_state")
         fmu.setFMUstate(state)

@@ -491,3 +491,27 @@ def test_stabilized_lambda_is_a_constant(built):
              "start_values": {"lambda": 3.0}})
     assert any("lambda" in s and s != "ok" for s in r["status"])
     assert any("lambda is a constant of this FMU" in line for line in r["logs"])
+
+
+def test_custom_outputs_and_their_derivatives(tmp_path):
+    spec = {"model": {"name": "PathOut"},
+            "states": {"y": {"start": 0.0}, "v": {"start": 2.5}, "u": {"start": 1.25}},
+            "parameters": {"w": {"value": 2.0, "tunable": True}},
+            "outputs": {"lin": {"expr": "w*y - v"}, "sq": {"expr": "v**2"}},
+            "equations": {"A": [[1, 0, 0], [0, 1, 0], [0, 0, 0]], "B": [[0, -1, 0], [2, 0.5, -1], [1, 0, 0]],
+                          "f": [0, 0, "sin(t) + 0.5*sin(3*t)"]},
+            "completion": {"method": "alternative", "lam": 2.0}}
+    fmu = build_fmu(spec, tmp_path, target="native")
+    r = run({"fmu": str(fmu), "dt": 0.01, "steps": 50, "outputs": ["y", "v", "u", "lin", "sq"],
+             "output_derivatives": ["y", "v"], "set_at": {"20": {"w": 3.0}}})
+    V = np.array(r["values"])
+    np.testing.assert_allclose(V[:21, 3], 2.0 * V[:21, 0] - V[:21, 1], rtol=1e-14, atol=1e-14)
+    np.testing.assert_allclose(V[21:, 3], 3.0 * V[21:, 0] - V[21:, 1], rtol=1e-14, atol=1e-14)  # w is tunable
+    np.testing.assert_allclose(V[:, 4], V[:, 1] ** 2, rtol=1e-14)
+    d = run({"fmu": str(fmu), "dt": 0.01, "steps": 50, "outputs": ["y"], "output_derivatives": ["lin", "y", "v"]})
+    for order in range(4):
+        lin, y, v = d["derivatives"][order]
+        assert abs(lin - (2.0 * y - v)) < 1e-12 * max(1.0, abs(lin))
+    bad = run({"fmu": str(fmu), "dt": 0.01, "steps": 5, "outputs": ["y"], "output_derivatives": ["sq"]})
+    assert "derivatives" not in bad and "derivatives_error" in bad
+    assert any("has no derivative here" in line for line in bad["logs"])
