@@ -740,7 +740,9 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetFMUS
     if (!allowed(c, "fmi2CompletedIntegratorStep", ContinuousTimeMode)) return fmi2Error;
     if (nullarg(c, "fmi2CompletedIntegratorStep", enterEventMode, "enterEventMode")
         || nullarg(c, "fmi2CompletedIntegratorStep", terminateSimulation, "terminateSimulation")) return fmi2Error;
-    record_inputs(c, c->s.t); /* the input history for the derivative estimates */
+    /* the input history for the derivative estimates: points at least the default experiment's step
+     * apart (divided differences over the integrator's tiny steps would amplify rounding noise) */
+    if (c->s.hist_n == 0 || c->s.t - c->s.hist_t[0] >= ME_INPUT_SPACING) record_inputs(c, c->s.t);
     *enterEventMode = fmi2False;
     *terminateSimulation = fmi2False;
     return fmi2OK;
