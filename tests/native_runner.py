@@ -54,10 +54,16 @@ def main():
     unzipped = extract(sc["fmu"])
     out = {"blocked": blocked, "logs": logs}
     if sc.get("interface", "cs") == "me":
+        import numpy as np
         from fmpy import simulate_fmu
 
+        table = None
+        if sc.get("input_table"):  # {"time": [...], name: [...]}: fmpy's input table
+            names = [k for k in sc["input_table"] if k != "time"]
+            table = np.array(list(zip(*[sc["input_table"][k] for k in ["time", *names]])),
+                             dtype=[(k, float) for k in ["time", *names]])
         res = simulate_fmu(unzipped, fmi_type="ModelExchange", stop_time=sc["dt"] * sc["steps"],
-                           output_interval=sc["dt"], relative_tolerance=sc.get("rtol", 1e-10),
+                           output_interval=sc["dt"], relative_tolerance=sc.get("rtol", 1e-10), input=table,
                            start_values=sc.get("start_values", {}), output=sc["outputs"], model_description=md)
         out["time"] = res["time"].tolist()
         out["values"] = [[float(r[name]) for name in sc["outputs"]] for r in res]

@@ -167,6 +167,9 @@ static void input_jets(Instance *c, double t) {
                 }
             }
             for (d = 1; d < n && d < NUD; d++) { fact *= d; uj[d] = a[d] * fact; }
+            /* Model Exchange with a host that holds the input since the last recorded point (fmpy
+             * does, between communication points): the extrapolated value, not the stale one */
+            if (c->type == fmi2ModelExchange && c->s.u[i] == c->s.hist_u[i]) { uj[0] = a[0]; continue; }
         }
         uj[0] = c->s.u[i];
     }
@@ -742,8 +745,13 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetFMUS
         || nullarg(c, "fmi2CompletedIntegratorStep", terminateSimulation, "terminateSimulation")) return fmi2Error;
     /* the input history for the derivative estimates: points at least the default experiment's step
      * apart (divided differences over the integrator's tiny steps would amplify rounding noise) */
-    if (c->s.hist_n == 0 || c->s.t - c->s.hist_t[0] >= ME_INPUT_SPACING) record_inputs(c, c->s.t);
     *enterEventMode = fmi2False;
+    if (NU > 0 && (c->s.hist_n == 0 || c->s.t - c->s.hist_t[0] >= ME_INPUT_SPACING)) {
+        record_inputs(c, c->s.t);
+        /* the forcing's input derivatives changed: a step event, so that the integrator restarts
+         * here instead of carrying history from the old right-hand side */
+        *enterEventMode = fmi2True;
+    }
     *terminateSimulation = fmi2False;
     return fmi2OK;
 }
