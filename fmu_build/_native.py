@@ -20,7 +20,6 @@ import os
 import shutil
 import subprocess
 import sys
-import sysconfig
 import tempfile
 import uuid
 import zipfile
@@ -132,7 +131,7 @@ def _ccode_block(exprs, targets, symbol_names):
     return lines
 
 
-def _derivatives_with_inputs(f, t, input_symbols, orders, nud):
+def _derivatives_with_inputs(f, t, input_symbols, orders):
     """f^(d) for d < orders, inputs u as functions of t whose j-th derivative is the symbol ``u__j``."""
     import sympy
 
@@ -215,7 +214,7 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars
     for i, (uname, usym) in enumerate(spec.input_symbols.items()):
         for j in range(nf):
             names[sympy.Symbol(f"{uname}__{j}", real=True)] = f"u[{i * nf + j}]"
-    derivs = _derivatives_with_inputs(f, spec.t, spec.input_symbols, nf, nf)
+    derivs = _derivatives_with_inputs(f, spec.t, spec.input_symbols, nf)
     exprs, targets = [], []
     for d, D in enumerate(derivs):
         for i in range(n):
@@ -252,7 +251,6 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars
 
 def _variables(spec, *, fpars, kpars, vr, lam_tunable, method, linear):
     """The FMU's variables for the model description, in value-reference order."""
-    units = {p["name"]: p["unit"] for p in spec.parameters}
     f_inputs = sorted({str(s) for s in spec.f.free_symbols} & set(spec.input_symbols))
     variables = [{"name": "lambda", "type": "Real", "vr": 0, "causality": "parameter" if lam_tunable else "local",
                   "variability": "tunable" if lam_tunable else "constant", "initial": "exact", "start": float(spec.lam),
