@@ -2,7 +2,9 @@
 from ._build import build_fmu
 from ._expressions import ExpressionError
 from ._host import native_host_env
+from ._native import NativeTargetError
 from ._spec import ModelSpec, SpecError, load_spec, parse_spec
 from .study import plot_study, recommend, sweep
 
-__all__ = ["build_fmu", "load_spec", "parse_spec", "ModelSpec", "SpecError", "ExpressionError", "native_host_env", "sweep", "recommend", "plot_study"]
+__all__ = ["build_fmu", "load_spec", "parse_spec", "ModelSpec", "SpecError", "ExpressionError", "native_host_env",
+           "NativeTargetError", "sweep", "recommend", "plot_study"]

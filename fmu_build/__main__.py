@@ -12,6 +12,7 @@ def main(argv=None):
     build.add_argument("--method", choices=["standard", "stabilized", "alternative"], help="override the completion method")
     build.add_argument("--lam", type=float, help="override the stabilization rate")
     build.add_argument("--name", help="override the model name")
+    _add_native_flags(build)
     sub.add_parser("env", help="print the shell exports a native (non-Python) FMI host needs")
     _add_sweep_parser(sub)
     args = parser.parse_args(argv)
@@ -31,7 +32,8 @@ def main(argv=None):
     from ._spec import SpecError
 
     try:
-        path = build_fmu(args.spec, args.output, method=args.method, lam=args.lam, model_name=args.name)
+        path = build_fmu(args.spec, args.output, method=args.method, lam=args.lam, model_name=args.name,
+                         **_native_options(args))
     except (SpecError, ValueError, TypeError, OSError) as exc:
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2
@@ -113,6 +115,19 @@ def sweep_command(args):
     if args.recommend is not None:
         print(recommend(df, args.recommend, cost=args.cost))
     return 0
+
+def _add_native_flags(build):
+    """``--native`` (generated C, FMI 2.0 CS + ME, no Python in the host) and ``--fix-parameters``."""
+    build.add_argument("--native", action="store_true",
+                       help="build a native C FMU (Co-Simulation and Model Exchange; constant A and B only)")
+    build.add_argument("--fix-parameters", action="store_true",
+                       help="with --native: fix tunable parameters that enter A or B at their spec values")
+
+
+def _native_options(args):
+    if args.fix_parameters and not args.native:
+        raise ValueError("`--fix-parameters` applies to --native builds only.")
+    return {"target": "native", "fix_parameters": args.fix_parameters} if args.native else {}
 
 
 if __name__ == "__main__":

@@ -284,7 +284,8 @@ class {name}(Fmi2Slave):
 '''
 
 
-def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, k=None):
+def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, k=None, target="pythonfmu",
+              fix_parameters=False):
     """Build an FMI 2.0 Co-Simulation FMU of a linear DAE's completion.
 
     Parameters
@@ -296,6 +297,14 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
         Folder (or ``.fmu`` file name) to write.
     method, lam, model_name, k : optional
         Override the spec's completion method, rate, model name and ``k``.
+    target : {'pythonfmu', 'native'}, optional
+        'pythonfmu' (default): Co-Simulation in Python, any coefficients.
+        'native': generated C compiled with the system C compiler, FMI 2.0
+        Co-Simulation and Model Exchange in one FMU, no Python in the host;
+        constant ``A`` and ``B`` only (see docs/native_fmu.md).
+    fix_parameters : bool, optional
+        Native target: fix tunable parameters that enter ``A`` or ``B`` at
+        their spec values instead of refusing the spec.
 
     Returns
     -------
@@ -321,8 +330,6 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
     >>> path.name, validate_fmu(str(path))
     ('Lag.fmu', [])
     """
-    from pythonfmu.builder import FmuBuilder
-
     spec = _resolve(spec_or_dae)
     if method is not None:
         if method not in METHODS:
@@ -339,6 +346,13 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
         if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k <= MAX_K:
             raise ValueError(f"`k` must be an integer from 0 to {MAX_K}; found {k!r}.")
         spec.k = k
+    if target not in ("pythonfmu", "native"):
+        raise ValueError(f"`target` must be one of ('pythonfmu', 'native'); found {target!r}.")
+    if target == "native":
+        from ._native import build_native
+
+        return build_native(spec, dest, fix_parameters=fix_parameters)
+    from pythonfmu.builder import FmuBuilder
 
     # Solvability check on the real data before anything is written.
     dae = _numeric_dae(spec)
