@@ -31,6 +31,7 @@ import lsc
 
 from ._description import model_description
 from ._runtime import start_name
+from ._build import _mangled
 
 __all__ = ["build_native", "NativeTargetError", "C_FLAGS"]
 
@@ -132,7 +133,7 @@ def _ccode_block(exprs, targets, symbol_names):
 
 
 def _derivatives_with_inputs(f, t, input_symbols, orders):
-    """f^(d) for d < orders, inputs u as functions of t whose j-th derivative is the symbol ``u__j``."""
+    """f^(d) for d < orders, inputs u as functions of t whose j-th derivative is the symbol ``_mangled("u", u, j)``."""
     import sympy
 
     from ._build import _input_derivatives
@@ -209,11 +210,11 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars
         _c_array("U_START", [u["start"] for u in spec.inputs]),
         _c_array("K_VALUE", [values[spec.symbols[q]] for q in kpars]),
     ]
-    # f and its derivatives, inputs' derivatives u__j read from u[i * NF + j]
+    # f and its derivatives, inputs' derivatives (named by the builder's `_mangled`) read from u[i * NF + j]
     f = spec.f.subs(values)
     for i, (uname, usym) in enumerate(spec.input_symbols.items()):
         for j in range(nf):
-            names[sympy.Symbol(f"{uname}__{j}", real=True)] = f"u[{i * nf + j}]"
+            names[sympy.Symbol(_mangled("u", uname, j), real=True)] = f"u[{i * nf + j}]"
     derivs = _derivatives_with_inputs(f, spec.t, spec.input_symbols, nf)
     exprs, targets = [], []
     for d, D in enumerate(derivs):
