@@ -388,7 +388,7 @@ class _Stop(Exception):
 # -- the master ------------------------------------------------------------------------------------
 
 def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrapolation=0, iterations=0,
-               start_values=None, output=None, start_time=0.0, rtol=1e-10, progress=None):
+               start_values=None, output=None, start_time=0.0, rtol=1e-10, progress=None, exchange="ordered"):
     """Co-simulate connected FMI 2.0 Co-Simulation FMUs at a fixed macro step.
 
     Parameters
@@ -415,6 +415,12 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         Start of the run.
     rtol : float
         Relative change of the coupling values that ends the step iteration.
+    exchange : {"ordered", "simultaneous"}
+        ``"ordered"``: at a communication point, inputs are set before the
+        outputs that depend on them directly are read (consistent values).
+        ``"simultaneous"``: every connected output is read, then every input
+        set (what libcosim's and ecos's fixed-step algorithms do: an output
+        with direct feedthrough lags its inputs by one exchange).
     progress : bool, optional
         Show a progress bar on stderr once a run takes more than 2 s
         (default: when stderr is a terminal).
@@ -437,6 +443,8 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         raise ValueError(f"`algorithm` must be one of {ALGORITHMS}; found {algorithm!r}.")
     if extrapolation not in (0, 1, 2):
         raise ValueError(f"`extrapolation` must be 0, 1 or 2; found {extrapolation!r}.")
+    if exchange not in ("ordered", "simultaneous"):
+        raise ValueError(f"`exchange` must be 'ordered' or 'simultaneous'; found {exchange!r}.")
     if not (isinstance(iterations, (int, np.integer)) and iterations >= 0):
         raise ValueError(f"`iterations` must be an integer >= 0; found {iterations!r}.")
     if not (np.isfinite(step_size) and step_size > 0):
@@ -452,7 +460,7 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         for name, path in names.items():
             comps[name] = _Component(name, path, workdir, callbacks)
         return _run(comps, connections, stop_time, step_size, algorithm, extrapolation, iterations,
-                    start_values or {}, output, start_time, rtol, messages,
+                    start_values or {}, output, start_time, rtol, messages, exchange,
                     sys.stderr.isatty() if progress is None else progress)
     finally:
         for c in comps.values():
@@ -469,7 +477,7 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
             shutil.rmtree(ssp_dir, ignore_errors=True)
 
 
-def _run(comps, connections, stop_time, H, algorithm, p, iterations, start_values, output, t0, rtol, messages,
+def _run(comps, connections, stop_time, H, algorithm, p, iterations, start_values, output, t0, rtol, messages, exchange,
          show_progress):
     from fmpy.fmi1 import FMICallException
 
@@ -577,7 +585,7 @@ def _run(comps, connections, stop_time, H, algorithm, p, iterations, start_value
                 break
 
     feeds_vr = {(c, vr[(c, u)]) for c, u in feeds}
-    exchange_needed = bool(feeds)
+    exchange_needed = bool(feeds) and exchange == "ordered"
 
     def record_derivs():
         d = np.full((nder, nslots), np.nan)

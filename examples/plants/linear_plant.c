@@ -63,6 +63,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     snprintf(p->name, sizeof p->name, "%s", instanceName ? instanceName : "plant");
     const double defaults[NPAR] = {PLANT_A11, PLANT_A12, PLANT_A21, PLANT_A22, PLANT_B1, PLANT_B2, PLANT_X1_0, PLANT_X2_0, PLANT_SUBSTEPS};
     memcpy(p->par, defaults, sizeof defaults);
+    p->s.x[0] = p->par[6]; /* the outputs are exact start values: readable before initialization */
+    p->s.x[1] = p->par[7];
     p->mode = MODE_INSTANTIATED;
     return p;
 }
@@ -143,6 +145,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
                 return fmi2Error;
             }
             p->par[vr[i]] = value[i];
+            if (vr[i] == 6 || vr[i] == 7) p->s.x[vr[i] - 6] = value[i];
         }
     }
     return fmi2OK;
