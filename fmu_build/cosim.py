@@ -587,18 +587,46 @@ def _run(comps, connections, stop_time, H, algorithm, p, iterations, start_value
     feeds_vr = {(c, vr[(c, u)]) for c, u in feeds}
     exchange_needed = bool(feeds) and exchange == "ordered"
 
+    # FMUs whose output derivatives may depend on the input derivatives they receive: the
+    # derivatives then form a loop of their own (y' = A x + b u, y'' = A y' + b u'), solved by
+    # fixed-point sweeps at each communication point
+    deriv_loop = [n for n in names if comps[n].max_derivative and comps[n].can_interpolate and inputs_of[n]]
+
     def record_derivs():
+        """Output derivatives at the current communication point.
+
+        They may depend on the FMU's inputs: the inputs' values (and, for an
+        FMU that interpolates, the derivatives known so far) at this point are
+        set first, so the derivatives are consistent; sweeps repeat while they
+        change (contraction with the loop gain, as the values' loop).
+        """
         d = np.full((nder, nslots), np.nan)
-        for n in names:
-            c = comps[n]
-            if not c.max_derivative or not nder:
-                continue
-            for order in range(1, min(nder, c.max_derivative) + 1):
-                pairs = outputs_of[n]
-                vals = call(n, lambda: c.fmu.getRealOutputDerivatives([v for _, v in pairs], [order] * len(pairs)),
-                            t, "fmi2GetRealOutputDerivatives")
-                for (s, _), x in zip(pairs, vals):
-                    d[order - 1, s] = x
+        sweeps = 200 if deriv_loop else 1
+        for _ in range(sweeps):
+            previous = d.copy()
+            for n in names:
+                c = comps[n]
+                if not c.max_derivative:
+                    continue
+                if inputs_of[n]:
+                    vrs, slots = [v for _, v in inputs_of[n]], [s for s, _ in inputs_of[n]]
+                    vals = [float(value[s]) for s in slots]
+                    call(n, lambda: c.fmu.setReal(vrs, vals), t, "fmi2SetReal")
+                    if n in deriv_loop:
+                        for j in range(1, min(nder, 2) + 1):
+                            der = [float(d[j - 1, s]) if np.isfinite(d[j - 1, s]) else 0.0 for s in slots]
+                            call(n, lambda: c.fmu.setRealInputDerivatives(vrs, [j] * len(vrs), der), t,
+                                 "fmi2SetRealInputDerivatives")
+                for order in range(1, min(nder, c.max_derivative) + 1):
+                    pairs = outputs_of[n]
+                    vals = call(n, lambda: c.fmu.getRealOutputDerivatives([v for _, v in pairs], [order] * len(pairs)),
+                                t, "fmi2GetRealOutputDerivatives")
+                    for (s, _), x in zip(pairs, vals):
+                        d[order - 1, s] = x
+            known = np.isfinite(d)
+            if np.array_equal(known, np.isfinite(previous)) and np.all(
+                    np.abs(d[known] - previous[known]) <= rtol * (1.0 + np.abs(d[known]))):
+                break
         return d
 
     def push_history(t_now):

@@ -6,6 +6,9 @@
  * over a step) and integrates with classical Runge-Kutta 4 on `substeps` substeps.
  * A mass-spring-damper is A = [[0, 1], [-k/m, -c/m]], b = [0, 1/m]; a first-order
  * lag w' = -w + g u is A = [[-1, 0], [0, 0]], b = [g, 0].
+ * Compiled with -DPLANT_FOLLOWER=1 it is instead the index-2 DAE x1' + x2 = 0, x1 = u solved
+ * exactly from the input polynomial (x1 = u(t), x2 = -u'(t)): a reference for what a DAE FMU
+ * that receives input derivatives computes (output derivatives: x1' = u', x2' = -u'').
  * Value references: 0..5 a11 a12 a21 a22 b1 b2, 6 x1_0, 7 x2_0, 8 substeps (Real),
  * 9 u (input), 10 y1, 11 y2 (outputs).
  */
@@ -17,6 +20,9 @@
 
 #include "fmi2Functions.h"
 
+#ifndef PLANT_FOLLOWER
+#define PLANT_FOLLOWER 0
+#endif
 #define NPAR 9
 enum { VR_U = 9, VR_Y1 = 10, VR_Y2 = 11, NVR = 12 };
 enum { MODE_INSTANTIATED, MODE_INIT, MODE_STEP, MODE_TERMINATED };
@@ -137,8 +143,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
             return fmi2Error;
         }
         if (vr[i] == VR_U) {
-            p->s.u[0] = value[i];
-            p->s.u[1] = p->s.u[2] = 0.0; /* derivatives hold only until the next value */
+            p->s.u[0] = value[i]; /* the derivatives stay those last set (zero unless the master sends them) */
         } else {
             if (p->mode == MODE_STEP && vr[i] != 8) {
                 logf_(p, fmi2Error, "fmi2SetReal: parameter %u is fixed after initialization", vr[i]);
@@ -166,8 +171,15 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer order[], fmi2Real value[]) {
     Plant *p = c;
     double d1[2], d2[2];
-    rhs(p, p->s.x, p->s.u[0], d1);
-    rhs(p, d1, p->s.u[1], d2); /* y'' = A y' + b u' */
+    if (PLANT_FOLLOWER) { /* x1 = u, x2 = -u' */
+        d1[0] = p->s.u[1];
+        d1[1] = -p->s.u[2];
+        d2[0] = p->s.u[2];
+        d2[1] = 0.0;
+    } else {
+        rhs(p, p->s.x, p->s.u[0], d1);
+        rhs(p, d1, p->s.u[1], d2); /* y'' = A y' + b u' */
+    }
     for (size_t i = 0; i < nvr; i++) {
         if ((vr[i] != VR_Y1 && vr[i] != VR_Y2) || order[i] < 1 || order[i] > 2) {
             logf_(p, fmi2Error, "fmi2GetRealOutputDerivatives: bad reference %u or order %d", vr[i], order[i]);
@@ -197,6 +209,10 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
         for (int j = 0; j < 2; j++) y[j] = x[j] + dt * k3[j];
         rhs(p, y, input_at(p, s + dt), k4);
         for (int j = 0; j < 2; j++) x[j] += dt / 6.0 * (k1[j] + 2 * k2[j] + 2 * k3[j] + k4[j]);
+    }
+    if (PLANT_FOLLOWER) {
+        x[0] = input_at(p, h);
+        x[1] = -(p->s.u[1] + h * p->s.u[2]);
     }
     /* the input polynomial moves with the step: value and slope at the new time */
     p->s.u[0] = input_at(p, h);

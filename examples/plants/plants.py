@@ -29,8 +29,11 @@ def _fmpy_headers():
     return Path(fmpy.__file__).parent / "c-code"
 
 
-def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y2"), input_name="u"):
-    """Compile ``linear_plant.c`` into ``dest/name.fmu`` with the given matrices as start values."""
+def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y2"), input_name="u", follower=False):
+    """Compile ``linear_plant.c`` into ``dest/name.fmu`` with the given matrices as start values.
+
+    ``follower=True``: the exact index-2 follower x1 = u, x2 = -u' instead (A, b unused).
+    """
     dest = Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
     values = [A[0][0], A[0][1], A[1][0], A[1][1], b[0], b[1], x0[0], x0[1], float(substeps)]
@@ -38,6 +41,7 @@ def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y
         tmp = Path(tmp)
         (tmp / "binaries" / "linux64").mkdir(parents=True)
         defines = [f"-DPLANT_{key.upper()}={float(v)!r}" for key, v in zip(_NAMES, values)]
+        defines.append(f"-DPLANT_FOLLOWER={int(bool(follower))}")
         subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra", "-Werror",
                         f"-DFMI2_FUNCTION_PREFIX=", f"-I{_fmpy_headers()}", *defines,
                         str(HERE / "linear_plant.c"), "-o", str(tmp / "binaries" / "linux64" / f"{name}.so"), "-lm"],

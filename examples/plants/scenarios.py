@@ -59,12 +59,21 @@ def path_reference(t, Kp=20.0, Kd=6.0, m=1.0, c=0.5, k=2.0):
     return sol.x
 
 
-def build_loop_system(dest, g=0.2, plant="pythonfmu", method="standard", lam=10.0, name=None):
-    """``dest/name.ssp`` for scenario 2 with the pythonfmu lag or the C lag (output derivatives)."""
+def build_loop_system(dest, g=0.2, plant="pythonfmu", method="standard", lam=10.0, name=None, dae="lsc"):
+    """``dest/name.ssp`` for scenario 2 with the pythonfmu lag or the C lag (output derivatives).
+
+    ``dae="lsc"``: our pythonfmu DAE FMU (values only); ``dae="exact"``: the C follower that
+    receives input derivatives (canInterpolateInputs), standing for a DAE FMU that does.
+    """
     from fmu_build import build_fmu
 
     dest = Path(dest)
-    dae = build_fmu(SSP_DIR / "follower.toml", dest / "fmus", method=method, lam=lam)
+    if dae == "lsc":
+        dae = build_fmu(SSP_DIR / "follower.toml", dest / "fmus", method=method, lam=lam)
+    else:
+        dae = plants.build_linear_plant(dest / "fmus", "ExactFollower", [[0.0, 0.0], [0.0, 0.0]], [0.0, 0.0],
+                                        (1.0, 1.0 / (1.0 + g)), output_names=("x1", "x2"), input_name="w",
+                                        follower=True)
     if plant == "pythonfmu":
         lag = plants.build_lag_plant(dest / "fmus", g=g)
         w, u = "w", "u"
