@@ -177,7 +177,8 @@ class _Component:
         self.can_rollback = bool(cs.canGetAndSetFMUstate)
         self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir, modelIdentifier=cs.modelIdentifier,
                              instanceName=name)
-        self.fmu.instantiate(callbacks=callbacks)
+        # logging on: pythonfmu FMUs pass their messages (errors included) to the logger only then
+        self.fmu.instantiate(callbacks=callbacks, loggingOn=True)
         # output -> inputs it depends on directly (None in the XML: every input)
         inputs = [v.name for v in self.md.modelVariables if v.causality == "input"]
         self.feedthrough = {}

@@ -90,3 +90,25 @@ def loop_reference(t, g):
     """Exact solution of scenario 2: (w, x1, x2)."""
     w = np.exp(-np.asarray(t) / (1.0 + g))
     return w, w, w / (1.0 + g)
+
+
+def build_damper_loop(dest, plant_x0=(1.0, 0.0), name="damper_loop", method="standard", lam=10.0):
+    """A second loop through a differentiated input: a C mass-spring-damper whose position x
+    feeds the Follower (x1 = x, x2 = -x'); the flow x2 goes back as the force: m x'' + c x' + k x = x2.
+    Here x' does not depend on the force directly (x has relative degree 2), unlike scenario 2."""
+    from fmu_build import build_fmu
+
+    dest = Path(dest)
+    dae = build_fmu(SSP_DIR / "follower.toml", dest / "fmus", method=method, lam=lam)
+    plant = plants.build_linear_plant(dest / "fmus", "MSD", [[0.0, 1.0], [-KP_PLANT / MP, -CP / MP]], [0.0, 1.0 / MP],
+                                      plant_x0, output_names=("x", "v"), input_name="F")
+    return plants.write_ssp(dest / f"{name}.ssp", name, {"dae": dae, "plant": plant},
+                            [("plant.x", "dae.w"), ("dae.x2", "plant.F")])
+
+
+def damper_loop_reference(t, x0=(1.0, 0.0)):
+    """Exact (x, v) of MP x'' + (CP + 1) x' + KP x = 0."""
+    from scipy.linalg import expm
+
+    A = np.array([[0.0, 1.0], [-KP_PLANT / MP, -(CP + 1.0) / MP]])
+    return np.array([expm(A * s) @ np.asarray(x0) for s in np.asarray(t)]).T
