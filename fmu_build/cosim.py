@@ -603,7 +603,7 @@ def _run(comps, connections, stop_time, H, algorithm, p, iterations, start_value
         """
         d = np.full((nder, nslots), np.nan)
         sweeps = 200 if deriv_loop else 1
-        for _ in range(sweeps):
+        for _ in range(sweeps):  # (a loop gain above 1 makes them overflow: the run then stops at a non-finite value)
             previous = d.copy()
             for n in names:
                 c = comps[n]
@@ -625,8 +625,9 @@ def _run(comps, connections, stop_time, H, algorithm, p, iterations, start_value
                     for (s, _), x in zip(pairs, vals):
                         d[order - 1, s] = x
             known = np.isfinite(d)
-            if np.array_equal(known, np.isfinite(previous)) and np.all(
-                    np.abs(d[known] - previous[known]) <= rtol * (1.0 + np.abs(d[known]))):
+            with np.errstate(over="ignore", invalid="ignore"):
+                settled = np.all(np.abs(d[known] - previous[known]) <= rtol * (1.0 + np.abs(d[known])))
+            if np.array_equal(known, np.isfinite(previous)) and settled:
                 break
         return d
 
@@ -747,13 +748,18 @@ def _run(comps, connections, stop_time, H, algorithm, p, iterations, start_value
         read_outputs(None, t, passes)
         push_history(t)
         snapshot_row(t)
+        # The first p steps have fewer than p + 1 past points: extrapolated, they would lose orders
+        # for the whole run (one zero-order-hold step is a local O(H^2) error). When every FMU can
+        # roll back, they are repeated with the inputs interpolated through the values just computed.
+        startup = p if all(c.can_rollback for c in comps.values()) else 0
         for i in range(n_steps):
             t_start = t0 + i * H
-            if iterations:
+            repeats = iterations or (2 if i < startup else 0)
+            if repeats:
                 states = {n: call(n, comps[n].fmu.getFMUstate, t_start, "fmi2GetFMUstate") for n in names}
                 start_value = value.copy()
                 step_all(t_start)
-                for _ in range(iterations):
+                for _ in range(repeats):
                     end = value.copy()
                     for n in names:
                         call(n, lambda: comps[n].fmu.setFMUstate(states[n]), t_start, "fmi2SetFMUstate")
