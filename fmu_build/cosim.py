@@ -648,14 +648,16 @@ def _run(comps, connections, stop_time, H, algorithm, p, iterations, start_value
         jet[0] = V[-1] if len(ts) == 1 or t_start == ts[-1] else np.asarray(_weights(ts, t_start, 0)) @ V
         for j in range(1, p + 1):
             jet[j] = _weights(ts, t_start, j) @ V if len(ts) > j else 0.0
-            # exact derivatives where the source gives them (at the newest point, Taylor-shifted)
-            last = ds[-1]
+            # exact derivatives where the source gives them: at the step start if known there,
+            # else at the newest point, Taylor-shifted
+            at = next((i for i in range(len(ts) - 1, -1, -1) if ts[i] == t_start and ds[i] is not None), len(ts) - 1)
+            last = ds[at]
             if last is not None and np.isfinite(last[j - 1]).any():
                 k = np.isfinite(last[j - 1])
                 taylor = np.zeros(nslots)
                 for m in range(j, p + 1):
                     dm = last[m - 1] if m - 1 < len(last) else np.full(nslots, np.nan)
-                    taylor += np.where(np.isfinite(dm), dm, 0.0) * (t_start - ts[-1]) ** (m - j) / math.factorial(m - j)
+                    taylor += np.where(np.isfinite(dm), dm, 0.0) * (t_start - ts[at]) ** (m - j) / math.factorial(m - j)
                 jet[j] = np.where(k, taylor, jet[j])
         return jet
 

@@ -280,7 +280,7 @@ def test_differentiated_input_loop_diverges_beyond_unit_gain(exact_loops):
     out, _ = run(f"""
 res = []
 for H in (0.02, 0.01):
-    r = cosimulate({str(exact_loops[1.1])!r}, 1.0, H, algorithm="jacobi", extrapolation=2, output=["plant.w"])
+    r = cosimulate({str(exact_loops[1.1])!r}, 2.0, H, algorithm="jacobi", extrapolation=1, output=["plant.w"])
     res.append(float(np.max(np.abs(r["plant.w"] - np.exp(-r["time"] / 2.1)))))
 print(json.dumps({{"errs": res}}))
 """)

@@ -59,7 +59,7 @@ def path_reference(t, Kp=20.0, Kd=6.0, m=1.0, c=0.5, k=2.0):
     return sol.x
 
 
-def build_loop_system(dest, g=0.2, plant="pythonfmu", method="standard", lam=10.0, name=None, dae="lsc"):
+def build_loop_system(dest, g=0.2, plant="pythonfmu", method="alternative", lam=10.0, name=None, dae="lsc"):
     """``dest/name.ssp`` for scenario 2 with the pythonfmu lag or the C lag (output derivatives).
 
     ``dae="lsc"``: our pythonfmu DAE FMU (values only); ``dae="exact"``: the C follower that
@@ -92,7 +92,7 @@ def loop_reference(t, g):
     return w, w, w / (1.0 + g)
 
 
-def build_damper_loop(dest, plant_x0=(1.0, 0.0), name="damper_loop", method="standard", lam=10.0):
+def build_damper_loop(dest, plant_x0=(1.0, 0.0), name="damper_loop", method="alternative", lam=10.0):
     """A second loop through a differentiated input: a C mass-spring-damper whose position x
     feeds the Follower (x1 = x, x2 = -x'); the flow x2 goes back as the force: m x'' + c x' + k x = x2.
     Here x' does not depend on the force directly (x has relative degree 2), unlike scenario 2."""
