@@ -147,7 +147,12 @@ def read_system(system):
     for c in ssd.system.connections:
         if c.startElement is None or c.endElement is None:
             raise ValueError(f"`system`: connections to the system's own connectors are not supported ({c!r}).")
+        if getattr(c, "linearTransformation", None) is not None:
+            raise ValueError(f"`system`: connection {c.startElement}.{c.startConnector} -> {c.endElement}.{c.endConnector} "
+                             "has a LinearTransformation, which this master does not apply.")
         connections.append((c.startElement, c.startConnector, c.endElement, c.endConnector))
+    if any(getattr(e, "parameterBindings", None) for e in [ssd.system, *ssd.system.elements]):
+        warnings.warn("`system`: SSP parameter bindings are not applied; use `start_values`.", stacklevel=3)
     return components, connections, workdir
 
 
