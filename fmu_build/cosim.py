@@ -25,6 +25,9 @@ The master couples FMUs by their connections, at a fixed macro step ``H``:
   repeated (rollback through ``fmi2GetFMUstate``/``fmi2SetFMUstate``) with the
   inputs interpolated through the end values just computed, until the coupling
   values change by less than ``rtol`` or ``iterations`` repeats are done.
+- **Start-up**: the first ``p`` steps lack past values for a degree-``p``
+  polynomial; when every FMU can roll back they are repeated with the inputs
+  interpolated through the values just computed.
 - Only connected variables and requested outputs are exchanged: an output no
   connection uses and nobody asked for is never read (an FMU that computes an
   output in its getter does not pay for it).
