@@ -369,7 +369,7 @@ class _Progress:
     def __init__(self, total, enabled, after=2.0):
         self.total, self.enabled, self.after = total, enabled, after
         self.start = _time.perf_counter()
-        self.shown, self.last = False, 0.0
+        self.shown, self.last = False, -math.inf
 
     def update(self, done):
         if not self.enabled:

@@ -298,3 +298,15 @@ def test_cli_writes_csv(path_ssp, tmp_path):
     assert data.shape == (6,)
     assert "plantx" in data.dtype.names or "plant.x" in open(result).readline()
     assert result.with_suffix(".png").exists()
+
+
+def test_progress_bar_appears_only_after_the_delay(capsys):
+    quiet = cosim._Progress(100, True, after=3600.0)
+    quiet.update(50)
+    quiet.close()
+    assert capsys.readouterr().err == ""
+    shown = cosim._Progress(100, True, after=0.0)
+    shown.update(50)
+    shown.close()
+    err = capsys.readouterr().err
+    assert "50/100 steps" in err and " 50.0%" in err and err.endswith("\n")
