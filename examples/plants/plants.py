@@ -1,0 +1,193 @@
+"""Plant FMUs for the co-simulation examples and tests, and SSP packaging.
+
+- :func:`build_linear_plant`: ``x' = A x + b u`` (two states) as a C FMU compiled
+  here with gcc (source: ``linear_plant.c``); declares
+  ``maxOutputDerivativeOrder = 2`` and ``canInterpolateInputs``.
+- :func:`build_lag_plant`: ``w' = -w + g u`` made with pythonfmu (exact
+  exponential step for a held input; no derivatives in or out).
+- :func:`write_ssp`: an ``.ssp`` archive (``SystemStructure.ssd`` + the FMUs).
+"""
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import textwrap
+import uuid
+import zipfile
+from pathlib import Path
+from xml.sax.saxutils import escape
+
+HERE = Path(__file__).parent
+
+_NAMES = ("a11", "a12", "a21", "a22", "b1", "b2", "x1_0", "x2_0", "substeps")
+
+
+def _fmpy_headers():
+    import fmpy
+
+    return Path(fmpy.__file__).parent / "c-code"
+
+
+def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y2"), input_name="u", follower=False):
+    """Compile ``linear_plant.c`` into ``dest/name.fmu`` with the given matrices as start values.
+
+    ``follower=True``: the exact index-2 follower x1 = u, x2 = -u' instead (A, b unused).
+    """
+    dest = Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    values = [A[0][0], A[0][1], A[1][0], A[1][1], b[0], b[1], x0[0], x0[1], float(substeps)]
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        (tmp / "binaries" / "linux64").mkdir(parents=True)
+        defines = [f"-DPLANT_{key.upper()}={float(v)!r}" for key, v in zip(_NAMES, values)]
+        defines.append(f"-DPLANT_FOLLOWER={int(bool(follower))}")
+        subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra", "-Werror",
+                        f"-DFMI2_FUNCTION_PREFIX=", f"-I{_fmpy_headers()}", *defines,
+                        str(HERE / "linear_plant.c"), "-o", str(tmp / "binaries" / "linux64" / f"{name}.so"), "-lm"],
+                       check=True)
+        variables = []
+        for vr, (key, v) in enumerate(zip(_NAMES, values)):
+            variables.append(f'<ScalarVariable name="{key}" valueReference="{vr}" causality="parameter" '
+                             f'variability="{"tunable" if key == "substeps" else "fixed"}"><Real start="{v!r}"/></ScalarVariable>')
+        variables.append(f'<ScalarVariable name="{input_name}" valueReference="9" causality="input" '
+                         f'variability="continuous"><Real start="0.0"/></ScalarVariable>')
+        for i, out in enumerate(output_names):
+            variables.append(f'<ScalarVariable name="{out}" valueReference="{10 + i}" causality="output" '
+                             f'variability="continuous" initial="exact"><Real start="{values[6 + i]!r}"/></ScalarVariable>')
+        xml = f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{{{uuid.uuid4()}}}"
+  description="linear two-state plant x' = A x + b u (RK4, output derivatives)" generationTool="lsc examples/plants"
+  numberOfEventIndicators="0">
+  <CoSimulation modelIdentifier="{name}" canHandleVariableCommunicationStepSize="true" canInterpolateInputs="true"
+    maxOutputDerivativeOrder="2" canGetAndSetFMUstate="true" canSerializeFMUstate="true"/>
+  <ModelVariables>
+    {chr(10).join('    ' + v for v in variables).strip()}
+  </ModelVariables>
+  <ModelStructure>
+    <Outputs>
+      <Unknown index="{len(_NAMES) + 2}" dependencies=""/>
+      <Unknown index="{len(_NAMES) + 3}" dependencies=""/>
+    </Outputs>
+  </ModelStructure>
+</fmiModelDescription>
+"""
+        (tmp / "modelDescription.xml").write_text(xml)
+        (tmp / "sources").mkdir()
+        shutil.copy(HERE / "linear_plant.c", tmp / "sources")
+        out = dest / f"{name}.fmu"
+        partial = dest / f".{name}.fmu.part"
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
+            for f in sorted(tmp.rglob("*")):
+                if f.is_file():
+                    zf.write(f, f.relative_to(tmp).as_posix())
+        os.replace(partial, out)
+    return out
+
+
+_LAG = '''
+import math
+
+from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+
+
+class {name}(Fmi2Slave):
+    """First-order lag w' = -w + g u, exact step for an input held over the step."""
+
+    author = "lsc examples"
+    description = "first-order lag w' = -w + g u (pythonfmu)"
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.g = {g!r}
+        self.w0 = {w0!r}
+        self.u = 0.0
+        self.w = {w0!r}
+        self.register_variable(Real("g", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
+        self.register_variable(Real("w0", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
+        self.register_variable(Real("u", causality=Fmi2Causality.input, variability=Fmi2Variability.continuous))
+        self.register_variable(Real("w", causality=Fmi2Causality.output, variability=Fmi2Variability.continuous))
+
+    def exit_initialization_mode(self):
+        self.w = self.w0
+
+    def do_step(self, current_time, step_size):
+        if not math.isfinite(self.u):
+            return False
+        e = math.exp(-step_size)
+        self.w = e * self.w + self.g * (1.0 - e) * self.u
+        return True
+'''
+
+
+def build_lag_plant(dest, name="LagPlant", g=0.2, w0=1.0):
+    """A pythonfmu FMU of ``w' = -w + g u`` (state w, output w; w has no direct feedthrough)."""
+    from pythonfmu.builder import FmuBuilder
+
+    dest = Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        script = Path(tmp) / f"{name}.py"
+        script.write_text(textwrap.dedent(_LAG.format(name=name, g=float(g), w0=float(w0))))
+        fmu = Path(FmuBuilder.build_FMU(script, dest=dest, canGetAndSetFMUstate=True, canSerializeFMUstate=True))
+    sys.modules.pop(name, None)
+    # pythonfmu writes no output dependencies: w is a state (no feedthrough), say so
+    with zipfile.ZipFile(fmu) as zf:
+        contents = {n: zf.read(n) for n in zf.namelist()}
+    xml = contents["modelDescription.xml"].decode()
+    import re
+
+    index = None
+    for i, m in enumerate(re.finditer(r"<ScalarVariable\b[^>]*>", xml), start=1):
+        if 'name="w"' in m.group(0):
+            index = i
+    xml = re.sub(r"<ModelStructure>.*</ModelStructure>|<ModelStructure\s*/>",
+                 f'<ModelStructure><Outputs><Unknown index="{index}" dependencies=""/></Outputs>'
+                 f'<InitialUnknowns><Unknown index="{index}"/></InitialUnknowns></ModelStructure>', xml, flags=re.S)
+    contents["modelDescription.xml"] = xml.encode()
+    partial = fmu.with_suffix(".part")
+    with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
+        for n, data in contents.items():
+            zf.writestr(n, data)
+    os.replace(partial, fmu)
+    return fmu
+
+
+def write_ssp(path, name, components, connections):
+    """Write ``path`` (.ssp): ``components`` {name: fmu_path}, ``connections`` [("a.y", "b.u"), ...]."""
+    from fmpy import read_model_description
+
+    path = Path(path)
+    elements = []
+    for comp, fmu in components.items():
+        md = read_model_description(str(fmu))
+        connectors = "".join(
+            f'<ssd:Connector name="{escape(v.name)}" kind="{v.causality}"><ssc:Real/></ssd:Connector>'
+            for v in md.modelVariables if v.causality in ("input", "output") and v.type == "Real")
+        elements.append(f'<ssd:Component name="{comp}" type="application/x-fmu-sharedlibrary" '
+                        f'source="resources/{comp}.fmu"><ssd:Connectors>{connectors}</ssd:Connectors></ssd:Component>')
+    links = []
+    for a, b in connections:
+        (ea, ca), (eb, cb) = a.split(".", 1), b.split(".", 1)
+        links.append(f'<ssd:Connection startElement="{ea}" startConnector="{escape(ca)}" '
+                     f'endElement="{eb}" endConnector="{escape(cb)}"/>')
+    ssd = f"""<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon"
+  xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" version="1.0" name="{name}">
+  <ssd:System name="{name}">
+    <ssd:Elements>
+      {chr(10).join(elements)}
+    </ssd:Elements>
+    <ssd:Connections>
+      {chr(10).join(links)}
+    </ssd:Connections>
+  </ssd:System>
+</ssd:SystemStructureDescription>
+"""
+    partial = path.with_suffix(".part")
+    with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("SystemStructure.ssd", ssd)
+        for comp, fmu in components.items():
+            zf.write(fmu, f"resources/{comp}.fmu")
+    os.replace(partial, path)
+    return path
