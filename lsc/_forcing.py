@@ -120,7 +120,11 @@ class Forcing:
     def _value_sympy(self, t):
         if self._scalar is None:
             return np.zeros(self.n)
-        v = np.array(self._scalar(float(t)), dtype=float)
+        try:
+            v = np.array(self._scalar(float(t)), dtype=float)
+        except (ArithmeticError, ValueError) as exc:  # the math module raises where numpy gives inf/nan
+            raise ValueError(f"`{self.f.name}` is not finite at t={t!r} (its derivatives that the completion "
+                             f"uses: {exc}).") from None
         g = self._W0 @ v
         # a sum is non-finite when any entry is (and costs less than isfinite on the vector)
         if not np.isfinite(g.sum()):
@@ -141,14 +145,16 @@ class Forcing:
             cols, Wused, fn = hit
             if fn is None:
                 return np.zeros((order + 1, self.n, ts.size))
-            values = fn(ts)
+            with np.errstate(all="ignore"):  # non-finite values are reported below, with the time
+                values = fn(ts)
             F = np.empty((len(values), ts.size))
             for i, v in enumerate(values):  # constant entries come back as scalars
                 F[i] = v
         else:
             Wused = Wbig
             F = self._callable_stack(ts, self.p + order)
-        out = (Wused @ F).reshape(order + 1, self.n, ts.size)
+        with np.errstate(all="ignore"):
+            out = (Wused @ F).reshape(order + 1, self.n, ts.size)
         if not np.all(np.isfinite(out)):
             bad = int(np.argmin(np.all(np.isfinite(out), axis=(0, 1))))
             raise ValueError(f"`{self.f.name}` is not finite at t={float(ts[bad])!r} (the forcing or one of its "
