@@ -28,7 +28,7 @@ __all__ = ["Forcing"]
 
 def _check_finite(values, name, t):
     if not np.all(np.isfinite(values)):
-        raise ValueError(f"`{name}` is not finite at t={t!r}: the completion's forcing is {np.asarray(values).tolist()}.")
+        raise ValueError(f"`{name}` is not finite at t={float(t)!r}: the completion's forcing is {np.asarray(values).tolist()}.")
 
 
 class Forcing:
@@ -123,7 +123,7 @@ class Forcing:
         try:
             v = np.array(self._scalar(float(t)), dtype=float)
         except (ArithmeticError, ValueError) as exc:  # the math module raises where numpy gives inf/nan
-            raise ValueError(f"`{self.f.name}` is not finite at t={t!r} (its derivatives that the completion "
+            raise ValueError(f"`{self.f.name}` is not finite at t={float(t)!r} (its derivatives that the completion "
                              f"uses: {exc}).") from None
         g = self._W0 @ v
         # a sum is non-finite when any entry is (and costs less than isfinite on the vector)

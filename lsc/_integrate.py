@@ -3,7 +3,7 @@
 import numpy as np
 from scipy.integrate import BDF, LSODA, OdeSolver, Radau, solve_ivp
 
-from . import _expm
+from . import _cvode, _expm
 from ._chebyshev import ChebyshevCoefficients, EvaluationFailed
 from ._completion import Completion, complete
 from ._derivative_array import lam_jet
@@ -145,11 +145,19 @@ def solve_completion(
         'LSODA') the constant Jacobian ``G`` is passed. Large ``lam`` makes
         the completion stiff: prefer 'Radau' or 'BDF' when ``lam`` times the
         interval length is large. ``'expm'`` (constant coefficients only)
-        steps exactly with the matrix exponential from output time to output
-        time (see `_ExpmPropagator`): exact for polynomial forcing of degree
-        <= ``taylor_degree`` (option, default 3), otherwise of order
-        ``taylor_degree + 1`` in the step (option ``max_step`` refines it);
-        ``t_eval`` defaults to 101 equally spaced times; rtol/atol are unused.
+        steps exactly with the matrix exponential (`lsc._expm`): exact for
+        polynomial forcing; otherwise the forcing's Taylor degree and the
+        step are chosen so that the error stays within ``atol + rtol |x0|``
+        (options ``taylor_degree`` and ``max_step`` fix them instead), and
+        the output points are read from the exact propagator (one
+        exponential for an equally spaced ``t_eval``, which defaults to 101
+        equally spaced times). ``'CVODE'`` integrates with SUNDIALS CVODE
+        (BDF, dense direct solver, the constant Jacobian ``G`` or
+        ``G(t)``; needs the optional package scikit-sundae; options
+        ``cvode_method`` ('BDF' or 'Adams'), ``first_step``, ``min_step``,
+        ``max_step``, ``max_order``, ``max_num_steps``, ``max_nonlin_iters``,
+        ``max_conv_fails``, ``linsolver``): stiff completions at compiled
+        speed.
         ``'auto'`` picks 'Radau' when the completion is stiff on `t_span`
         (``stiffness_ratio`` > 100, see below) and 'DOP853' otherwise. An
         explicit method on a stiff completion runs as asked, and the
@@ -157,7 +165,7 @@ def solve_completion(
     t_eval : array_like, optional
         Output times (default: the solver's steps).
     rtol, atol : float or array_like, optional
-        Tolerances, as in solve_ivp.
+        Tolerances, as in solve_ivp ('expm': the accuracy asked for).
     project : bool, optional
         Replace `x0` by the nearest consistent point (`Completion.project`)
         before integrating.
@@ -232,6 +240,8 @@ def solve_completion(
         except ValueError as exc:
             raise _ForcingFailed(t, exc) from exc
 
+    if method == "CVODE":
+        return _solve_cvode(completion, rhs, jac, (t0, t1), x0, t_eval, rtol, atol, options, built)
     if _is_implicit(method) and "jac" not in options:
         options["jac"] = completion.jac(t0, x0) if completion.dae.is_constant else jac
     try:
@@ -248,6 +258,20 @@ def solve_completion(
     return CompletionResult(
         t=sol.t, x=x, success=bool(sol.success), status=sol.status, message=message,
         nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=sol.sol, completion=completion,
+    )
+
+
+def _solve_cvode(completion, rhs, jac, t_span, x0, t_eval, rtol, atol, options, built):
+    constant_jac = completion.jac(t_span[0], x0) if completion.dae.is_constant else None
+    out = _cvode.solve(rhs, jac, *t_span, x0, t_eval, rtol, atol, options, constant_jac=constant_jac)
+    message = out["message"] + built
+    status = out["status"]
+    if "failure" in out:
+        t_fail, exc = out["failure"]
+        message, status = f"evaluating the right-hand side failed at t={float(t_fail)!r}: {exc}", -2
+    return CompletionResult(
+        t=out["t"], x=out["x"], success=out["success"], status=status, message=message,
+        nfev=out["nfev"], njev=out["njev"], nlu=0, sol=None, completion=completion,
     )
 
 
