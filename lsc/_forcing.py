@@ -19,6 +19,8 @@ at once (``g^(j) = W [f^(j); ...; f^(j+p)]``): the exact stepping of
 `lsc._expm` reads all its forcing terms from one such call.
 """
 
+import math
+
 import numpy as np
 
 from ._timefunc import SympyFunction
@@ -121,16 +123,14 @@ class Forcing:
         if self._scalar is None:
             return np.zeros(self.n)
         try:
-            v = np.array(self._scalar(float(t)), dtype=float)
+            values = self._scalar(float(t))
         except (ArithmeticError, ValueError) as exc:  # the math module raises where numpy gives inf/nan
             raise ValueError(f"`{self.f.name}` is not finite at t={float(t)!r} (its derivatives that the completion "
                              f"uses: {exc}).") from None
-        g = self._W0 @ v
-        # a sum is non-finite when any entry is (and costs less than isfinite on the vector)
-        if not np.isfinite(g.sum()):
-            _check_finite(g, self.f.name, t)
-            _check_finite(v, self.f.name, t)
-        return g
+        # a sum is non-finite when an entry is (and the builtin sum of a short list costs next to nothing)
+        if not math.isfinite(sum(values)):
+            _check_finite(np.array(values, dtype=float), self.f.name, t)
+        return self._W0 @ np.array(values, dtype=float)
 
     # -- many times ----------------------------------------------------------------------------
     def jets(self, ts, order):
