@@ -17,6 +17,7 @@ about 3 for set-up, dense SVDs of (k+1) n arrays; about 2 per step).
 Writes ``docs/_generated/bench_scaling.md``.
 
 Run:  python examples/bench_scaling.py [n ...]
+      python examples/bench_scaling.py --index-only [n ...]   (index determination only, for large n)
 """
 
 import os
@@ -90,5 +91,23 @@ def _write(header, rows):
         "forcing (matrix products per derivative order), which dominates it.\n\n" + table + "\n\n" + summary + "\n")
 
 
+def index_only(sizes):
+    """The index determination alone (the dominant set-up cost) for large n: one measurement per size."""
+    lines = ["| n | index [s] |", "|---:|---:|"]
+    for n in sizes:
+        p = gallery.random_pencil(n=n, blocks=(3, 2), seed=0)
+        seconds, k = once(lambda: lsc.differentiation_index(p.dae))
+        assert k == 3
+        lines.append(f"| {n} | {seconds:.1f} |")
+        print(lines[-1], flush=True)
+        GENERATED.mkdir(parents=True, exist_ok=True)
+        (GENERATED / "bench_scaling_index.md").write_text(
+            "The index determination alone for large n (`examples/bench_scaling.py --index-only`), "
+            "single-threaded BLAS, one measurement each:\n\n" + "\n".join(lines) + "\n")
+
+
 if __name__ == "__main__":
-    main(tuple(int(a) for a in sys.argv[1:]) or (100, 200, 400, 800))
+    if sys.argv[1:2] == ["--index-only"]:
+        index_only(tuple(int(a) for a in sys.argv[2:]) or (400, 800))
+    else:
+        main(tuple(int(a) for a in sys.argv[1:]) or (100, 200, 400, 800))
