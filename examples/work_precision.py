@@ -10,7 +10,11 @@ Rows, all measured in one run (one warm-up, then the minimum over `--repeats`):
 - ``lsc-pointwise``: time-varying, the alternative completion (lam=1) evaluated
   at every solver stage (``interpolate=False``);
 - ``expm``: exact stepping of the alternative completion (constant
-  coefficients), over a range of step sizes, with forcing Taylor degree 3 and 7;
+  coefficients): ``expm auto`` with the Taylor degree and step chosen from
+  ``rtol = atol`` (the default), and over a range of fixed step sizes with
+  forcing Taylor degree 3 and 7;
+- ``CVODE``: lsc completions integrated by SUNDIALS CVODE (BDF) when
+  scikit-sundae is installed;
 - ``hand-ODE``: solve_ivp with the same methods and tolerances on the
   state-space ODE derived by hand (``gallery.Problem.state_space``: the
   dynamic part only, the algebraic part from the forcing derivatives);
@@ -25,49 +29,149 @@ method missed its tolerance). Also ``nfev`` and the constraint residual
 ``|Z2^T (F x - g)|`` at the final time (the same measure for every row).
 ``setup`` is the one-off time of ``lsc.complete`` (not in ``time``).
 
-Writes ``out/work_precision.csv`` and ``out/work_precision.png`` (repository root; with
-``--only X``: ``work_precision_X.*``; the CSV after every problem) and prints the targets of
-issue 5 as ratios measured in this run.
+Writes ``out/work_precision.csv`` (after every problem), and the targets as ratios measured in
+this run to ``docs/_generated/work_precision.md`` with the plot ``docs/_generated/work_precision.png``
+(with ``--only X``: ``work_precision_X.*``), which docs/performance.md includes.
 
-Run: ``python examples/work_precision.py [--quick] [--repeats R] [--only constant|time-varying]``.
+``--only dense`` runs two problems defined here with non-polynomial sympy forcing (an index-3
+chain and an oscillator driven through an index-2 constraint, both over 20 time units), each
+with 51 and 2,001 output points: the completion's forcing is then compiled (lsc._forcing) and
+'expm' reads the dense output from the exact propagator. BLAS runs single-threaded.
+
+Run: ``python examples/work_precision.py [--quick] [--repeats R] [--only constant|time-varying|dense]``.
 """
 
-import argparse
-import csv
-import math
-import time
-from pathlib import Path
+import os
 
-import numpy as np
-from scipy.integrate import solve_ivp
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # a threaded BLAS on a shared machine measures the load
+os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import lsc
-from lsc import gallery
+import argparse  # noqa: E402
+import csv  # noqa: E402
+import math  # noqa: E402
+import time  # noqa: E402
+import timeit  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import sympy  # noqa: E402
+from scipy.integrate import solve_ivp  # noqa: E402
+
+import lsc  # noqa: E402
+from lsc import gallery  # noqa: E402
+from lsc.gallery import Problem, StateSpace  # noqa: E402
 
 try:
     from sksundae.ida import IDA
-except ImportError:  # the IDA rows are skipped, and said so
+except ImportError:  # the IDA and CVODE rows are skipped, and said so
     IDA = None
+CVODE_OK = IDA is not None
 
 OUT = Path(__file__).resolve().parent.parent / "out"  # like main_job.py: gitignored
+GENERATED = Path(__file__).resolve().parent.parent / "docs" / "_generated"  # included by docs/performance.md
 N_OUT = 51
+T = sympy.Symbol("t")
+
+
+def _sympy_problem(name, A, B, xs, t_span, index, hand):
+    """A constant-coefficient DAE with sympy forcing ``f = A x*' + B x*`` whose solution is ``x*``.
+
+    ``hand(f_fns)`` returns the hand-derived StateSpace from the compiled
+    forcing derivatives ``f_fns[d](t) -> f^(d)(t)`` (what a user writes).
+    """
+    x = sympy.Matrix(xs)
+    f = sympy.Matrix(A) * x.diff(T) + sympy.Matrix(B) * x
+    derivs = [sympy.lambdify(T, list(x.diff(T, d)), "numpy") for d in range(3)]
+
+    def exact(t, d):
+        return np.array([np.broadcast_to(v, t.shape) for v in derivs[d](t)], dtype=float)
+
+    p = Problem(name, lsc.LinearDAE(A, B, list(f)), t_span, exact, index, None, (index,))
+    f_fns = [sympy.lambdify(T, list(f.diff(T, d)), "math") for d in range(4)]
+    p.state_space = hand(f_fns, p)
+    return p
+
+
+def forced_chain():
+    """Index 3, sinusoidal and exponential forcing: x0' + x0 + x1 = f0, x2' + x1 = f1, x3' + x2 = f2, x3 = f3."""
+    A = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1], [0, 0, 0, 0]], dtype=float)
+    B = np.eye(4)
+    B[0, 1] = 1.0
+    xs = [sympy.sin(2 * T), sympy.cos(T) * sympy.exp(-T / 3), sympy.cos(3 * T), sympy.sin(T) * sympy.exp(-T / 10)]
+
+    def hand(f, p):
+        # x3 = f3, x2 = f2 - f3', x1 = f1 - f2' + f3'', and the one dynamic state x0
+        def rhs(t, y):
+            f0, f1 = f[0](t), f[1](t)
+            return np.array([-y[0] - (f0[1] - f1[2] + f[2](t)[3]) + f0[0]])
+
+        def output(t, y):
+            f0, f1, f2 = f[0](t), f[1](t), f[2](t)
+            return np.array([y[0], f0[1] - f1[2] + f2[3], f0[2] - f1[3], f0[3]])
+
+        def residual(t, x, xp):  # index-1 form: the dynamic equation and the hidden constraints
+            return np.array([xp[0] + x[0] + x[1], 0.0, 0.0, 0.0]) - np.r_[f[0](t)[0], 0.0, 0.0, 0.0] + \
+                np.r_[0.0, x[1:] - output(t, x[:1])[1:]]
+
+        def residual_jac(t, x, xp, cj):
+            return np.array([[1 + cj, 1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], dtype=float)
+
+        return StateSpace(p.x0[:1], rhs, np.array([[-1.0]]), output, residual, residual_jac, algebraic=[1, 2, 3])
+
+    return _sympy_problem("forced_chain (sympy, index 3)", A, B, xs, (0.0, 20.0), 3, hand)
+
+
+def forced_oscillator():
+    """Index 2, a damped oscillator driven through a constraint: x0' = x1 + f0, x1' + x0 + 0.1 x1 + x2 = f1, x3' + x2 = f2, x3 = f3."""
+    A = np.diag([1.0, 1.0, 0.0, 0.0])
+    A[2, 3] = 1.0
+    B = np.array([[0, -1, 0, 0], [1, 0.1, 1, 0], [0, 0, 1, 0], [0, 0, 0, 1]], dtype=float)
+    xs = [sympy.sin(2 * T) * sympy.exp(-T / 10), sympy.cos(3 * T), sympy.sin(T) ** 2, sympy.cos(T) + sympy.sin(4 * T) / 3]
+
+    def hand(f, p):
+        # x3 = f3, x2 = f2 - f3', and the oscillator (x0, x1)
+        def rhs(t, y):
+            f1, f2, f3 = f[0](t)[1], f[0](t)[2], f[1](t)[3]
+            return np.array([y[1] + f[0](t)[0], -y[0] - 0.1 * y[1] - (f2 - f3) + f1])
+
+        def output(t, y):
+            f0 = f[0](t)
+            return np.array([y[0], y[1], f0[2] - f[1](t)[3], f0[3]])
+
+        def residual(t, x, xp):
+            f0 = f[0](t)
+            return np.array([xp[0] - x[1] - f0[0], xp[1] + x[0] + 0.1 * x[1] + x[2] - f0[1],
+                             x[2] - (f0[2] - f[1](t)[3]), x[3] - f0[3]])
+
+        def residual_jac(t, x, xp, cj):
+            return np.array([[cj, -1, 0, 0], [1, cj + 0.1, 1, 0], [0, 0, 1, 0], [0, 0, 0, 1]], dtype=float)
+
+        return StateSpace(p.x0[:2], rhs, np.array([[0.0, 1.0], [-1.0, -0.1]]), output, residual, residual_jac,
+                          algebraic=[2, 3])
+
+    return _sympy_problem("forced_oscillator (sympy, index 2)", A, B, xs, (0.0, 20.0), 2, hand)
 
 
 def problems(quick, only=None):
+    if only == "dense":  # sympy forcing, 51 and 2,001 output points
+        return [(p, True, n_out) for p in (forced_chain(), forced_oscillator()) for n_out in (51, 2001)]
     const = [gallery.nilpotent_chain(k, seed=0) for k in ((1, 3, 5) if quick else (1, 2, 3, 4, 5))]
     const.append(gallery.random_pencil(n=12, blocks=(3, 2)))
     varying = [gallery.rotating_canonical(3), gallery.stiff_index1(100.0)]
     if not quick:
         varying.insert(0, gallery.rotating_canonical(2, omega=2.0))
-    return ([(p, True) for p in const] if only != "time-varying" else []) + \
-        ([(p, False) for p in varying] if only != "constant" else [])
+    return ([(p, True, N_OUT) for p in const] if only != "time-varying" else []) + \
+        ([(p, False, N_OUT) for p in varying] if only != "constant" else [])
 
 
 def timed(run, repeats):
-    """``run()`` once to warm up, then the minimum wall time over `repeats` calls."""
+    """``run()`` once to warm up, then the minimum wall time over `repeats` calls (more for fast runs)."""
+    t0 = time.perf_counter()
     out = run()
+    first = time.perf_counter() - t0
     best = math.inf
-    for _ in range(repeats):
+    # a run of a few ms is easily hit by the machine's load: take the minimum over ~0.2 s of repeats
+    for _ in range(max(repeats, min(30, int(0.2 / max(first, 1e-6))))):
         t0 = time.perf_counter()
         out = run()
         best = min(best, time.perf_counter() - t0)
@@ -79,8 +183,8 @@ def errors(X, Xs, rtol, atol):
     return float(np.max(e / (1 + np.abs(Xs)))), float(np.max(e / (atol + rtol * np.abs(Xs))))
 
 
-def bench_problem(p, constant, args, residual_of):
-    t_eval = np.linspace(*p.t_span, N_OUT)
+def bench_problem(p, constant, args, residual_of, n_out=N_OUT):
+    t_eval = np.linspace(*p.t_span, n_out)
     Xs = p.exact(t_eval)
     ss = p.state_space
     rows = []
@@ -88,15 +192,20 @@ def bench_problem(p, constant, args, residual_of):
     solvers = ["RK45", "DOP853", "Radau", "BDF"] if constant else ["DOP853", "Radau"]
     if "stiff" in p.name:
         solvers = ["Radau", "BDF"]  # explicit methods need ~kappa steps per unit time: not what anyone would pick
+    if args.only == "dense":
+        solvers = ["RK45", "DOP853", "Radau"]
+    lsc_solvers = solvers + (["CVODE"] if CVODE_OK else [])
     lams = [1.0, 10.0]
     completions = [("standard", None)] + [(m, lam) for m in ("stabilized", "alternative") for lam in lams]
     if not constant:  # a time-varying completion is evaluated pointwise: keep the run short
         completions = [("standard", None), ("stabilized", 1.0), ("alternative", 1.0), ("alternative", 10.0)]
+    if args.only == "dense":  # four grids of two problems: two completions keep the run short
+        completions = [("standard", None), ("alternative", 1.0)]
 
     def add(family, method, lam, solver, rtol, atol, seconds, X, nfev, setup=0.0, success=True):
         err, err_tol = errors(X, Xs, rtol, atol) if success else (math.inf, math.inf)
         rows.append({
-            "problem": p.name, "constant": constant, "index": p.index, "n": p.dae.n, "family": family,
+            "problem": p.name if len(t_eval) == N_OUT else f"{p.name}, {len(t_eval)} points", "n_out": len(t_eval), "constant": constant, "index": p.index, "n": p.dae.n, "family": family,
             "method": method, "lam": lam, "solver": solver, "rtol": rtol, "atol": atol, "time": seconds,
             "setup": setup, "err": err, "err_tol": err_tol, "nfev": nfev,
             "residual_end": residual_of(p, X[:, -1]) if success else math.inf, "success": success,
@@ -109,7 +218,7 @@ def bench_problem(p, constant, args, residual_of):
         t0 = time.perf_counter()
         c = lsc.complete(p.dae, method, lam=lam)
         setup = time.perf_counter() - t0
-        for solver in solvers:
+        for solver in (lsc_solvers if family == "lsc" else solvers):
             for rtol in tols:
                 atol = 1e-2 * rtol
                 seconds, res = timed(lambda: lsc.solve_completion(c, p.t_span, p.x0, method=solver, t_eval=t_eval,
@@ -117,8 +226,15 @@ def bench_problem(p, constant, args, residual_of):
                                      args.repeats)
                 add(family, method, lam, solver, rtol, atol, seconds, res.x, res.nfev, setup, res.success)
         if constant and method == "alternative" and lam == lams[0]:
-            # taylor_degree 3 (the default) and 7: the forcing's Taylor degree, not the step, limits the
-            # error for smooth forcing (global error O(h^(q+1)))
+            # automatic Taylor degree and step from the tolerance asked for (the default)
+            for rtol in ([1e-6, 1e-9, 1e-11] if args.quick else [1e-4, 1e-6, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12]):
+                seconds, res = timed(lambda: lsc.solve_completion(c, p.t_span, p.x0, method="expm", t_eval=t_eval,
+                                                                   rtol=rtol, atol=rtol), args.repeats)
+                add("expm", method, lam, "expm auto", rtol, rtol, seconds, res.x, 0, setup, res.success)
+            if args.only == "dense":
+                continue
+            # taylor_degree 3 and 7 with a fixed step (max_step): the forcing's Taylor degree, not the step,
+            # limits the error for smooth forcing (global error O(h^(q+1)))
             for q in (3, 7):
                 for h in ([0.1, 0.02, 0.005] if args.quick else [0.2, 0.1, 0.05, 0.02, 0.01, 0.005, 0.0025]):
                     seconds, res = timed(lambda: lsc.solve_completion(c, p.t_span, p.x0, method="expm",
@@ -129,7 +245,8 @@ def bench_problem(p, constant, args, residual_of):
     if ss is None:
         return rows
     for solver in solvers:
-        for rtol in tols:
+        # dense: DOP853 on the hand ODE also at the tolerances that reach the 1e-10 of the expm target
+        for rtol in tols + ([1e-10, 1e-11, 1e-12, 1e-13] if args.only == "dense" and solver == "DOP853" else []):
             atol = 1e-2 * rtol
             options = {"jac": ss.jac} if solver in ("Radau", "BDF") else {}
 
@@ -180,19 +297,24 @@ def fastest_at(rows, level, **where):
     return min(times) if times else None
 
 
-def report(rows):
+def report(rows, rhs_rows=()):
+    """The targets as ratios measured in this run, as Markdown."""
     lines = []
     problems_ = list(dict.fromkeys(r["problem"] for r in rows))
     constant = {r["problem"]: r["constant"] for r in rows}
 
-    lines.append("Target 1: expm (alternative, lam=1) vs DOP853 on the hand-derived ODE, fastest run with err <= 1e-10")
+    lines += [] if not any(constant.values()) else ["**expm** (alternative, lam=1, automatic Taylor degree and step) against DOP853 on the hand-derived "
+              "ODE, fastest run of each with max error <= 1e-10 (target <= 0.3):", "",
+              "| problem | expm | DOP853 hand | ratio |", "|---|---:|---:|---:|"]
     for name in (q for q in problems_ if constant[q]):
-        te = fastest_at(rows, 1e-10, problem=name, family="expm")
+        te = fastest_at(rows, 1e-10, problem=name, family="expm", solver="expm auto")
         th = fastest_at(rows, 1e-10, problem=name, family="hand-ODE", solver="DOP853")
         ratio = f"{te / th:.2f}" if te and th else "n/a (not reached)"
-        lines.append(f"  {name:45s} expm {_ms(te)}  DOP853 {_ms(th)}  ratio {ratio}  (target <= 0.5)")
+        lines.append(f"| {name} | {_ms(te)} | {_ms(th)} | {ratio} |")
 
-    lines.append("Target 2: completion / hand-derived ODE, same solver and tolerance (constant coefficients)")
+    lines += [] if not any(constant.values()) else [
+        "", "**Completion / hand-derived ODE**, same solve_ivp method and tolerance, constant coefficients "
+        "(target <= 1.3):", "", "| problem | median | max | worst case |", "|---|---:|---:|---|"]
     for name in (q for q in problems_ if constant[q]):
         ratios = []
         for r in rows:
@@ -204,24 +326,43 @@ def report(rows):
         if ratios:
             q = np.array([x[0] for x in ratios])
             worst = max(ratios)
-            lines.append(f"  {name:45s} median {np.median(q):.2f}  max {worst[0]:.2f} ({worst[1]}, lam={worst[2]}, "
-                         f"{worst[3]}, rtol={worst[4]:g})  (target <= 1.5)")
+            lines.append(f"| {name} | {np.median(q):.2f} | {worst[0]:.2f} | {worst[1]}, lam={worst[2]}, {worst[3]}, "
+                         f"rtol={worst[4]:g} |")
+    if rhs_rows:
+        lines += ["", "**One rhs call**: `Completion.rhs` against the hand-derived ODE's rhs (target <= 1.5):", "",
+                  "| problem | completion rhs | hand rhs | ratio |", "|---|---:|---:|---:|"]
+        lines += [f"| {name} | {1e6 * a:.2f} us | {1e6 * b:.2f} us | {a / b:.2f} |" for name, a, b in rhs_rows]
 
-    lines.append("Target 3: time-varying, best lsc run vs best hand-ODE / IDA run reaching the same error")
-    for name in (q for q in problems_ if not constant[q]):
+    varying = [q for q in problems_ if not constant[q]]
+    if varying:
+        lines += ["", "**Time-varying**: best lsc run (stabilized or alternative; any solver, CVODE included) against "
+                  "the best hand-ODE and IDA runs reaching the same error (targets: <= 3 and < 1):", "",
+                  "| problem | error | lsc | hand | IDA | lsc/hand | lsc/IDA |", "|---|---:|---:|---:|---:|---:|---:|"]
+    for name in varying:
         for level in (1e-4, 1e-6, 1e-8, 1e-10):
             tl = fastest_at(rows, level, problem=name, family="lsc", method=lambda m: m != "standard")
             th = fastest_at(rows, level, problem=name, family="hand-ODE")
             ti = fastest_at(rows, level, problem=name, family="IDA")
             r_h = f"{tl / th:.2f}" if tl and th else "n/a"
             r_i = f"{tl / ti:.2f}" if tl and ti else "n/a"
-            lines.append(f"  {name:45s} err<={level:.0e}: lsc {_ms(tl)} hand {_ms(th)} IDA {_ms(ti)}  "
-                         f"lsc/hand {r_h} (target <= 5)  lsc/IDA {r_i} (target < 1)")
+            lines.append(f"| {name} | {level:.0e} | {_ms(tl)} | {_ms(th)} | {_ms(ti)} | {r_h} | {r_i} |")
     return "\n".join(lines)
 
 
+def rhs_cost(p, repeats=7):
+    """``(completion rhs, hand rhs)`` in seconds per call, interleaved (alternative, lam=1)."""
+    c = lsc.complete(p.dae, "alternative", lam=1.0)
+    ss = p.state_space
+    x, y, t = p.x0.copy(), ss.y0.copy(), 0.3
+    lib, hand = [], []
+    for _ in range(repeats):
+        lib.append(min(timeit.repeat(lambda: c.rhs(t, x), number=2000, repeat=3)) / 2000)
+        hand.append(min(timeit.repeat(lambda: ss.rhs(t, y), number=2000, repeat=3)) / 2000)
+    return min(lib), min(hand)
+
+
 def _ms(seconds):
-    return f"{1e3 * seconds:8.2f} ms" if seconds else "     n/a   "
+    return f"{1e3 * seconds:.2f} ms" if seconds else "n/a"
 
 
 def plot(rows, path):
@@ -266,20 +407,40 @@ def plot(rows, path):
     return True
 
 
+def _typed(r):
+    """A CSV row back to the types `add` wrote."""
+    out = dict(r)
+    for key in ("rtol", "atol", "time", "setup", "err", "err_tol", "residual_end"):
+        out[key] = float(r[key])
+    for key in ("constant", "success"):
+        out[key] = r[key] == "True"
+    out["lam"] = None if r["lam"] in ("", "None") else float(r["lam"])
+    out["nfev"], out["index"], out["n"], out["n_out"] = int(r["nfev"]), int(r["index"]), int(r["n"]), int(r["n_out"])
+    return out
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer problems, tolerances and step sizes")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--only", choices=["constant", "time-varying"],
-                        help="one half of the problems (two halves can run side by side on two cores)")
+    parser.add_argument("--only", choices=["constant", "time-varying", "dense"],
+                        help="one part of the problems (parts can run side by side on two cores); 'dense': two "
+                             "problems with sympy forcing, 51 and 2,001 output points")
+    parser.add_argument("--report-only", action="store_true",
+                        help="re-render the Markdown report from the CSV of an earlier run (no measuring)")
     args = parser.parse_args()
     OUT.mkdir(exist_ok=True)
     stem = "work_precision" + (f"_{args.only}" if args.only else "")
     residual_of = _residual_function()
     rows = []
-    for p, constant in problems(args.quick, args.only):
+    rhs_rows = []
+    if args.report_only:
+        rows = [_typed(r) for r in csv.DictReader(open(OUT / f"{stem}.csv"))]
+    for p, constant, n_out in ([] if args.report_only else problems(args.quick, args.only)):
         t0 = time.perf_counter()
-        rows += bench_problem(p, constant, args, residual_of)
+        rows += bench_problem(p, constant, args, residual_of, n_out)
+        if constant and p.state_space is not None and n_out == N_OUT:
+            rhs_rows.append((p.name, *rhs_cost(p)))
         print(f"{p.name}: {time.perf_counter() - t0:.1f} s", flush=True)
         with open(OUT / f"{stem}.csv", "w", newline="") as fh:  # after every problem: a long run keeps its rows
             writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
@@ -294,9 +455,19 @@ def main():
         print(f"{r['problem']:45s} {r['family']:8s} {r['method']:11s} {lam:>4s} {r['solver']:13s} {r['rtol']:7.0e} "
               f"{1e3 * r['time']:9.2f} {r['err']:8.1e} {r['err_tol']:8.1e} {r['nfev']:6d} {r['residual_end']:8.1e}")
     print()
-    print(report(rows))
-    if plot(rows, OUT / f"{stem}.png"):
-        print(f"\nwrote {OUT / f'{stem}.csv'} and {OUT / f'{stem}.png'}")
+    text = report(rows, rhs_rows)
+    print(text)
+    GENERATED.mkdir(parents=True, exist_ok=True)
+    what = {"dense": "two problems with sympy forcing, 51 and 2,001 output points",
+            "constant": "constant-coefficient gallery problems", "time-varying": "time-varying gallery problems",
+            None: "gallery problems"}[args.only]
+    header = (f"Work-precision targets, {what}, measured side by side in one run of "
+              f"`examples/work_precision.py{' --only ' + args.only if args.only else ''}"
+              f"{' --quick' if args.quick else ''}` (single-threaded BLAS, minimum of {args.repeats} repeats "
+              f"after a warm-up). Errors are max |x - x*| / (1 + |x*|) over the output grid.\n\n")
+    (GENERATED / f"{stem}.md").write_text(header + text + f"\n\n![work-precision]({stem}.png)\n")
+    if plot(rows, GENERATED / f"{stem}.png"):
+        print(f"\nwrote {OUT / f'{stem}.csv'}, {GENERATED / f'{stem}.md'} and {GENERATED / f'{stem}.png'}")
 
 
 if __name__ == "__main__":

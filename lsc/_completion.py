@@ -28,6 +28,7 @@ import scipy.linalg
 
 from ._derivative_array import array_jets, lam_jet, stabilization_jets
 from ._exceptions import DimensionError, IndexDeterminationError
+from ._forcing import Forcing
 from ._index import check_solvability, determine_index, k_works
 from ._linalg import numerical_rank, validate_rcond
 from ._timefunc import TimeFunction, _contains_sympy, _shape_str, as_time_function
@@ -303,6 +304,7 @@ class Completion:
         else:
             self._g_const = None
             self._c_const = None
+            self._forcing = Forcing(self._W, f, self._order)  # g(t) compiled once (lsc._forcing)
 
     def _fstack(self, t):
         return self.dae.f.jet(t, self._order).reshape(-1)
@@ -321,14 +323,14 @@ class Completion:
             return G, g
         if self._g_const is not None:
             return self._G, self._g_const
-        return self._G, self._W @ self._fstack(t)
+        return self._G, self._forcing.value(t)
 
     def rhs(self, t, x):
         """Right-hand side ``G x + g(t)`` in `scipy.integrate.solve_ivp` form."""
         if self.dae.is_constant:
             if self._g_const is not None:
                 return self._G @ x + self._g_const
-            return self._G @ x + self._W @ self._fstack(t)
+            return self._G @ x + self._forcing.value(t)
         _, G, g = self._evaluate(t)
         return G @ x + g
 

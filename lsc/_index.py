@@ -28,8 +28,9 @@ class ArrayRanks:
     n : int
     """
 
-    def __init__(self, k, rank_J, rank_J_w, rank_JF, rows, n):
+    def __init__(self, k, rank_J, rank_J_w, rank_JF, rows, n, singular_values=None):
         self.k, self.rank_J, self.rank_J_w, self.rank_JF, self.rows, self.n = k, rank_J, rank_J_w, rank_JF, rows, n
+        self._s = singular_values  # of J: for constant coefficients they are those of the next array's J[:, n:]
 
     @property
     def one_full(self):
@@ -52,8 +53,18 @@ class ArrayRanks:
         )
 
 
-def array_ranks(dae, k, t, rcond):
-    """The ranks that decide 1-fullness and (A3)-(A4) for k differentiations."""
+def array_ranks(dae, k, t, rcond, previous=None, memo=None):
+    """The ranks that decide 1-fullness and (A3)-(A4) for k differentiations.
+
+    ``previous`` (the ranks for ``k - 1`` at the same time) saves one SVD
+    for constant coefficients: ``J[:, n:]`` with ``k`` differentiations is
+    ``J`` with ``k - 1`` below a zero block row (``D^i A`` vanishes for
+    ``i > 0``), so it has the same singular values. ``memo`` (a dict) keeps
+    the ranks per ``(k, t)`` across calls on the same DAE.
+    """
+    key = (k, float(t))
+    if memo is not None and key in memo:
+        return memo[key]
     n = dae.n
     jets = array_jets(dae, k, t)
     J, F = jets.J[0], jets.F[0]
@@ -62,12 +73,20 @@ def array_ranks(dae, k, t, rcond):
     s = scipy.linalg.svdvals(J)
     scale = s[0] if s.size else 0.0
     r = numerical_rank(s, J.shape, rcond, what=f"derivative array J (k={k})")
-    s_w = scipy.linalg.svdvals(J[:, n:]) if k > 0 else np.zeros(0)
+    if k == 0:
+        s_w = np.zeros(0)
+    elif dae.is_constant and previous is not None and previous.k == k - 1 and previous._s is not None:
+        s_w = previous._s
+    else:
+        s_w = scipy.linalg.svdvals(J[:, n:])
     r_w = numerical_rank(s_w, J.shape, rcond, what=f"derivative array J[:, n:] (k={k})", scale=scale)
     JF = np.hstack([J, F])
     s_jf = scipy.linalg.svdvals(JF)
     r_jf = numerical_rank(s_jf, JF.shape, rcond, what=f"[J, F] (k={k})")
-    return ArrayRanks(k, r, r_w, r_jf, rows, n)
+    ranks = ArrayRanks(k, r, r_w, r_jf, rows, n, singular_values=s)
+    if memo is not None:
+        memo[key] = ranks
+    return ranks
 
 
 def pencil_is_regular(dae, rcond=None):
@@ -135,7 +154,7 @@ def differentiation_index(dae, t=0.0, kmax=10, rcond=None):
     return k
 
 
-def k_works(dae, k, t, rcond, ranks=None):
+def k_works(dae, k, t, rcond, ranks=None, memo=None):
     """Whether ``k`` differentiations determine ``x'`` at ``t``: ``(ok, ranks, next_ranks)``.
 
     The one criterion used everywhere: the array with ``k`` differentiations
@@ -143,19 +162,22 @@ def k_works(dae, k, t, rcond, ranks=None):
     keeps the corank and full row rank (thesis (A3)-(A4) for k and k+1).
     ``next_ranks`` is None when the first part already fails.
     """
-    ranks = ranks if ranks is not None else array_ranks(dae, k, t, rcond)
+    ranks = ranks if ranks is not None else array_ranks(dae, k, t, rcond, memo=memo)
     if not (ranks.full_row_rank and ranks.one_full):
         return False, ranks, None
-    nxt = array_ranks(dae, k + 1, t, rcond)
+    nxt = array_ranks(dae, k + 1, t, rcond, previous=ranks, memo=memo)
     return nxt.full_row_rank and nxt.corank == ranks.corank, ranks, nxt
 
 
-def determine_index(dae, t, kmax, rcond):
+def determine_index(dae, t, kmax, rcond, memo=None):
     """``(k, ranks)`` with the ranks for each k tried; raises on failure."""
     tried = []
     ranks_next = None
     for k in range(kmax + 1):
-        ok, ranks, ranks_next = k_works(dae, k, t, rcond, ranks=ranks_next)
+        if ranks_next is None and tried:
+            # k - 1 failed before its next array was formed: J[:, n:] here is J there
+            ranks_next = array_ranks(dae, k, t, rcond, previous=tried[-1], memo=memo)
+        ok, ranks, ranks_next = k_works(dae, k, t, rcond, ranks=ranks_next, memo=memo)
         tried.append(ranks)
         if ok:
             return k, tried
@@ -271,11 +293,12 @@ def check_solvability(dae, t_span, *, k=None, kmax=10, rcond=None, samples=21):
         raise ValueError(f"`samples` must be an int >= 2; found {samples!r}.")
     times = sample_times((t0, t1), samples)
     index = None
+    memo = {}  # the ranks found while determining the index are those k_works checks below
     if k is None:
         index, failures = [], []
         for t in times:
             try:
-                index.append(determine_index(dae, float(t), kmax, rcond)[0])
+                index.append(determine_index(dae, float(t), kmax, rcond, memo=memo)[0])
             except IndexDeterminationError as exc:
                 failures.append(f"t={t:g}: {str(exc).splitlines()[0]}")
         if failures:
@@ -286,7 +309,7 @@ def check_solvability(dae, t_span, *, k=None, kmax=10, rcond=None, samples=21):
         k = max(index)
     else:
         k = check_k(k)
-    checks = [k_works(dae, k, float(t), rcond) for t in times]
+    checks = [k_works(dae, k, float(t), rcond, memo=memo) for t in times]
     bad = [f"t={t:g}: {r}" + ("" if nxt is None else f"; next: {nxt}") for t, (ok, r, nxt) in zip(times, checks) if not ok]
     if bad:
         raise IndexDeterminationError(f"with k={k} the derivative array does not determine x' at:\n  " + "\n  ".join(bad))

@@ -3,6 +3,7 @@
 import numpy as np
 from scipy.integrate import BDF, LSODA, OdeSolver, Radau, solve_ivp
 
+from . import _cvode, _expm
 from ._chebyshev import ChebyshevCoefficients, EvaluationFailed
 from ._completion import Completion, complete
 from ._derivative_array import lam_jet
@@ -76,104 +77,25 @@ def _is_implicit(method):
     return isinstance(method, type) and issubclass(method, (Radau, BDF, LSODA))
 
 
-class _ExpmPropagator:
-    """Exact stepping of ``x' = G x + g(t)`` for constant ``G`` (the 'expm' method).
-
-    Over a step ``[t, t + h]`` the forcing is replaced by its Taylor
-    polynomial of degree ``q`` at ``t`` (its derivatives are exact:
-    ``g^(j) = W @ [f^(j); f^(j+1); ...]``), and the linear ODE is then solved
-    exactly::
-
-        x(t + h) = e^{Gh} x(t) + sum_{j=0..q} h^(j+1) phi_(j+1)(Gh) g^(j)(t)
-
-    with ``phi_0 = exp`` and ``phi_(j+1)(z) = (phi_j(z) - 1/j!) / z``. All
-    ``phi_j(Gh)`` come from one ``expm`` of an ``n (q + 2)`` block matrix per
-    distinct step size, so a step costs ``q + 2`` matrix-vector products.
-    Exact (to rounding) when ``g`` is a polynomial of degree <= ``q`` (in
-    particular for constant or zero forcing); otherwise the local error is
-    ``O(h^(q+2) |g^(q+1)|)`` and the global error ``O(h^(q+1))``.
-    """
-
-    def __init__(self, completion, q):
-        self.c, self.q = completion, q
-        self.G = completion._G
-        self.W = completion._W
-        self.n = completion.n
-        self._cache = {}
-        p = completion._order
-        self._shifted = np.add.outer(np.arange(q + 1), np.arange(p + 1))  # jet rows j..j+p for each term j
-
-    def _matrices(self, h):
-        # Output intervals of equal length give step sizes that differ in the last
-        # bits (linspace rounding): share one exponential among them. A relative
-        # change of 1e-13 in h changes the step by far less than the method's error.
-        key = float(f"{h:.13g}")
-        hit = self._cache.get(key)
-        if hit is None:
-            import scipy.linalg
-
-            n, q = self.n, self.q
-            m = q + 2
-            # Block upper-bidiagonal [[Gh, I, 0..], [0, 0, I, ..], ...]: the first
-            # block row of its exponential is [phi_0, phi_1, ..., phi_(q+1)](Gh).
-            M = np.zeros((m * n, m * n))
-            M[:n, :n] = self.G * h
-            for j in range(1, m):
-                M[(j - 1) * n : j * n, j * n : (j + 1) * n] = np.eye(n)
-            E = scipy.linalg.expm(M)[:n]
-            phi = [E[:, j * n : (j + 1) * n] for j in range(m)]
-            # All q + 1 Taylor terms as one matrix acting on the stacked shifted jets
-            # [f^(j), ..., f^(j+p)] for j = 0..q (see `step`): one product per step.
-            forcing = np.hstack([h ** (j + 1) * phi[j + 1] @ self.W for j in range(q + 1)])
-            hit = self._cache[key] = (phi[0], forcing)
-        return hit
-
-    def step(self, t, x, h):
-        Phi, forcing = self._matrices(h)
-        x_new = Phi @ x
-        f = self.c.dae.f
-        if f is None:
-            return x_new
-        p = self.c._order
-        if f.is_constant:
-            # g is constant: only the j = 0 term
-            return x_new + forcing[:, : (p + 1) * self.n] @ f.jet(t, p).reshape(-1)
-        return x_new + forcing @ f.jet(t, p + self.q)[self._shifted].reshape(-1)
-
-
-def _solve_expm(completion, t0, t1, x0, t_eval, options):
-    q = options.pop("taylor_degree", 3)
-    max_step = options.pop("max_step", np.inf)
+def _solve_expm(completion, t0, t1, x0, t_eval, rtol, atol, options):
+    q = options.pop("taylor_degree", None)
+    max_step = options.pop("max_step", None)
     if options:
         raise TypeError(f"method='expm' takes only `taylor_degree` and `max_step` options; found {sorted(options)}.")
     if not completion.dae.is_constant:
         raise ValueError("method='expm' needs constant coefficients; use an ODE method for time-varying ones.")
-    if isinstance(q, bool) or not isinstance(q, int) or q < 0:
+    if q is not None and (isinstance(q, bool) or not isinstance(q, int) or q < 0):
         raise ValueError(f"`taylor_degree` must be a non-negative int; found {q!r}.")
-    if not max_step > 0:
+    if max_step is not None and not max_step > 0:
         raise ValueError(f"`max_step` must be positive; found {max_step!r}.")
     t_out = np.linspace(t0, t1, 101) if t_eval is None else np.asarray(t_eval, dtype=float)
     direction = np.sign(t1 - t0)
     if t_out.ndim != 1 or np.any(direction * np.diff(t_out) < 0) or np.any(direction * (t_out - t0) < 0) \
             or np.any(direction * (t_out - t1) > 0):
         raise ValueError("`t_eval` must be sorted in the direction of integration and lie within `t_span`.")
-    prop = _ExpmPropagator(completion, q)
-    xs, x, t, nsteps = [], x0.copy(), t0, 0
-    for target in t_out:
-        span = target - t
-        if span != 0.0:
-            m = max(1, int(np.ceil(abs(span) / max_step - 1e-12)))
-            h = span / m
-            for _ in range(m):
-                x = prop.step(t, x, h)
-                t = t + h
-                nsteps += 1
-            t = target
-        xs.append(x.copy())
-    X = np.array(xs).T
+    X, message = _expm.integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=q, max_step=max_step)
     return CompletionResult(
-        t=t_out, x=X, success=True, status=0,
-        message=f"exact stepping: {nsteps} steps, {len(prop._cache)} matrix exponential(s)",
+        t=t_out, x=X, success=True, status=0, message=message,
         nfev=0, njev=0, nlu=0, sol=None, completion=completion,
     )
 
@@ -223,11 +145,19 @@ def solve_completion(
         'LSODA') the constant Jacobian ``G`` is passed. Large ``lam`` makes
         the completion stiff: prefer 'Radau' or 'BDF' when ``lam`` times the
         interval length is large. ``'expm'`` (constant coefficients only)
-        steps exactly with the matrix exponential from output time to output
-        time (see `_ExpmPropagator`): exact for polynomial forcing of degree
-        <= ``taylor_degree`` (option, default 3), otherwise of order
-        ``taylor_degree + 1`` in the step (option ``max_step`` refines it);
-        ``t_eval`` defaults to 101 equally spaced times; rtol/atol are unused.
+        steps exactly with the matrix exponential (`lsc._expm`): exact for
+        polynomial forcing; otherwise the forcing's Taylor degree and the
+        step are chosen so that the error stays within ``atol + rtol |x0|``
+        (options ``taylor_degree`` and ``max_step`` fix them instead), and
+        the output points are read from the exact propagator (one
+        exponential for an equally spaced ``t_eval``, which defaults to 101
+        equally spaced times). ``'CVODE'`` integrates with SUNDIALS CVODE
+        (BDF, dense direct solver, the constant Jacobian ``G`` or
+        ``G(t)``; needs the optional package scikit-sundae; options
+        ``cvode_method`` ('BDF' or 'Adams'), ``first_step``, ``min_step``,
+        ``max_step``, ``max_order``, ``max_num_steps``, ``max_nonlin_iters``,
+        ``max_conv_fails``, ``linsolver``): stiff completions at compiled
+        speed.
         ``'auto'`` picks 'Radau' when the completion is stiff on `t_span`
         (``stiffness_ratio`` > 100, see below) and 'DOP853' otherwise. An
         explicit method on a stiff completion runs as asked, and the
@@ -235,7 +165,7 @@ def solve_completion(
     t_eval : array_like, optional
         Output times (default: the solver's steps).
     rtol, atol : float or array_like, optional
-        Tolerances, as in solve_ivp.
+        Tolerances, as in solve_ivp ('expm': the accuracy asked for).
     project : bool, optional
         Replace `x0` by the nearest consistent point (`Completion.project`)
         before integrating.
@@ -282,7 +212,7 @@ def solve_completion(
     if method == "expm":
         if project:
             x0 = completion.project(t0, x0)
-        return _solve_expm(completion, t0, t1, x0, t_eval, dict(options))
+        return _solve_expm(completion, t0, t1, x0, t_eval, rtol, atol, dict(options))
     stiffness = stiffness_ratio(completion, (t0, t1))
     if method == "auto":
         method = "Radau" if stiffness > _STIFF else "DOP853"
@@ -310,6 +240,8 @@ def solve_completion(
         except ValueError as exc:
             raise _ForcingFailed(t, exc) from exc
 
+    if method == "CVODE":
+        return _solve_cvode(completion, rhs, jac, (t0, t1), x0, t_eval, rtol, atol, options, built)
     if _is_implicit(method) and "jac" not in options:
         options["jac"] = completion.jac(t0, x0) if completion.dae.is_constant else jac
     try:
@@ -326,6 +258,20 @@ def solve_completion(
     return CompletionResult(
         t=sol.t, x=x, success=bool(sol.success), status=sol.status, message=message,
         nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=sol.sol, completion=completion,
+    )
+
+
+def _solve_cvode(completion, rhs, jac, t_span, x0, t_eval, rtol, atol, options, built):
+    constant_jac = completion.jac(t_span[0], x0) if completion.dae.is_constant else None
+    out = _cvode.solve(rhs, jac, *t_span, x0, t_eval, rtol, atol, options, constant_jac=constant_jac)
+    message = out["message"] + built
+    status = out["status"]
+    if "failure" in out:
+        t_fail, exc = out["failure"]
+        message, status = f"evaluating the right-hand side failed at t={float(t_fail)!r}: {exc}", -2
+    return CompletionResult(
+        t=out["t"], x=out["x"], success=out["success"], status=status, message=message,
+        nfev=out["nfev"], njev=out["njev"], nlu=0, sol=None, completion=completion,
     )
 
 

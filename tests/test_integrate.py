@@ -146,7 +146,8 @@ def test_expm_order_is_taylor_degree_plus_one(q):
     hs = np.array([0.2, 0.1, 0.05])
     errors = []
     for h in hs:
-        res = solve_completion(c, (0.0, 2.0), p.x0, method="expm", t_eval=np.arange(0.0, 2.0 + h / 2, h), taylor_degree=q)
+        res = solve_completion(c, (0.0, 2.0), p.x0, method="expm", t_eval=np.arange(0.0, 2.0 + h / 2, h), taylor_degree=q,
+                               max_step=h)
         errors.append(np.abs(res.x - p.exact(res.t)).max())
     slope = np.polyfit(np.log(hs), np.log(errors), 1)[0]
     assert abs(slope - (q + 1)) < 0.2, (slope, errors)

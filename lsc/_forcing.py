@@ -1,0 +1,179 @@
+"""The forcing ``g(t) = W [f; f'; ...; f^(p)]`` of a constant-coefficient completion, compiled.
+
+A constant-coefficient completion is ``x' = G x + W fstack(t)`` with
+``fstack = [f, f', ..., f^(p)]`` stacked by derivative order. Evaluating the
+forcing jet of ``f`` at every call, then a product with the wide ``W``, costs
+far more than ``G @ x``. `Forcing` does that work once:
+
+- sympy ``f``: only the entries of ``fstack`` that ``W`` uses (a nonzero
+  column, a derivative that is not identically zero) are differentiated and
+  compiled into one function of ``t`` with shared common subexpressions: a
+  scalar version (the ``math`` module, fastest on floats) for ``rhs`` and a
+  numpy version vectorized over an array of times;
+- callable ``f(t, d)``: evaluated as before, one jet per time, and over an
+  array of times in one call per derivative order when the callable accepts
+  an array ``t`` (checked by shape; otherwise one call per time).
+
+`Forcing.jets` gives the derivatives ``g, g', ..., g^(order)`` at many times
+at once (``g^(j) = W [f^(j); ...; f^(j+p)]``): the exact stepping of
+`lsc._expm` reads all its forcing terms from one such call.
+"""
+
+import math
+
+import numpy as np
+
+from ._timefunc import SympyFunction
+
+__all__ = ["Forcing"]
+
+
+def _check_finite(values, name, t):
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"`{name}` is not finite at t={float(t)!r}: the completion's forcing is {np.asarray(values).tolist()}.")
+
+
+class Forcing:
+    """``g(t) = W @ [f; f'; ...; f^(p)](t)`` and its derivatives, for a fixed map ``W``.
+
+    Parameters
+    ----------
+    W : ndarray, shape (n, n_f * (p + 1))
+        The forcing map of the completion (columns ordered by derivative
+        order, then component of ``f``).
+    f : TimeFunction
+        The DAE's forcing (not constant: constant forcing needs none of this).
+    p : int
+        Highest derivative of ``f`` that ``W`` acts on.
+
+    Examples
+    --------
+    >>> import numpy as np, sympy
+    >>> from lsc._timefunc import as_time_function
+    >>> t = sympy.Symbol("t")
+    >>> f = as_time_function("f", [sympy.sin(t)], (1,))
+    >>> g = Forcing(np.array([[1.0, 2.0]]), f, 1)   # g = sin t + 2 cos t
+    >>> bool(abs(g(0.5) - (np.sin(0.5) + 2 * np.cos(0.5)))[0] < 1e-15)
+    True
+    >>> g.jets(np.array([0.0, 0.5]), 1).shape     # (order + 1, n, times)
+    (2, 1, 2)
+    """
+
+    def __init__(self, W, f, p):
+        self.W = np.asarray(W, dtype=float)
+        self.f, self.p = f, p
+        self.n = self.W.shape[0]
+        self.n_f = int(np.prod(f.shape, dtype=int))
+        self._sympy = isinstance(f, SympyFunction)
+        self._vector = {}  # order -> (columns of the stacked f-jet used, matrix acting on them, compiled fn or None)
+        self._callable_vectorizes = None
+        if self._sympy:
+            cols, entries = self._used(self._stack_map(0))
+            self._cols0 = cols
+            self._W0 = self._stack_map(0)[:, cols]
+            self._scalar = self._lambdify(entries, ["math", "numpy"])
+        # `value` is looked up per rhs call: bind the right one once
+        self.value = self._value_sympy if self._sympy else self._value_jet
+
+    # -- the map from the stacked f-jet (orders 0..p+order) to [g; g'; ...; g^(order)] ------------
+    def _stack_map(self, order):
+        """``Wbig`` with ``[g; ...; g^(order)] = Wbig @ [f; ...; f^(p+order)]``."""
+        n, m = self.n, self.n_f
+        Wbig = np.zeros(((order + 1) * n, (self.p + order + 1) * m))
+        for j in range(order + 1):
+            Wbig[j * n : (j + 1) * n, j * m : (j + self.p + 1) * m] = self.W
+        return Wbig
+
+    def _derivative(self, d):
+        f = self.f
+        while len(f._derivs) <= d:
+            f._derivs.append(f._derivs[-1].diff(f._t))
+        return f._derivs[d]
+
+    def _used(self, Wbig):
+        """The columns of `Wbig` that are nonzero and whose f-entry is not identically zero, with those entries."""
+        cols, entries = [], []
+        for col in np.flatnonzero(np.any(Wbig != 0.0, axis=0)):
+            d, i = divmod(int(col), self.n_f)
+            entry = self._derivative(d)[i]
+            if entry != 0:
+                cols.append(int(col))
+                entries.append(entry)
+        return np.array(cols, dtype=int), entries
+
+    def _lambdify(self, entries, modules):
+        import sympy
+
+        if not entries:
+            return None
+        return sympy.lambdify(self.f._t, entries, modules=modules, cse=True)
+
+    # -- one time ----------------------------------------------------------------------------------
+    def __call__(self, t):
+        return self.value(t)
+
+    def value(self, t):  # replaced per instance in __init__; documents the contract
+        """``g(t)``, shape (n,)."""
+        return self._value_sympy(t) if self._sympy else self._value_jet(t)
+
+    def _value_jet(self, t):
+        return self.W @ self.f.jet(t, self.p).reshape(-1)
+
+    def _value_sympy(self, t):
+        if self._scalar is None:
+            return np.zeros(self.n)
+        try:
+            values = self._scalar(float(t))
+        except (ArithmeticError, ValueError) as exc:  # the math module raises where numpy gives inf/nan
+            raise ValueError(f"`{self.f.name}` is not finite at t={float(t)!r} (its derivatives that the completion "
+                             f"uses: {exc}).") from None
+        # a sum is non-finite when an entry is (and the builtin sum of a short list costs next to nothing)
+        if not math.isfinite(sum(values)):
+            _check_finite(np.array(values, dtype=float), self.f.name, t)
+        return self._W0 @ np.array(values, dtype=float)
+
+    # -- many times ----------------------------------------------------------------------------
+    def jets(self, ts, order):
+        """``[g, g', ..., g^(order)]`` at every time of `ts`: shape ``(order + 1, n, len(ts))``."""
+        ts = np.asarray(ts, dtype=float).reshape(-1)
+        Wbig = self._stack_map(order)
+        if self._sympy:
+            hit = self._vector.get(order)
+            if hit is None:
+                cols, entries = self._used(Wbig)
+                hit = self._vector[order] = (cols, Wbig[:, cols], self._lambdify(entries, ["numpy"]))
+            cols, Wused, fn = hit
+            if fn is None:
+                return np.zeros((order + 1, self.n, ts.size))
+            with np.errstate(all="ignore"):  # non-finite values are reported below, with the time
+                values = fn(ts)
+            F = np.empty((len(values), ts.size))
+            for i, v in enumerate(values):  # constant entries come back as scalars
+                F[i] = v
+        else:
+            Wused = Wbig
+            F = self._callable_stack(ts, self.p + order)
+        with np.errstate(all="ignore"):
+            out = (Wused @ F).reshape(order + 1, self.n, ts.size)
+        if not np.all(np.isfinite(out)):
+            bad = int(np.argmin(np.all(np.isfinite(out), axis=(0, 1))))
+            raise ValueError(f"`{self.f.name}` is not finite at t={float(ts[bad])!r} (the forcing or one of its "
+                             f"derivatives of order <= {self.p + order}).")
+        return out
+
+    def _callable_stack(self, ts, top):
+        """``[f; f'; ...; f^(top)]`` at every time, shape ``((top + 1) n_f, len(ts))``."""
+        f, shape = self.f, self.f.shape
+        fn = getattr(f, "fn", None)
+        if self._callable_vectorizes is not False and fn is not None and not hasattr(fn, "jet") and ts.size > 1:
+            # A callable written with numpy ufuncs accepts an array t: one call per order.
+            try:
+                rows = [np.asarray(fn(ts, d), dtype=float) for d in range(top + 1)]
+                if all(r.shape == shape + (ts.size,) for r in rows):
+                    self._callable_vectorizes = True
+                    return np.concatenate([r.reshape(self.n_f, ts.size) for r in rows], axis=0)
+            except Exception:  # noqa: BLE001 - any failure means: not vectorized; the loop below reports errors
+                pass
+            self._callable_vectorizes = False
+        return np.column_stack([f.jet(float(t), top).reshape(-1) for t in ts]) if ts.size else \
+            np.zeros(((top + 1) * self.n_f, 0))

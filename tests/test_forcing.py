@@ -1,0 +1,57 @@
+"""The compiled forcing of constant-coefficient completions (lsc._forcing) against the jet path."""
+
+import numpy as np
+import pytest
+import sympy
+
+from lsc import LinearDAE, complete, gallery
+
+t = sympy.Symbol("t")
+
+
+def _dae():
+    p = gallery.random_pencil(n=6, blocks=(3, 2), seed=2)
+    f = [sympy.sin(2 * t), 0, sympy.exp(-t / 3) * sympy.cos(t), 1 / (2 + sympy.sin(t)), t**2, sympy.sqrt(1 + t**2)]
+    return LinearDAE(p.dae.A(0.0), p.dae.B(0.0), f)
+
+
+@pytest.mark.parametrize("method, lam", [("standard", None), ("stabilized", 3.0), ("alternative", 1.0)])
+def test_compiled_forcing_matches_the_jet_path(method, lam):
+    dae = _dae()
+    c = complete(dae, method, lam=lam)
+    p, n = c._order, c.n
+    ts = np.linspace(-1.0, 4.0, 23)
+    x = np.linspace(-1.0, 1.0, n)
+    for s in ts:
+        jet = c._W @ dae.f.jet(s, p).reshape(-1)
+        scale = 1.0 + np.abs(jet).max()
+        np.testing.assert_allclose(c.rhs(s, x), c._G @ x + jet, rtol=0, atol=1e-13 * scale)
+        np.testing.assert_allclose(c.matrices(s)[1], jet, rtol=0, atol=1e-13 * scale)
+    q = 4
+    jets = c._forcing.jets(ts, q)
+    assert jets.shape == (q + 1, n, ts.size)
+    for i, s in enumerate(ts):
+        fj = dae.f.jet(s, p + q)
+        for j in range(q + 1):
+            ref = c._W @ fj[j : j + p + 1].reshape(-1)
+            np.testing.assert_allclose(jets[j, :, i], ref, rtol=0, atol=1e-13 * (1.0 + np.abs(ref).max()))
+
+
+def test_compiled_forcing_uses_only_the_derivatives_W_needs():
+    dae = _dae()
+    c = complete(dae, "alternative", lam=1.0)
+    used = c._forcing._cols0
+    # the zero component of f and columns W does not touch are never compiled
+    assert np.all(np.any(c._W[:, used] != 0.0, axis=0))
+    assert not np.any(used % dae.n == 1)
+    assert used.size < c._W.shape[1]
+
+
+def test_compiled_forcing_reports_non_finite_values():
+    dae = LinearDAE(np.eye(2, k=1), np.eye(2), [0, 1 / (1 - t)])
+    c = complete(dae, "alternative", lam=1.0)
+    c.rhs(0.5, np.zeros(2))
+    with pytest.raises(ValueError, match="not finite at t=1.0"):
+        c.rhs(1.0, np.zeros(2))
+    with pytest.raises(ValueError, match="not finite"):
+        c._forcing.jets(np.array([0.0, 1.0]), 2)
