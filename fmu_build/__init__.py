@@ -1,7 +1,7 @@
 """fmu_build: package an lsc completion as an FMI 2.0 Co-Simulation FMU (pythonfmu)."""
 from ._build import build_fmu
 from ._expressions import ExpressionError
-from ._host import native_host_env
+from ._host import ecos_executable, native_host_env
 from ._spec import ModelSpec, SpecError, load_spec, parse_spec
 
-__all__ = ["build_fmu", "load_spec", "parse_spec", "ModelSpec", "SpecError", "ExpressionError", "native_host_env"]
+__all__ = ["build_fmu", "load_spec", "parse_spec", "ModelSpec", "SpecError", "ExpressionError", "native_host_env", "ecos_executable"]
