@@ -65,4 +65,7 @@ def main(sizes=(25, 50, 100, 200, 400)):
 
 
 if __name__ == "__main__":
-    main()
+    from _docs_output import printed_to_docs
+
+    with printed_to_docs("bench_scaling", "Set-up and step cost against n"):
+        main()

@@ -263,6 +263,7 @@ def plot(rows, path):
         ax.axis("off")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
+    fig.savefig(Path(__file__).resolve().parent.parent / "docs" / "_generated" / path.name, dpi=120)  # benchmarks page
     return True
 
 
@@ -300,4 +301,7 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from _docs_output import printed_to_docs
+
+    with printed_to_docs("work_precision", "Work-precision against peers"):
+        main()
