@@ -82,9 +82,12 @@ def ecos_executable():
 
     Examples
     --------
-    >>> exe = ecos_executable()  # doctest: +SKIP
-    >>> exe.name  # doctest: +SKIP
-    'ecos'
+    >>> try:
+    ...     exe = ecos_executable()
+    ... except FileNotFoundError as exc:  # ecospy or libtbb12 not installed: says which
+    ...     exe = None
+    >>> exe is None or (exe.name.startswith("ecos") and os.access(exe, os.X_OK))
+    True
     """
     # find_spec does not import ecospy: its import loads libecosc.so with
     # ctypes and dies with OSError when libtbb is missing.
