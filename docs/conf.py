@@ -35,6 +35,8 @@ def _include_generated(app, docname, source):
     for table in sorted(generated.glob("*.md")):
         parts.append(f"\n\n```{{include}} ../_generated/{table.name}\n```\n")
     for figure in sorted(generated.glob("*.png")):
+        if figure.name == "main_job.png":  # the README's picture, not a benchmark
+            continue
         parts.append(f"\n\n```{{figure}} ../_generated/{figure.name}\n:width: 80%\n\n`{figure.name}`\n```\n")
     source[0] = "".join(parts)
 

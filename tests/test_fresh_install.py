@@ -51,6 +51,6 @@ def test_first_command_on_a_fresh_clone(tmp_path):
     assert (clone / "out" / "main_job.png").stat().st_size > 10_000
     assert "validate_fmu: no problems" in out.stdout
     # the clone's own code ran, not the developer's checkout
-    where = subprocess.run([str(bindir / "python"), "-c", "import lsc; print(lsc.__file__)"], env=env, cwd=tmp_path,
+    where = subprocess.run([str(bindir / "python"), "-c", "import lsc; print(lsc.__file__)"], env=env, cwd=env_dir,
                            capture_output=True, text=True, check=True).stdout
     assert Path(where.strip()).is_relative_to(clone), where
