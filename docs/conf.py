@@ -23,7 +23,6 @@ numpydoc_class_members_toctree = False
 autosummary_generate = False
 html_theme = "alabaster"
 html_static_path = []
-suppress_warnings = ["myst.xref_missing"]
 
 
 def _include_generated(app, docname, source):
