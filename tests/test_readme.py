@@ -59,3 +59,20 @@ def test_snippet_runs(code, expected, tmp_path):
     assert out.stdout.strip(), "a snippet must print its result"
     if expected is not None:
         assert same_output(out.stdout, expected), f"printed:\n{out.stdout}\nthe page says:\n{expected}"
+
+
+def test_spec_reference_examples_form_a_valid_spec(tmp_path):
+    """The ```toml blocks of the spec reference, put together, are one spec that builds and validates."""
+    pytest.importorskip("pythonfmu")
+    validation = pytest.importorskip("fmpy.validation")
+    from fmu_build import build_fmu, load_spec
+
+    blocks = re.findall(r"^```toml\n(.*?)^```", (ROOT / "docs" / "guide" / "spec.md").read_text(), re.S | re.M)
+    assert len(blocks) == 8
+    spec = tmp_path / "spec.toml"
+    spec.write_text("\n".join(blocks))
+    parsed = load_spec(spec)
+    assert [s["name"] for s in parsed.states] == ["y", "v", "u"]
+    assert [p["name"] for p in parsed.parameters if p["tunable"]] == ["c"]
+    assert (parsed.method, parsed.lam) == ("alternative", 5.0)
+    assert validation.validate_fmu(str(build_fmu(spec, tmp_path))) == []
