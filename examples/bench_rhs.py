@@ -69,4 +69,7 @@ def main(n=200):
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 200)
+    from _docs_output import printed_to_docs
+
+    with printed_to_docs("bench_rhs", "One rhs call against hand-written code"):
+        main(int(sys.argv[1]) if len(sys.argv) > 1 else 200)

@@ -56,4 +56,7 @@ def main(sizes=(10, 50, 100)):
 
 
 if __name__ == "__main__":
-    main()
+    from _docs_output import printed_to_docs
+
+    with printed_to_docs("bench_timevarying", "Time-varying rhs call against one SVD"):
+        main()

@@ -92,6 +92,7 @@ def main():
     ax.legend()
     fig.tight_layout()
     fig.savefig(OUT / "main_job.png", dpi=100)
+    fig.savefig(ROOT / "docs" / "_generated" / "main_job.png", dpi=100)  # the README's picture
     print(f"\nplot: {(OUT / 'main_job.png').relative_to(ROOT)}")
 
 

@@ -2,10 +2,10 @@
 from ._build import build_fmu
 from .cosim import cosimulate
 from ._expressions import ExpressionError
-from ._host import native_host_env
+from ._host import ecos_executable, native_host_env
 from ._native import NativeTargetError
 from ._spec import ModelSpec, SpecError, load_spec, parse_spec
 from .study import plot_study, recommend, sweep
 
 __all__ = ["build_fmu", "cosimulate", "load_spec", "parse_spec", "ModelSpec", "SpecError", "ExpressionError",
-           "native_host_env", "NativeTargetError", "sweep", "recommend", "plot_study"]
+           "native_host_env", "ecos_executable", "NativeTargetError", "sweep", "recommend", "plot_study"]

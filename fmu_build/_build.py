@@ -368,7 +368,7 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
     with tempfile.TemporaryDirectory(prefix="lsc_fmu_") as tmp:
         src = Path(tmp) / "src"
         src.mkdir()
-        shutil.copytree(Path(lsc.__file__).parent, src / package, ignore=shutil.ignore_patterns("__pycache__", "gallery.py"))
+        shutil.copytree(Path(lsc.__file__).parent, src / package, ignore=shutil.ignore_patterns("__pycache__", "gallery"))
         # The runtime needs neither the gallery (sympy) nor solve_ivp: importing
         # scipy.integrate in an embedded interpreter loads scipy._lib._uarray,
         # whose finalization crashes native hosts at exit (see _vendor_ivp).

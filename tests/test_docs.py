@@ -1,0 +1,29 @@
+"""The documentation builds with warnings as errors (sphinx-build -W)."""
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+pytest.importorskip("sphinx", reason="the docs build needs the `test` or `docs` extra (sphinx)")
+pytest.importorskip("numpydoc")
+pytest.importorskip("myst_parser")
+
+
+def test_docs_build_without_warnings(tmp_path):
+    cmd = [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-E", "-b", "html", "-d",
+           str(tmp_path / "doctrees"), str(ROOT / "docs"), str(tmp_path / "html")]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-5000:]
+    api = (tmp_path / "html" / "reference" / "api.html").read_text()
+    for name in ("lsc.complete", "lsc.solve_completion", "lsc.gallery.prescribed_path", "fmu_build.build_fmu"):
+        assert f'id="{name}"' in api, name
+    assert (tmp_path / "html" / "reference" / "benchmarks.html").exists()
+
+
+def test_readme_has_no_project_history():
+    text = (ROOT / "README.md").read_text().lower()
+    for word in ("session", "earlier version", "this issue", "issue #", "previously", "used to ", "re-run", "before the fix"):
+        assert word not in text, word
