@@ -686,3 +686,61 @@ def test_host_without_scipy_is_told_what_it_lacks(path_fmu):
     assert out.returncode == 1, (out.returncode, out.stderr[-2000:])  # fmpy's exception, no crash
     assert "cannot import scipy.linalg" in out.stderr and "numpy and scipy" in out.stderr, out.stderr[-2000:]
     assert "requirements.txt" in out.stderr
+
+
+# -- the build: killed at any point, it leaves a valid FMU -------------------------------------
+
+_BUILD_SCRIPT = """
+import sys
+from fmu_build import build_fmu
+build_fmu(sys.argv[1], sys.argv[2], lam=float(sys.argv[3]))
+print("built", flush=True)
+"""
+
+
+def _kill_build_at_random_points(tmp_path, runs, seed):
+    """Build over a good FMU, SIGKILL the build after a random delay; the FMU must stay valid."""
+    import random
+    import signal
+    import time
+    import zipfile
+
+    folder = tmp_path / "out"
+    good = build_fmu(SPEC, folder)
+    old = good.read_bytes()
+    # how long a whole build takes here, to spread the kills over it
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-c", _BUILD_SCRIPT, str(SPEC), str(folder), "2.0"], check=True, timeout=300)
+    duration = time.perf_counter() - t0
+    rng = random.Random(seed)
+    outcomes = []
+    for i in range(runs):
+        proc = subprocess.Popen([sys.executable, "-c", _BUILD_SCRIPT, str(SPEC), str(folder), str(3.0 + i)],
+                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+        time.sleep(rng.uniform(0.0, 1.1 * duration))
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        fmu = folder / "PrescribedPath.fmu"
+        assert fmu.exists()
+        assert fmpy_validation.validate_fmu(str(fmu)) == [], f"kill {i} left a broken FMU"
+        with zipfile.ZipFile(fmu) as zf:
+            assert zf.testzip() is None
+        outcomes.append("old" if fmu.read_bytes() == old else "new")  # every build has a new GUID
+        old = fmu.read_bytes()
+        # what a kill may leave: the killed build's work folder (documented), nothing else
+        stray = {p.name for p in folder.iterdir()} - {"PrescribedPath.fmu"}
+        assert all(name.startswith(".lsc-build-") for name in stray), stray
+    # the next build clears what killed builds left behind
+    build_fmu(SPEC, folder)
+    assert [p.name for p in folder.iterdir()] == ["PrescribedPath.fmu"]
+    return outcomes
+
+
+def test_killed_build_never_leaves_a_broken_fmu(tmp_path):
+    _kill_build_at_random_points(tmp_path, runs=4, seed=1)
+
+
+@pytest.mark.stress
+def test_killed_build_never_leaves_a_broken_fmu_many_times(tmp_path):
+    outcomes = _kill_build_at_random_points(tmp_path, runs=30, seed=2)
+    assert "old" in outcomes  # the kills hit before and after the replace
