@@ -292,8 +292,20 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
     ------
     SpecError
         Listing every problem of the spec.
+    ValueError
+        When `model_name` is not an identifier, is a Python keyword or starts with ``_lsc``.
     lsc.IndexDeterminationError
         When the DAE is not solvable: no FMU is written.
+
+    Notes
+    -----
+    The FMU is made in a work folder next to it (``.lsc-build-<pid>-*``) and moved into place
+    with one `os.replace`: a failed or interrupted build leaves the previous FMU (or none),
+    never a part of one. A build killed outright leaves its work folder, which the next build
+    into the same folder removes. The Python modules inside the FMU are named after a hash of
+    its content, so FMUs with the same model name coexist in one process and a model may be
+    named like any module; the caller's ``sys.modules`` is left as it was. See
+    ``docs/reliability_fmu.md``.
 
     Examples
     --------
@@ -374,7 +386,8 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
                                        project_files=[src / f"{model_module}.py", src / package, src / "requirements.txt"],
                                        canGetAndSetFMUstate=True, canSerializeFMUstate=True)
         finally:
-            sys.path.remove(str(src))
+            while str(src) in sys.path:  # pythonfmu's builder adds it once more and leaves it
+                sys.path.remove(str(src))
             # pythonfmu imported the script (and with it the model and the lsc copy) to write the
             # description: drop those modules, and only those (their names are this build's own)
             for mod in [m for m in sys.modules if (m == prefix or m.startswith(prefix + "_")) and m not in own_modules]:
