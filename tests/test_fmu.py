@@ -744,3 +744,19 @@ def test_killed_build_never_leaves_a_broken_fmu(tmp_path):
 def test_killed_build_never_leaves_a_broken_fmu_many_times(tmp_path):
     outcomes = _kill_build_at_random_points(tmp_path, runs=30, seed=2)
     assert "old" in outcomes  # the kills hit before and after the replace
+
+
+def test_failed_build_writes_nothing_and_keeps_the_old_fmu(tmp_path, monkeypatch):
+    import fmu_build._build as build_module
+
+    good = build_fmu(SPEC, tmp_path)
+    old = good.read_bytes()
+
+    def broken(fmu, spec):
+        raise RuntimeError("the model description could not be completed")
+
+    monkeypatch.setattr(build_module, "_complete_model_description", broken)
+    with pytest.raises(RuntimeError, match="could not be completed"):
+        build_fmu(SPEC, tmp_path, lam=3.0)
+    assert [p.name for p in tmp_path.iterdir()] == ["PrescribedPath.fmu"]  # no work folder left
+    assert good.read_bytes() == old
