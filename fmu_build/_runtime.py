@@ -19,10 +19,25 @@ Design rules, from pythonfmu's behaviour:
 - The FMU state snapshot holds everything the next step depends on: time,
   the continuous state, every variable value and the pending errors; since
   taking a snapshot restarts the solver there, a master can roll back and
-  repeat a step bit for bit.
+  repeat a step bit for bit. A state to restore is checked first (its model,
+  its length, finite numbers); a bad one is refused and leaves a pending error.
+- pythonfmu 0.7.0 turns any exception escaping a Python FMI method into
+  fmi2Fatal and then frees the slave object the C++ layer still points to:
+  the host crashed at its next call. `LscSlave` therefore implements every
+  FMI method itself and never lets an exception out. Its only statuses are
+  the ones pythonfmu can return without an exception: fmi2OK, and fmi2Discard
+  from doStep. A refused call logs an fmi2Error message and changes nothing.
+- The FMI 2.0 Co-Simulation call sequence and the variability rules are
+  enforced: doStep only between exitInitializationMode and terminate,
+  setupExperiment only before enterInitializationMode, fixed parameters only
+  before exitInitializationMode, nothing set after terminate, and doStep only
+  from the FMU's own time with a finite, non-negative step.
 """
 
+import functools
+import json
 import math
+import weakref
 
 import numpy as np
 try:  # inside a built FMU: scipy's solvers without importing scipy.integrate (see _build._vendor_ivp)
@@ -226,11 +241,23 @@ class _InputSignal:
         return out
 
 
+# FMI 2.0 Co-Simulation states, as far as the calls allowed differ
+INSTANTIATED, INITIALIZATION_MODE, STEP_MODE, TERMINATED = "instantiated", "initializationMode", "stepMode", "terminated"
+
+_STIFF = 100.0  # fastest decay rate x communication step above which an explicit solver is limited by stability
+_TIME_TOLERANCE = 1e-9  # relative: masters pass communication points that differ in the last bits
+
+
 class LscRuntime:
     def __init__(self, slave, model):
         from pythonfmu import Boolean, Fmi2Causality, Fmi2Variability, Integer, Real
 
-        self.slave, self.model = slave, model
+        # weak: the slave owns the variables whose getters and setters hold this runtime, and a
+        # strong reference back would make every instance a reference cycle that outlives
+        # fmi2FreeInstance until the garbage collector runs
+        self.slave, self.model = weakref.proxy(slave), model
+        self.mode = INSTANTIATED
+        self._stiff_logged = None
         M = model.MODEL
         self.n = len(M["states"])
         self.values = {"lambda": M["lam"], "method": METHODS.index(M["method"]), "project_initial": False,
@@ -284,6 +311,8 @@ class LscRuntime:
             reg(Real(u["name"], causality=inp, variability=cont, start=u["start"], description=u["description"],
                      getter=lambda name=u["name"]: self.inputs[name].value,
                      setter=lambda v, name=u["name"]: self._set_input(name, v)))
+        self._good_values = self._model_values()  # the build checked that these run
+        self._fastest_rate = None
         self._state_of_vr = {}  # value reference -> state index, for the fast get_real
         for i, s in enumerate(M["states"]):
             var = Real(s["name"], causality=out, variability=cont, description=s["description"],
@@ -353,18 +382,39 @@ class LscRuntime:
         return None
 
     def _log_error(self, msg):
+        self._log(msg)
+
+    def _log(self, msg, warning=False):
         from pythonfmu.enums import Fmi2Status
 
-        self.slave.log(msg, status=Fmi2Status.error)
+        self.slave.log(msg, status=Fmi2Status.warning if warning else Fmi2Status.error)
 
     # -- the completion --------------------------------------------------------
     def _params(self):
         return {p["name"]: self.values[p["name"]] for p in self.model.MODEL["parameters"]}
 
+    def _model_values(self):
+        """The values the completion is built from (and must be rebuilt when they change)."""
+        return {name: self.values[name] for name in ("lambda", "method", *self._params())}
+
     def completion(self):
         if self._completion is not None and not self._dirty:
             return self._completion
-        self._dirty = False
+        try:
+            return self._build_completion()
+        except Exception as exc:
+            # The new values cannot be run: they are taken back, so that a variable never
+            # reads a value the model does not run, and each stays pending as an error
+            # (every doStep discards, with this reason) until a value that works is set.
+            changed = [name for name, value in self._model_values().items() if self._good_values.get(name) != value]
+            for name in changed:
+                self.errors[name] = (f"{name} = {self.values[name]!r} makes the model unsolvable "
+                                     f"({type(exc).__name__}: {exc}); {name} keeps {self._good_values[name]!r}")
+                self.values[name] = self._good_values[name]
+            self._dirty = True
+            raise
+
+    def _build_completion(self):
         method = METHODS[self.values["method"]]
         lam = None if method == "standard" else self.values["lambda"]
         params = self._params()
@@ -393,7 +443,10 @@ class LscRuntime:
                 span = (self.t, self.t + 1e-6 * max(1.0, abs(self.t)))
             self._completion = complete(dae, method, lam=lam, k=M["k"], t_span=span)
             self._completion_key = key
+            self._fastest_rate = None
             self._solver = None
+        self._dirty = False
+        self._good_values = self._model_values()
         return self._completion
 
     def _output(self, function):
@@ -411,13 +464,34 @@ class LscRuntime:
             return float("nan")
 
     # -- FMI calls -------------------------------------------------------------
+    def _sequence_error(self, rule, allowed):
+        """A message if the call is not allowed in the current mode (`rule` says when it is), else None (logged)."""
+        if self.mode in allowed:
+            return None
+        msg = f"{rule}; the FMU is in {self.mode}: the call is ignored"
+        self._log_error(msg)
+        return msg
+
     def setup(self, start_time, stop_time=None):
+        if self._sequence_error("setupExperiment is allowed only before enterInitializationMode", (INSTANTIATED,)):
+            return
+        if not math.isfinite(start_time) or (stop_time is not None and not stop_time >= start_time):
+            self._log_error(f"setupExperiment(startTime={start_time!r}, stopTime={stop_time!r}) refused: the start time "
+                            "must be finite and not after the stop time; the default experiment stays")
+            return
         self.t = float(start_time)
         if stop_time is not None:
             self.t_stop = float(stop_time)
         self._solver = None
 
+    def enter_initialization(self):
+        if not self._sequence_error("enterInitializationMode is allowed only once, after instantiation", (INSTANTIATED,)):
+            self.mode = INITIALIZATION_MODE
+
     def initialize(self):
+        if self._sequence_error("exitInitializationMode is allowed only after enterInitializationMode, once", (INITIALIZATION_MODE,)):
+            return
+        self.mode = STEP_MODE
         self.x = np.array([self.values[start_name(s["name"])] for s in self.model.MODEL["states"]], dtype=float)
         self._solver = None
         if self.values["project_initial"] and not self.errors:
@@ -427,8 +501,52 @@ class LscRuntime:
                 self.errors["project_initial"] = str(exc)
                 self._log_error(f"projecting the initial state failed: {exc}")
 
-    def _start_solver(self, c, target):
+    def terminate(self):
+        if not self._sequence_error("terminate is allowed only after enterInitializationMode, once", (INITIALIZATION_MODE, STEP_MODE)):
+            self.mode = TERMINATED
+
+    def settable(self, var):
+        """Why `var` cannot be set now (a message), or None."""
+        from pythonfmu.enums import Fmi2Causality, Fmi2Variability
+
+        if var.setter is None or var.causality not in (Fmi2Causality.parameter, Fmi2Causality.input):
+            return f"{var.name!r} is an {var.causality.name} and cannot be set"
+        if self.mode == TERMINATED:
+            return f"{var.name!r} cannot be set after terminate"
+        if var.variability == Fmi2Variability.fixed and self.mode == STEP_MODE:
+            return f"{var.name!r} is fixed: it can be set only before exitInitializationMode"
+        return None
+
+    def _fastest(self, c):
+        """Fastest decay rate of the completion: lam, and for constant coefficients max |Re eig G|."""
+        if self._fastest_rate is None:
+            rate = 0.0 if METHODS[self.values["method"]] == "standard" else float(self.values["lambda"])
+            if c.dae.is_constant:
+                G, _ = c.matrices(self.t)
+                rate = max(rate, float(np.max(np.abs(np.linalg.eigvals(G).real), initial=0.0)))
+            self._fastest_rate = rate
+        return self._fastest_rate
+
+    def _solver_name(self, c, h):
+        """The solver asked for, or Radau where an explicit one would be limited by stability (logged)."""
         name = SOLVERS[self.values["solver"]]
+        if name in ("RK45", "DOP853") and h > 0:
+            try:
+                stiffness = self._fastest(c) * h
+            except Exception:  # the rate is advice only
+                return name
+            if stiffness > _STIFF:
+                key = (name, self._completion_key)
+                if self._stiff_logged != key:
+                    self._stiff_logged = key
+                    self._log(f"the completion is stiff for this step (fastest rate x step = {stiffness:.3g} > {_STIFF:g}): "
+                              f"doStep integrates with Radau instead of {name}; solver = 2 or 3 selects an implicit "
+                              "solver explicitly", warning=True)
+                return "Radau"
+        return name
+
+    def _start_solver(self, c, target):
+        name = self._solver_name(c, target - self.t)
         options = {"jac": c.jac} if name in ("Radau", "BDF") else {}
         # Integrate up to the experiment's stop time (never past it) unless a
         # master steps beyond it.
@@ -437,26 +555,43 @@ class LscRuntime:
                                              atol=self.values["atol"], **options)
         self._dense = None
 
+    def _refuse_step(self, t, h):
+        """Why doStep(t, h) cannot run (a message), or None."""
+        if self.mode != STEP_MODE:
+            return ("doStep after terminate" if self.mode == TERMINATED else
+                    f"doStep before exitInitializationMode (the FMU is in {self.mode})")
+        if not (math.isfinite(h) and h >= 0.0):
+            return f"communicationStepSize must be finite and non-negative; found {h!r}"
+        if not abs(t - self.t) <= _TIME_TOLERANCE * max(1.0, abs(self.t)):
+            return (f"currentCommunicationPoint {t!r} is not the FMU's time: the FMU is at t={self.t!r} "
+                    "(restore a saved FMU state to go back)")
+        return None
+
     def step(self, t, h):
         target = t + h
         dense = self._dense
         # (the interpolant outlives its solver: every reset -- snapshot, tolerance, solver -- sets
         # _solver to None, and _dirty covers the completion's values)
         if (dense is not None and self._solver is not None and t == self.t and dense.t_old <= target <= dense.t
+                and h >= 0.0 and self.mode == STEP_MODE
                 and not self._dirty and not self.errors and not self.inputs and dense.dense is None):
             # Fast path: the solver's last step already covers this communication step
             # (dozens of communication steps per solver step at fine output grids).
             self.x = dense(target)
             self.t = target
             return True
+        problem = self._refuse_step(t, h)
+        if problem:
+            self._log_error(f"doStep(currentCommunicationPoint={t!r}, communicationStepSize={h!r}) refused: {problem}")
+            return False
         if self.errors:
             for name, msg in self.errors.items():
                 self._log_error(f"doStep at t={t!r} discarded: {name} was set to an invalid value ({msg})")
             return False
         try:
             c = self.completion()
-            if abs(t - self.t) > 1e-12 * max(1.0, abs(t)):
-                # the master's time rules (e.g. after a rollback done its own way)
+            if t != self.t:
+                # the master's time rules (within rounding)
                 self._solver = None
             self.t = float(t)
             if self.inputs:
@@ -484,7 +619,8 @@ class LscRuntime:
             x = solver.y.copy() if target == solver.t else self._dense(target)
         except Exception as exc:
             self._solver = None
-            self._log_error(f"doStep at t={t!r} failed: {type(exc).__name__}: {exc}")
+            pending = "; ".join(self.errors.values())
+            self._log_error(f"doStep at t={t!r} failed: {pending or f'{type(exc).__name__}: {exc}'}")
             return False
         self.x = x
         self.t = target
@@ -494,11 +630,55 @@ class LscRuntime:
         # Restart the solver here, so that stepping on from this snapshot now
         # and after restoring it later start identically.
         self._solver = None
-        return {"t": self.t, "x": self.x.tolist(), "values": dict(self.values), "errors": dict(self.errors),
-                "t_stop": self.t_stop,
+        return {"model": self.model.MODEL.get("build"), "t": self.t, "x": self.x.tolist(), "values": dict(self.values),
+                "errors": dict(self.errors), "t_stop": self.t_stop,
                 "inputs": {n: {"value": s.value, "history": [list(h) for h in s.history]} for n, s in self.inputs.items()}}
 
+    def check_state(self, state):
+        """Why `state` cannot be restored in this FMU (a message), or None."""
+        if not isinstance(state, dict):
+            return "not an FMU state"
+        if "_lsc_invalid" in state:
+            return state["_lsc_invalid"]
+        missing = {"model", "t", "x", "values", "errors", "t_stop", "inputs"} - set(state)
+        if missing:
+            return f"not a state of this FMU (missing {', '.join(sorted(missing))})"
+        if state["model"] != self.model.MODEL.get("build"):
+            return f"a state of another model (or another build of {self.model.MODEL['name']})"
+
+        def finite(v):
+            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+        x = state["x"]
+        if not isinstance(x, list) or len(x) != self.n:
+            return f"{self.n} state values expected, found {len(x) if isinstance(x, list) else type(x).__name__}"
+        if not (finite(state["t"]) and all(finite(v) for v in x)):
+            return "its time or state values are not finite numbers"
+        if not (isinstance(state["t_stop"], (int, float)) and state["t_stop"] >= state["t"]):
+            return "its stop time is not a number after its time"
+        values = state["values"]
+        if not isinstance(values, dict) or set(values) != set(self.values):
+            return "its variables are not this FMU's"
+        if not all(isinstance(v, (int, float)) and not (isinstance(v, float) and math.isnan(v)) for v in values.values()):
+            return "its variable values are not numbers"
+        if not (isinstance(state["errors"], dict) and all(isinstance(m, str) for m in state["errors"].values())):
+            return "its pending errors are malformed"
+        inputs = state["inputs"]
+        if not isinstance(inputs, dict) or set(inputs) != set(self.inputs):
+            return "its inputs are not this FMU's"
+        for saved in inputs.values():
+            if not (isinstance(saved, dict) and finite(saved.get("value")) and isinstance(saved.get("history"), list)
+                    and all(isinstance(h, list) and len(h) == 2 and all(finite(v) for v in h) for h in saved["history"])):
+                return "its input history is malformed"
+        return None
+
     def set_state(self, state):
+        problem = self.check_state(state)
+        if problem:
+            self.errors["FMU state"] = f"setFMUstate refused: {problem}"
+            self._log_error(f"setFMUstate refused: {problem}; the FMU keeps its own state, and doStep discards until "
+                            "a valid state is set")
+            return
         self.t = float(state["t"])
         self.x = np.array(state["x"], dtype=float)
         self.values = dict(state["values"])
@@ -516,3 +696,174 @@ class LscRuntime:
                 signal.value = current
         self._solver = None
         self._dirty = True
+
+
+def _never_raises(fallback):
+    """Decorate an FMI method of `LscSlave`: an exception is logged as an fmi2Error message and
+    ``fallback(self, *args)`` is returned instead (pythonfmu would make it fatal)."""
+
+    def decorate(method):
+        @functools.wraps(method)
+        def safe(self, *args):
+            try:
+                return method(self, *args)
+            except Exception as exc:
+                try:
+                    self.lsc_log_error(f"{method.__name__} failed: {type(exc).__name__}: {exc}")
+                    return fallback(self, *args)
+                except Exception:
+                    return None
+        return safe
+    return decorate
+
+
+def _article(word):
+    return ("an " if word[0] in "AEIOU" else "a ") + word
+
+
+def _values_like(value):
+    return lambda self, vrs, *rest: [value] * len(vrs)
+
+
+def _nothing(self, *args):
+    return None
+
+
+_SLAVE_BASE = []
+
+
+def make_slave_base():
+    """The base class of every generated slave: pythonfmu's `Fmi2Slave` with every FMI method made safe.
+
+    A function, so that importing this module needs no pythonfmu (the build imports it); the
+    class is made once per copy of this module (the slave script runs at every instantiation).
+    """
+    if not _SLAVE_BASE:
+        _SLAVE_BASE.append(_make_slave_base())
+    return _SLAVE_BASE[0]
+
+
+def _make_slave_base():
+    from pythonfmu import Boolean, Fmi2Slave, Integer, Real, String
+    from pythonfmu.enums import Fmi2Status
+
+    kinds = {Real: "Real", Integer: "Integer", Boolean: "Boolean", String: "String"}
+
+    class LscSlave(Fmi2Slave):
+        """Delegates to `LscRuntime` (``self.rt``, made by the subclass) and never raises."""
+
+        rt = None
+
+        def lsc_log_error(self, msg):
+            self.log(msg, status=Fmi2Status.error)
+
+        def _variable(self, vr, kind):
+            var = self.vars.get(vr)
+            if var is None:
+                self.lsc_log_error(f"unknown value reference {vr}: this FMU has 0..{len(self.vars) - 1}")
+            elif not isinstance(var, kind):
+                self.lsc_log_error(f"{var.name!r} is a {kinds[type(var)]}, not {_article(kinds[kind])} (value reference {vr}): "
+                                   "the call is ignored for it")
+                return None
+            return var
+
+        def _get(self, vrs, kind, convert, bad):
+            out = []
+            for vr in vrs:
+                var = self._variable(vr, kind)
+                try:
+                    out.append(convert(var.getter()) if var is not None else bad)
+                except Exception as exc:
+                    self.lsc_log_error(f"reading {var.name!r} failed: {type(exc).__name__}: {exc}")
+                    out.append(bad)
+            return out
+
+        def _set(self, vrs, values, kind):
+            for vr, value in zip(vrs, values):
+                var = self._variable(vr, kind)
+                if var is None:
+                    continue
+                problem = self.rt.settable(var) if self.rt is not None else None
+                if problem:
+                    self.lsc_log_error(f"{problem}: the value {value!r} is ignored")
+                    continue
+                var.setter(value)
+
+        @_never_raises(_values_like(float("nan")))
+        def get_real(self, vrs):
+            return self.rt.get_real(vrs, lambda vrs: self._get(vrs, Real, float, float("nan")))
+
+        @_never_raises(_values_like(0))
+        def get_integer(self, vrs):
+            return self._get(vrs, Integer, int, 0)
+
+        @_never_raises(_values_like(False))
+        def get_boolean(self, vrs):
+            return self._get(vrs, Boolean, bool, False)
+
+        @_never_raises(_values_like(""))
+        def get_string(self, vrs):
+            return self._get(vrs, String, str, "")
+
+        @_never_raises(_nothing)
+        def set_real(self, vrs, values):
+            self._set(vrs, values, Real)
+
+        @_never_raises(_nothing)
+        def set_integer(self, vrs, values):
+            self._set(vrs, values, Integer)
+
+        @_never_raises(_nothing)
+        def set_boolean(self, vrs, values):
+            self._set(vrs, values, Boolean)
+
+        @_never_raises(_nothing)
+        def set_string(self, vrs, values):
+            self._set(vrs, values, String)
+
+        @_never_raises(_nothing)
+        def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+            self.rt.setup(start_time, stop_time)
+
+        @_never_raises(_nothing)
+        def enter_initialization_mode(self):
+            self.rt.enter_initialization()
+
+        @_never_raises(_nothing)
+        def exit_initialization_mode(self):
+            self.rt.initialize()
+
+        @_never_raises(lambda self, *args: False)
+        def do_step(self, current_time, step_size):
+            return self.rt.step(current_time, step_size)
+
+        @_never_raises(_nothing)
+        def terminate(self):
+            self.rt.terminate()
+
+        @_never_raises(lambda self: {"_lsc_invalid": "the FMU could not take its state"})
+        def _get_fmu_state(self):
+            return self.rt.get_state()
+
+        @_never_raises(_nothing)
+        def _set_fmu_state(self, state):
+            self.rt.set_state(state)
+
+        # called on the class (no instance to log to): failures travel inside the state object
+        # and are reported by _set_fmu_state
+        @staticmethod
+        def _fmu_state_to_bytes(state):
+            try:
+                return json.dumps(state).encode("utf-8")
+            except Exception as exc:
+                return json.dumps({"_lsc_invalid": f"the state could not be serialized ({exc})"}).encode("utf-8")
+
+        @staticmethod
+        def _fmu_state_from_bytes(data):
+            try:
+                state = json.loads(bytes(data).decode("utf-8"))
+            except Exception as exc:
+                return {"_lsc_invalid": f"not a serialized state of this FMU ({type(exc).__name__}: {exc})"}
+            return state if isinstance(state, dict) else {"_lsc_invalid": "not a serialized state of this FMU"}
+
+    return LscSlave

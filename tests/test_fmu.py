@@ -120,6 +120,12 @@ def test_rollback_repeats_steps_bit_for_bit(fmus):
              "start_values": {"x_0[1]": 0.1, "x_0[2]": -0.9}, "rollback_at": 3})
     assert r["rollback"]["first"] == r["rollback"]["second"]
     assert r["status"] == ["ok"] * 6
+    # the repeated steps are the library's steps (not merely equal to each other)
+    p = gallery.thesis_example1()
+    t = 0.05 * np.arange(7)
+    ref = library(lsc.complete(p.dae, "alternative", lam=2.0, t_span=(0.0, 1.0)), (0.0, t[-1]), np.array([0.1, -0.9]), t)
+    np.testing.assert_allclose(np.array(r["rollback"]["first"])[:, :2], ref.x[:, [4, 5]].T, rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(np.array([r["values"]["x[1]"], r["values"]["x[2]"]]), ref.x, rtol=1e-5, atol=1e-7)
 
 
 def test_rollback_is_bit_for_bit_when_solver_steps_span_many_communication_steps(fmus):
@@ -134,11 +140,11 @@ def test_rollback_is_bit_for_bit_when_solver_steps_span_many_communication_steps
 @pytest.mark.parametrize("name, value, fragment", [
     ("lambda", -1.0, "lambda must be positive"),
     ("lambda", float("nan"), "not finite"),
-    ("method", 7, "method must be 0 (standard), 1 (stabilized) or 2 (alternative)"),
+    ("solver", 7, "solver must be 0..3"),
     ("rtol", 0.0, "rtol must be positive"),
 ])
 def test_bad_values_discard_with_a_readable_log_and_recover(fmus, name, value, fragment):
-    good = {"lambda": 2.0, "method": 2, "rtol": 1e-6}[name]
+    good = {"lambda": 2.0, "solver": 0, "rtol": 1e-6}[name]
     r = run({"fmu": str(fmus["path", "alternative"]), "dt": 0.1, "steps": 6, "outputs": ["y", "constraint_residual"],
              "set_at": {"2": {name: value}, "4": {name: good}}})
     assert r["status"] == ["ok", "ok", "discard", "discard", "ok", "ok"]
@@ -194,6 +200,12 @@ def test_variable_communication_step_sizes(fmus, tmp_path):
     a = run({"fmu": str(fmus["path", "alternative"]), "dt": 0.25, "steps": 4, "outputs": ["y", "u"], "start_values": TOL})
     b = run({"fmu": str(fmus["path", "alternative"]), "dt": 0.125, "steps": 8, "outputs": ["y", "u"], "start_values": TOL})
     np.testing.assert_allclose([a["values"]["y"][-1], a["values"]["u"][-1]], [b["values"]["y"][-1], b["values"]["u"][-1]], rtol=1e-8)
+    # and both are the library's solution (a doStep that did nothing would pass the comparison above)
+    p = gallery.prescribed_path()
+    x0 = np.array([0.0, 2.5, 1.25])  # the spec's start values
+    ref = library(lsc.complete(p.dae, "alternative", lam=2.0), (0.0, 1.0), x0, np.array(b["time"]))
+    np.testing.assert_allclose([b["values"]["y"], b["values"]["u"]], ref.x[[0, 2]], rtol=1e-7, atol=1e-8)
+    np.testing.assert_allclose([a["values"]["y"], a["values"]["u"]], ref.x[[0, 2]][:, ::2], rtol=1e-7, atol=1e-8)
 
 
 def test_model_description_units_and_structure(fmus):
@@ -257,6 +269,7 @@ def test_cli(tmp_path):
                         capture_output=True, text=True, timeout=300)
     assert ok.returncode == 0, ok.stderr
     assert Path(ok.stdout.strip()).name == "PrescribedPath.fmu"
+    assert fmpy_validation.validate_fmu(ok.stdout.strip()) == []
     bad = tmp_path / "bad.toml"
     bad.write_text('[model]\nname = "B"\n[states]\nx = {}\n[equations]\nA = [[1]]\nB = [["os.system"]]\n')
     err = subprocess.run([sys.executable, "-m", "fmu_build", "build", str(bad), "-o", str(tmp_path)], capture_output=True,
@@ -360,7 +373,10 @@ def _model_data(fmu, name):
     import ast
     import zipfile
 
-    src = zipfile.ZipFile(fmu).read(f"resources/{name}_model.py").decode()
+    with zipfile.ZipFile(fmu) as zf:
+        module = zf.read("resources/slavemodule.txt").decode().strip()  # the build's own module names
+        assert zf.read(f"resources/{module}.py").decode().count(f"class {name}(") == 1
+        src = zf.read(f"resources/{module}_model.py").decode()
     line = next(line for line in src.splitlines() if line.startswith("MODEL = "))
     return ast.literal_eval(line[len("MODEL = "):])
 
@@ -391,7 +407,9 @@ def test_only_needed_input_derivatives_are_estimated(tmp_path):
     # an ODE x' + x = w: only w itself, no derivative
     spec = {"model": {"name": "Lag"}, "states": {"x": {}}, "inputs": {"w": {}},
             "equations": {"A": [[1]], "B": [[1]], "f": ["w"]}}
-    assert _model_data(build_fmu(spec, tmp_path / "b"), "Lag")["input_orders"] == {"w": 0}
+    lag = build_fmu(spec, tmp_path / "b")
+    assert _model_data(lag, "Lag")["input_orders"] == {"w": 0}
+    assert fmpy_validation.validate_fmu(str(lag)) == []
 
 
 # The path problem with the damping c as an input in B: for any c(t), y = p, v = p',
@@ -461,6 +479,7 @@ def test_value_only_input_converges_at_second_order(tmp_path):
     spec = {"model": {"name": "Lag"}, "states": {"x": {}}, "inputs": {"w": {}},
             "equations": {"A": [[1]], "B": [[1]], "f": ["w"]}}
     fmu = build_fmu(spec, tmp_path)
+    assert fmpy_validation.validate_fmu(str(fmu)) == []
     errors = []
     for dt in (0.05, 0.025):
         steps = int(round(2.0 / dt))
@@ -490,3 +509,254 @@ def test_power_form_interpolant_equals_scipys(solver):
     interpolant = _Interpolant(dense, s.t_old, s.t)
     for t in np.linspace(s.t_old, s.t, 9):
         np.testing.assert_allclose(interpolant(t), dense(t), rtol=0, atol=4 * np.finfo(float).eps * 2.0)
+
+
+# -- the FMU at run time: bad calls ------------------------------------------------------------
+
+def run_calls(scenario):
+    """Run FMI calls in a fresh host process; the host must exit by itself with code 0 (no signal)."""
+    out = subprocess.run([sys.executable, str(HERE / "fmu_runner.py")], input=json.dumps(scenario), capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == 0, (out.returncode, out.stderr[-3000:])
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+@pytest.fixture(scope="module")
+def path_fmu(tmp_path_factory):
+    return build_fmu(SPEC, tmp_path_factory.mktemp("path"))
+
+
+@pytest.fixture(scope="module")
+def other_fmu(tmp_path_factory):
+    # another model with the same model name: its state must be refused by PrescribedPath
+    spec = {"model": {"name": "PrescribedPath"}, "states": {"x": {}}, "equations": {"A": [[1]], "B": [[1]], "f": [1]}}
+    return build_fmu(spec, tmp_path_factory.mktemp("other"))
+
+
+OK, DISCARD = 0, 2
+INIT = [["setupExperiment", 0.0], ["enterInitializationMode"], ["exitInitializationMode"]]
+STEP = ["doStep", 0.0, 0.1]
+SAVED = INIT + [["save"]]
+
+# pythonfmu 0.7.0's C++ layer turns a Python exception into fmi2Fatal and then frees the slave
+# (the host crashed at its next call); its only non-fatal statuses are fmi2OK and, from doStep,
+# fmi2Discard. So a refused call that is not a doStep returns fmi2OK with an fmi2Error message
+# in the log and changes nothing; where the master could go on believing something happened
+# (a state that was not restored, a parameter the model cannot run), doStep discards until it
+# is put right. (before, bad call, expected status, log fragment, a valid call afterwards)
+BAD_CALLS = {
+    "getReal unknown reference": (INIT, ["getReal", 9999], OK, "unknown value reference 9999", STEP),
+    "setReal unknown reference": (INIT, ["setReal", 9999, 1.0], OK, "unknown value reference 9999", STEP),
+    "setReal on an output": (INIT, ["setReal", "y", 1.0], OK, "'y' is an output and cannot be set", STEP),
+    "setReal on a calculated output": (INIT, ["setReal", "constraint_residual", 1.0], OK, "cannot be set", STEP),
+    "setInteger on a Real": (INIT, ["setInteger", "lambda", 3], OK, "'lambda' is a Real, not an Integer", STEP),
+    "getInteger of a Real": (INIT, ["getInteger", "lambda"], OK, "'lambda' is a Real, not an Integer", STEP),
+    "setBoolean on a Real": (INIT, ["setBoolean", "k", True], OK, "'k' is a Real, not a Boolean", STEP),
+    "setString (no String variables)": (INIT, ["setString", "k", "x"], OK, "'k' is a Real, not a String", STEP),
+    "fixed parameter after initialization": (INIT, ["setReal", "m", 3.0], OK,
+                                             "'m' is fixed: it can be set only before exitInitializationMode", STEP),
+    "fixed start value after initialization": (INIT, ["setReal", "y_0", 3.0], OK, "'y_0' is fixed", STEP),
+    "doStep before exitInitializationMode": (INIT[:2], STEP, DISCARD, "doStep before exitInitializationMode",
+                                             ["exitInitializationMode"]),
+    "doStep before initialization": (INIT[:1], STEP, DISCARD, "doStep before exitInitializationMode",
+                                     ["enterInitializationMode"]),
+    "doStep with a NaN step": (INIT, ["doStep", 0.0, float("nan")], DISCARD, "communicationStepSize must be", STEP),
+    "doStep with a negative step": (INIT, ["doStep", 0.0, -0.1], DISCARD, "communicationStepSize must be", STEP),
+    "doStep with an infinite step": (INIT, ["doStep", 0.0, float("inf")], DISCARD, "communicationStepSize must be", STEP),
+    "doStep at another time": (INIT, ["doStep", 0.5, 0.1], DISCARD, "the FMU is at t=0.0", STEP),
+    "doStep at a NaN time": (INIT, ["doStep", float("nan"), 0.1], DISCARD, "the FMU is at t=0.0", STEP),
+    "setupExperiment after initialization": (INIT, ["setupExperiment", 5.0], OK,
+                                             "setupExperiment is allowed only before enterInitializationMode", STEP),
+    "enterInitializationMode twice": (INIT, ["enterInitializationMode"], OK, "enterInitializationMode is allowed only",
+                                      STEP),
+    "exitInitializationMode without enter": (INIT[:1], ["exitInitializationMode"], OK,
+                                             "exitInitializationMode is allowed only", ["enterInitializationMode"]),
+    "doStep after terminate": (INIT + [["terminate"]], STEP, DISCARD, "doStep after terminate", ["getReal", "y"]),
+    "setReal after terminate": (INIT + [["terminate"]], ["setReal", "k", 1.0], OK, "after terminate",
+                                ["getReal", "y"]),
+    "setFMUstate truncated": (SAVED, ["restore", "truncated"], OK, "setFMUstate refused", ["restore", "valid"]),
+    "setFMUstate garbage": (SAVED, ["restore", "garbage"], OK, "setFMUstate refused", ["restore", "valid"]),
+    "setFMUstate empty": (SAVED, ["restore", "empty_json"], OK, "setFMUstate refused", ["restore", "valid"]),
+    "setFMUstate wrong length": (SAVED, ["restore", "wrong_length"], OK, "3 state values expected, found 4",
+                                 ["restore", "valid"]),
+    "setFMUstate NaN time": (SAVED, ["restore", "nan_time"], OK, "setFMUstate refused", ["restore", "valid"]),
+    "setFMUstate of another model": (SAVED, ["restore", "other_model"], OK, "another model", ["restore", "valid"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_CALLS))
+def test_bad_fmi_call_is_refused_with_a_log_and_the_host_runs_on(path_fmu, other_fmu, case):
+    before, bad, status, fragment, valid = BAD_CALLS[case]
+    calls = before + [bad, valid]
+    if valid != STEP and valid[0] != "getReal":  # then a step must work too
+        calls += [STEP] if valid[0] != "enterInitializationMode" else [["exitInitializationMode"], STEP]
+    calls += [["getReal", "y", "v", "u"]]
+    r = run_calls({"fmu": str(path_fmu), "calls": calls, "other_fmu": str(other_fmu)})
+    statuses = [s for s, _ in r["results"]]
+    assert statuses[: len(before)] == [OK] * len(before), (statuses, r["logs"])
+    assert statuses[len(before)] == status, (statuses, r["logs"])
+    assert statuses[len(before) + 1:] == [OK] * (len(calls) - len(before) - 1), (statuses, r["logs"])
+    hits = [s for msg, s in zip(r["logs"], r["log_statuses"]) if fragment in msg]
+    assert hits and all(s == 3 for s in hits), (fragment, r["logs"])  # logged as fmi2Error
+    assert np.all(np.isfinite(r["results"][-1][1])), r["results"]
+    if calls[-2] == STEP:  # the step after the bad call ran from the right place: the exact solution
+        p = gallery.prescribed_path()
+        assert np.abs(np.array(r["results"][-1][1]) - p.exact(0.1)).max() < 1e-5
+
+
+def _lag_spec(name, rate):
+    """x' + rate x = rate: x = 1 - exp(-rate t) from x(0) = 0."""
+    return {"model": {"name": name}, "states": {"x": {}}, "parameters": {"r": {"value": rate}},
+            "equations": {"A": [[1]], "B": [["r"]], "f": ["r"]}}
+
+
+def test_two_different_fmus_with_one_model_name_run_side_by_side(path_fmu, other_fmu, tmp_path):
+    # same model name, different models: each instance must run its own code, in either order
+    third = build_fmu(_lag_spec("PrescribedPath", 3.0), tmp_path)
+    dt, steps = 0.1, 5
+    t = dt * np.arange(1, steps + 1)
+    path = gallery.prescribed_path()
+    for order in ([path_fmu, other_fmu, third], [third, other_fmu, path_fmu]):
+        outputs = {path_fmu: "y", other_fmu: "x", third: "x"}
+        r = run({"side_by_side": [[str(f), outputs[f]] for f in order], "dt": dt, "steps": steps})
+        got = dict(zip(order, r["values"]))
+        np.testing.assert_allclose(got[path_fmu], path.exact(t)[0], atol=1e-5)
+        np.testing.assert_allclose(got[other_fmu], 1 - np.exp(-t), atol=1e-5)
+        np.testing.assert_allclose(got[third], 1 - np.exp(-3 * t), atol=1e-5)
+
+
+@pytest.mark.parametrize("name", ["os", "json", "ctypes", "numpy", "fmpy", "lsc", "sys", "pythonfmu"])
+def test_model_named_like_a_module_leaves_the_callers_modules_alone_and_runs(tmp_path, name):
+    before = dict(sys.modules)
+    fmu = build_fmu(_lag_spec("Lag", 2.0), tmp_path, model_name=name)
+    assert all(sys.modules.get(m) is mod for m, mod in before.items()), "the build changed the caller's sys.modules"
+    assert fmu.name == f"{name}.fmu" and fmpy_validation.validate_fmu(str(fmu)) == []
+    r = run({"fmu": str(fmu), "dt": 0.1, "steps": 3, "outputs": ["x"], "start_values": TOL})
+    assert r["status"] == ["ok"] * 3
+    np.testing.assert_allclose(r["values"]["x"], 1 - np.exp(-2 * np.array(r["time"])), atol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["class", "None", "_lsc_model", "1x", "a-b"])
+def test_model_name_that_cannot_be_a_class_is_refused(tmp_path, name):
+    with pytest.raises(ValueError, match="`model_name` must"):
+        build_fmu(_lag_spec("Lag", 2.0), tmp_path, model_name=name)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_tunable_value_that_breaks_the_model_stays_pending_until_a_good_one(tmp_path):
+    # x1' + x2 = 0, x1 + a x2 = sin t: index 1 for a != 0; a = 0 needs a higher k than the FMU's
+    spec = {"model": {"name": "Pending"}, "states": {"x1": {}, "x2": {"start": 1.0}},
+            "parameters": {"a": {"value": 1.0, "tunable": True}},
+            "equations": {"A": [[1, 0], [0, 0]], "B": [[0, 1], [1, "a"]], "f": [0, "sin(t)"]}}
+    fmu = build_fmu(spec, tmp_path)
+    calls = INIT + [["setReal", "a", 0.0], STEP, STEP, ["getReal", "a"], ["setReal", "a", 2.0], STEP,
+                    ["getReal", "a", "x1", "x2"]]
+    r = run_calls({"fmu": str(fmu), "calls": calls})
+    statuses = [s for s, _ in r["results"]]
+    assert statuses == [OK] * 4 + [DISCARD, DISCARD] + [OK] * 4, (statuses, r["logs"])
+    assert r["results"][6][1] == [1.0]  # a reads the value the model runs, not the refused 0
+    assert sum("a = 0.0 makes the model unsolvable" in m for m in r["logs"]) >= 2, r["logs"]
+    a, x1, x2 = r["results"][-1][1]
+    assert a == 2.0
+    import sympy
+
+    t = sympy.Symbol("t")
+    dae = lsc.LinearDAE([[1, 0], [0, 0]], [[0, 1], [1, 2.0]], sympy.Matrix([0, sympy.sin(t)]))
+    ref = library(lsc.complete(dae, "alternative", lam=1.0), (0.0, 0.1), np.array([0.0, 1.0]), np.array([0.1]))
+    np.testing.assert_allclose([x1, x2], ref.x[:, -1], atol=1e-6)
+
+
+def test_stiff_completion_switches_to_an_implicit_solver_and_says_so(path_fmu):
+    # lambda = 1e8 with RK45 took 82 s for one doStep(0.01) (stability-limited steps)
+    p = gallery.prescribed_path()
+    r = run({"fmu": str(path_fmu), "dt": 0.01, "steps": 3, "outputs": ["y", "v", "u"],
+             "start_values": {"lambda": 1e8, **TOL}})
+    assert r["status"] == ["ok"] * 3
+    assert sum("doStep integrates with Radau instead of RK45" in m for m in r["logs"]) == 1, r["logs"]
+    X = np.array([r["values"][n] for n in ("y", "v", "u")])
+    ref = library(lsc.complete(p.dae, "alternative", lam=1e8), (0.0, 0.03), np.array([0.0, 2.5, 1.25]),
+                  np.array(r["time"]))
+    np.testing.assert_allclose(X, ref.x, rtol=1e-6, atol=1e-7)
+
+
+def test_host_without_scipy_is_told_what_it_lacks(path_fmu):
+    scenario = {"fmu": str(path_fmu), "dt": 0.1, "steps": 1, "outputs": ["y"], "block": ["scipy"]}
+    out = subprocess.run([sys.executable, str(HERE / "fmu_runner.py")], input=json.dumps(scenario), capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == 1, (out.returncode, out.stderr[-2000:])  # fmpy's exception, no crash
+    assert "cannot import scipy.linalg" in out.stderr and "numpy and scipy" in out.stderr, out.stderr[-2000:]
+    assert "requirements.txt" in out.stderr
+
+
+# -- the build: killed at any point, it leaves a valid FMU -------------------------------------
+
+_BUILD_SCRIPT = """
+import sys
+from fmu_build import build_fmu
+build_fmu(sys.argv[1], sys.argv[2], lam=float(sys.argv[3]))
+print("built", flush=True)
+"""
+
+
+def _kill_build_at_random_points(tmp_path, runs, seed):
+    """Build over a good FMU, SIGKILL the build after a random delay; the FMU must stay valid."""
+    import random
+    import signal
+    import time
+    import zipfile
+
+    folder = tmp_path / "out"
+    good = build_fmu(SPEC, folder)
+    old = good.read_bytes()
+    # how long a whole build takes here, to spread the kills over it
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-c", _BUILD_SCRIPT, str(SPEC), str(folder), "2.0"], check=True, timeout=300)
+    duration = time.perf_counter() - t0
+    rng = random.Random(seed)
+    outcomes = []
+    for i in range(runs):
+        proc = subprocess.Popen([sys.executable, "-c", _BUILD_SCRIPT, str(SPEC), str(folder), str(3.0 + i)],
+                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+        time.sleep(rng.uniform(0.0, 1.1 * duration))
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        fmu = folder / "PrescribedPath.fmu"
+        assert fmu.exists()
+        assert fmpy_validation.validate_fmu(str(fmu)) == [], f"kill {i} left a broken FMU"
+        with zipfile.ZipFile(fmu) as zf:
+            assert zf.testzip() is None
+        outcomes.append("old" if fmu.read_bytes() == old else "new")  # every build has a new GUID
+        old = fmu.read_bytes()
+        # what a kill may leave: the killed build's work folder (documented), nothing else
+        stray = {p.name for p in folder.iterdir()} - {"PrescribedPath.fmu"}
+        assert all(name.startswith(".lsc-build-") for name in stray), stray
+    # the next build clears what killed builds left behind
+    build_fmu(SPEC, folder)
+    assert [p.name for p in folder.iterdir()] == ["PrescribedPath.fmu"]
+    return outcomes
+
+
+def test_killed_build_never_leaves_a_broken_fmu(tmp_path):
+    _kill_build_at_random_points(tmp_path, runs=4, seed=1)
+
+
+@pytest.mark.stress
+def test_killed_build_never_leaves_a_broken_fmu_many_times(tmp_path):
+    outcomes = _kill_build_at_random_points(tmp_path, runs=30, seed=2)
+    assert "old" in outcomes  # the kills hit before and after the replace
+
+
+def test_failed_build_writes_nothing_and_keeps_the_old_fmu(tmp_path, monkeypatch):
+    import fmu_build._build as build_module
+
+    good = build_fmu(SPEC, tmp_path)
+    old = good.read_bytes()
+
+    def broken(fmu, spec):
+        raise RuntimeError("the model description could not be completed")
+
+    monkeypatch.setattr(build_module, "_complete_model_description", broken)
+    with pytest.raises(RuntimeError, match="could not be completed"):
+        build_fmu(SPEC, tmp_path, lam=3.0)
+    assert [p.name for p in tmp_path.iterdir()] == ["PrescribedPath.fmu"]  # no work folder left
+    assert good.read_bytes() == old
