@@ -178,6 +178,27 @@ def _needed_input_orders(spec, dae, k):
     return need
 
 
+_EXACT_DEGREE_T = 5  # Taylor degree of a forcing that depends on t: local error h^7 |g^(6)| / 7! per step
+
+
+def _exact_degree(spec, input_orders):
+    """Degree q of the forcing's Taylor polynomial over a step of the FMU's exact stepping.
+
+    Constant coefficients only (0 otherwise, and for a constant forcing). An
+    input enters as its extrapolation polynomial, of degree ``order + 2``
+    (`_runtime._InputSignal`): with ``q`` at least that degree, a forcing
+    polynomial in the inputs' values is stepped exactly. A forcing that
+    depends on t gets ``q >= 5``.
+    """
+    t = spec.t
+    if t in spec.A.free_symbols or t in spec.B.free_symbols or _inputs_in(spec.A, spec) or _inputs_in(spec.B, spec):
+        return 0
+    q = max([order + 2 for order in input_orders.values() if order >= 0], default=0)
+    if t in spec.f.free_symbols:  # (the runtime also splits a step where g^(q+1) needs it)
+        q = max(q, _EXACT_DEGREE_T)
+    return q
+
+
 def _inputs_in(M, spec):
     """Names of the inputs a sympy matrix uses."""
     return {str(s) for s in M.free_symbols} & set(spec.input_symbols)
@@ -209,6 +230,10 @@ def _model_source(spec, k, dae):
     params = [p["name"] for p in spec.parameters]
     n = spec.n
     order_max = k + 2
+    input_orders = _needed_input_orders(spec, dae, k)
+    exact_degree = _exact_degree(spec, input_orders)
+    # exact stepping reads f and its derivatives up to p + q at a step's start (p <= k + 1)
+    f_order_max = max(order_max, k + 2 + exact_degree)  # (one more: the step-size bound reads g^(q+1))
     model = {
         "name": spec.name, "states": spec.states, "parameters": spec.parameters, "method": spec.method,
         "lam": spec.lam, "k": k, "build": _BUILD_PLACEHOLDER, "start": spec.experiment["start"], "stop": spec.experiment["stop"],
@@ -217,7 +242,8 @@ def _model_source(spec, k, dae):
         "B_varies": t in spec.B.free_symbols or bool(_inputs_in(spec.B, spec)),
         "f_varies": t in spec.f.free_symbols or bool(spec.inputs),
         "A_inputs": bool(_inputs_in(spec.A, spec)), "B_inputs": bool(_inputs_in(spec.B, spec)),
-        "inputs": spec.inputs, "input_orders": _needed_input_orders(spec, dae, k),
+        "inputs": spec.inputs, "input_orders": input_orders,
+        "exact_degree": exact_degree, "f_order_max": f_order_max, "f_time": t in spec.f.free_symbols,
         "outputs": [{key: out[key] for key in ("name", "unit", "description")} for out in spec.outputs],
     }
     parts = [
@@ -231,7 +257,7 @@ def _model_source(spec, k, dae):
         "",
         _jet_source("B_jet", spec.B, t, params, order_max, (n, n), spec.input_symbols if model["B_inputs"] else None),
         "",
-        _jet_source("f_jet", spec.f, t, params, order_max, (n,), spec.input_symbols),
+        _jet_source("f_jet", spec.f, t, params, f_order_max, (n,), spec.input_symbols),
         "",
         _outputs_source(spec),
         "",

@@ -47,13 +47,17 @@ except ImportError:
 
 try:  # inside a built FMU this module sits in the private copy of lsc
     from . import LinearDAE, complete
+    from ._expm import Propagator
     from ._timefunc import JetCallable
 except ImportError:  # imported from fmu_build itself (documentation, tests)
     from lsc import LinearDAE, complete
+    from lsc._expm import Propagator
     from lsc._timefunc import JetCallable
 
 METHODS = ("standard", "stabilized", "alternative")
-SOLVERS = ("RK45", "DOP853", "Radau", "BDF")
+SOLVERS = ("RK45", "DOP853", "Radau", "BDF", "exact")
+EXACT = SOLVERS.index("exact")
+_STEP_TOLERANCE = 1e-10  # relative: step sizes this close share one step matrix (masters' step jitter)
 _SOLVER_CLASSES = {"RK45": RK45, "DOP853": DOP853, "Radau": Radau, "BDF": BDF}
 
 
@@ -195,6 +199,21 @@ def start_name(state):
     return state + "_0"
 
 
+_DIFFERENTIATORS = {}  # normalized node times -> matrix from values to scaled derivatives at the last node
+
+
+def _differentiator(nodes):
+    """``D`` with ``D @ values = [j! c_j]``, ``c`` the coefficients of the polynomial through (nodes, values)."""
+    D = _DIFFERENTIATORS.get(nodes)
+    if D is None:
+        if len(_DIFFERENTIATORS) > 64:  # variable step sizes: keep the table small
+            _DIFFERENTIATORS.clear()
+        V = np.vander(np.array(nodes), len(nodes), increasing=True)
+        factorials = np.array([math.factorial(j) for j in range(len(nodes))], dtype=float)
+        D = _DIFFERENTIATORS[nodes] = factorials[:, None] * np.linalg.inv(V)
+    return D
+
+
 class _InputSignal:
     """Estimates of an input and its derivatives from the values received.
 
@@ -205,7 +224,13 @@ class _InputSignal:
     j-th derivative has error O(h^(degree + 1 - j)) for a smooth input;
     ``degree`` is the highest derivative the completion uses plus 2. Only
     derivatives the completion can use are estimated (``order``: the highest
-    one; 0 means only the value is used; -1 that the input is never used).
+    one; 0 means only the value is used; -1 that the input is never used);
+    `taylor` gives every derivative of the polynomial (exact stepping).
+
+    The polynomial is kept as its derivatives at the last point received,
+    from the values by one small matrix that depends only on the node times
+    relative to the last step (rounded to 11 digits, so that masters' step
+    jitter shares one matrix): equally spaced points cost one product.
     """
 
     def __init__(self, order, start, order_max):
@@ -213,7 +238,7 @@ class _InputSignal:
         self.history = []  # (t, value), increasing t
         self.value = start
         self.degree = order + 2 if order >= 0 else 0  # order -1: the input is never used
-        self._coef = None
+        self._derivs = None  # derivatives 0..deg of the polynomial at _t0
 
     def record(self, t):
         if self.history and t <= self.history[-1][0]:
@@ -221,24 +246,138 @@ class _InputSignal:
             self.history = [h for h in self.history if h[0] < t]
         self.history.append((t, self.value))
         del self.history[: -(self.degree + 1)]
-        ts = np.array([h[0] for h in self.history])
-        vs = np.array([h[1] for h in self.history])
-        deg = min(self.degree, len(ts) - 1)
-        self._t0 = ts[-1]
-        # polynomial in (s - t0), highest power first, exact through the points
-        self._coef = np.polyfit(ts - self._t0, vs, deg) if deg > 0 else np.array([vs[-1]])
+        history = self.history
+        self._t0 = t0 = history[-1][0]
+        if len(history) == 1:
+            self._derivs = np.array([history[-1][1]])
+            return
+        scale = t0 - history[-2][0]
+        nodes = tuple(round((h[0] - t0) / scale, 11) for h in history[:-1]) + (0.0,)
+        D = _differentiator(nodes)
+        self._derivs = (D @ np.array([h[1] for h in history])) / scale ** np.arange(len(history))
+
+    def _at(self, t, top):
+        """Derivatives 0..top of the polynomial at t."""
+        out = np.zeros(top + 1)
+        d = self._derivs
+        if d is None:
+            out[0] = self.value
+            return out
+        s = t - self._t0
+        if s == 0.0:
+            m = min(top + 1, d.size)
+            out[:m] = d[:m]
+            return out
+        for j in range(min(top + 1, d.size)):
+            # Taylor shift: u^(j)(t0 + s) = sum_m d_(j+m) s^m / m!
+            acc, term = 0.0, 1.0
+            for m in range(d.size - j):
+                acc += d[j + m] * term
+                term *= s / (m + 1)
+            out[j] = acc
+        return out
 
     def jet(self, t):
         """[u, u', ..., u^(order_max)] at t (zeros beyond the orders in use)."""
-        out = np.zeros(self.order_max + 1)
-        if self._coef is None:
-            out[0] = self.value
-            return out
-        c = self._coef
-        for j in range(min(self.order, self.order_max) + 1 if self.order >= 0 else 1):
-            out[j] = np.polyval(c, t - self._t0)
-            c = np.polyder(c) if c.size > 1 else np.zeros(1)
+        out = self._at(t, self.order_max)
+        out[(min(self.order, self.order_max) + 1 if self.order >= 0 else 1):] = 0.0
         return out
+
+    def taylor(self, t, top):
+        """Every derivative 0..top of the extrapolation polynomial at t (zero beyond its degree)."""
+        return self._at(t, top)
+
+
+class _ExactStepper:
+    """Exact stepping of a constant-coefficient completion: ``x(t + h) = Phi x + K fstack(t)``.
+
+    Over a step the forcing ``g = W [f; f'; ...; f^(p)]`` is its Taylor
+    polynomial of degree ``q`` at the step's start, and the completion with
+    that polynomial is stepped by the exponential of `lsc._expm.Propagator`:
+    ``x(t + h) = Phi x + Psi [g; g'; ...; g^(q)](t)``, exact when ``g`` is a
+    polynomial of degree <= q over the step (an input's extrapolation
+    polynomial, and no other time dependence), with local error
+    ``O(h^(q+2) |g^(q+1)|)`` otherwise. A forcing that depends on t itself
+    is stepped in equal substeps no longer than ``H``, with the local error
+    bound ``H^(q+2) max |g^(q+1)| / (q+2)!`` at 1e-13 (times ``max(1, |x|)``
+    at the start), ``max |g^(q+1)|`` sampled at 33 times over the experiment
+    (the generated code has that derivative). ``K = Psi Wbig`` acts on the stacked
+    jet ``[f; f'; ...; f^(p+q)](t)`` directly, so a step is one call of the
+    generated ``f_jet`` and two matrix-vector products; a constant forcing
+    folds into one vector ``K``. The matrices are computed once per step size
+    (sizes within a relative 1e-10 share them) and per completion.
+    """
+
+    def __init__(self, c, key, q, model, params, inputs, x, t_span):
+        self.key, self.n = key, c.n
+        self.constant = c._g_const is not None
+        self.q = 0 if self.constant else q
+        self.p = c._order
+        self._prop = Propagator(c._G, self.q)
+        self._g_const = c._g_const
+        if not self.constant:
+            n, m, p = c.n, c.n, c._order
+            self.W = np.zeros(((self.q + 1) * n, (p + self.q + 1) * m))  # [g; ...; g^(q)] = W [f; ...; f^(p+q)]
+            for j in range(self.q + 1):
+                self.W[j * n:(j + 1) * n, j * m:(j + p + 1) * m] = c._W
+        self._f_jet, self._params, self._inputs = model.f_jet, dict(params), inputs
+        self._top = model.MODEL.get("f_order_max", model.MODEL["k"] + 2)
+        self._blocks = []  # (h, Phi, K)
+        self._last = None
+        self.H = math.inf
+        if not self.constant and model.MODEL.get("f_time") and self._top >= self.p + self.q + 1:
+            self.H = self._step_bound(c, x, t_span)
+
+    def _step_bound(self, c, x, t_span):
+        q, p, n = self.q, self.p, self.n
+        top = p + q + 1
+        zeros = {name: np.zeros(self._top + 1) for name in self._inputs}  # inputs: polynomials of degree <= q
+        bound = 0.0
+        for t in np.linspace(t_span[0], t_span[1], 33):
+            jet = self._f_jet(t, self._params, top, zeros) if self._inputs else self._f_jet(t, self._params, top)
+            g = c._W @ jet[q + 1:].reshape(-1)  # g^(q+1) = W [f^(q+1); ...; f^(q+1+p)]
+            bound = max(bound, float(np.max(np.abs(g))))
+        if not (bound > 0.0 and math.isfinite(bound)):
+            return math.inf
+        tol = 1e-13 * max(1.0, float(np.max(np.abs(x), initial=0.0)))
+        return (tol * math.factorial(q + 2) / bound) ** (1.0 / (q + 2))
+
+    def blocks(self, h):
+        """``(h', Phi, K)`` for a step size ``h'`` within a relative 1e-10 of `h`."""
+        last = self._last
+        if last is not None and abs(h - last[0]) <= _STEP_TOLERANCE * last[0]:
+            return last
+        for entry in self._blocks:
+            if abs(h - entry[0]) <= _STEP_TOLERANCE * entry[0]:
+                self._last = entry
+                return entry
+        E = self._prop.exponential(h)
+        self._prop._cache.clear()  # this class keeps its own table
+        n = self.n
+        Phi = np.ascontiguousarray(E[:n, :n])
+        Psi = E[:n, n:]
+        K = Psi @ self._g_const if self.constant else np.ascontiguousarray(Psi @ self.W)
+        if len(self._blocks) >= 16:  # variable step sizes: keep the table small
+            self._blocks.clear()
+        entry = (h, Phi, K)
+        self._blocks.append(entry)
+        self._last = entry
+        return entry
+
+    def step(self, t, x, h):
+        m = 1 if h <= self.H else math.ceil(h / self.H - 1e-12)
+        _, Phi, K = self.blocks(h / m)
+        if self.constant:
+            return Phi @ x + K
+        order, f_jet, params, inputs, top = self.p + self.q, self._f_jet, self._params, self._inputs, self._top
+        for i in range(m):
+            s = t + i * (h / m)
+            if inputs:
+                fstack = f_jet(s, params, order, {name: u.taylor(s, top) for name, u in inputs.items()})
+            else:
+                fstack = f_jet(s, params, order)
+            x = Phi @ x + K @ fstack.reshape(-1)
+        return x
 
 
 # FMI 2.0 Co-Simulation states, as far as the calls allowed differ
@@ -260,8 +399,12 @@ class LscRuntime:
         self._stiff_logged = None
         M = model.MODEL
         self.n = len(M["states"])
+        # exact stepping for constant coefficients A, B (the default there); scipy's solvers otherwise
+        self.exact_capable = "exact_degree" in M and not (M["A_varies"] or M["B_varies"])
+        solver_start = EXACT if self.exact_capable else 0
         self.values = {"lambda": M["lam"], "method": METHODS.index(M["method"]), "project_initial": False,
-                       "rtol": 1e-6, "atol": 1e-9, "solver": 0}
+                       "rtol": 1e-6, "atol": 1e-9, "solver": solver_start}
+        self._exact = None  # _ExactStepper of the current completion
         self.errors = {}  # variable -> message of a rejected value
         self.t = M["start"]
         self.x = np.array([s["start"] for s in M["states"]], dtype=float)
@@ -273,7 +416,7 @@ class LscRuntime:
         self._dense = None  # _Interpolant of the solver's last step
 
         par, out, inp = Fmi2Causality.parameter, Fmi2Causality.output, Fmi2Causality.input
-        order_max = M["k"] + 2
+        order_max = M.get("f_order_max", M["k"] + 2)
         self.inputs = {u["name"]: _InputSignal(M["input_orders"].get(u["name"], -1), u["start"], order_max)
                        for u in M.get("inputs", [])}
         fixed, tunable, cont = Fmi2Variability.fixed, Fmi2Variability.tunable, Fmi2Variability.continuous
@@ -287,8 +430,9 @@ class LscRuntime:
         reg(Integer("method", causality=par, variability=fixed, start=METHODS.index(M["method"]),
                     description="completion: 0 standard, 1 stabilized, 2 alternative",
                     getter=lambda: self.values["method"], setter=lambda v: self._set("method", v)))
-        reg(Integer("solver", causality=par, variability=tunable, start=0,
-                    description="integrator per step: 0 RK45, 1 DOP853, 2 Radau, 3 BDF",
+        reg(Integer("solver", causality=par, variability=tunable, start=solver_start,
+                    description="integrator per step: 0 RK45, 1 DOP853, 2 Radau, 3 BDF, 4 exact (matrix exponential; "
+                                "constant coefficients only)",
                     getter=lambda: self.values["solver"], setter=lambda v: self._set("solver", v)))
         reg(Real("rtol", causality=par, variability=tunable, start=1e-6, description="relative tolerance of the integrator",
                  getter=lambda: self.values["rtol"], setter=lambda v: self._set("rtol", v)))
@@ -370,6 +514,8 @@ class LscRuntime:
         if name == "method":
             return None if value in (0, 1, 2) else "method must be 0 (standard), 1 (stabilized) or 2 (alternative)"
         if name == "solver":
+            if value == EXACT and not self.exact_capable:
+                return "solver 4 (exact) needs constant coefficients A and B; use 0..3"
             return None if value in range(len(SOLVERS)) else f"solver must be 0..{len(SOLVERS) - 1}"
         if name == "project_initial":
             return None
@@ -567,7 +713,31 @@ class LscRuntime:
                     "(restore a saved FMU state to go back)")
         return None
 
+    def _exact_step(self, c, t, h):
+        """One exact step from the FMU's time (already checked): True, or False with the reason logged."""
+        ex = self._exact
+        if ex is None or ex.key != self._completion_key:
+            ex = self._exact = _ExactStepper(c, self._completion_key, self.model.MODEL.get("exact_degree", 0),
+                                             self.model, self._params(), self.inputs, self.x,
+                                             (min(self.t, self.t_stop), max(self.t, self.t_stop)))
+        if self.inputs:
+            for signal in self.inputs.values():
+                signal.record(t)
+        if h == 0.0:
+            return True
+        x = ex.step(t, self.x, h)
+        if not math.isfinite(x.sum()):
+            self._log_error(f"doStep at t={t!r}, h={h!r} produced non-finite values")
+            return False
+        self.x = x
+        self.t = t + h
+        return True
+
     def step(self, t, h):
+        if (self._exact is not None and t == self.t and self.values["solver"] == EXACT and not self._dirty
+                and not self.errors and self.mode == STEP_MODE and 0.0 < h < math.inf):
+            # Fast path: exact stepping with the step matrices of the current completion.
+            return self._exact_step(self._completion, t, h)
         target = t + h
         dense = self._dense
         # (the interpolant outlives its solver: every reset -- snapshot, tolerance, solver -- sets
@@ -594,6 +764,8 @@ class LscRuntime:
                 # the master's time rules (within rounding)
                 self._solver = None
             self.t = float(t)
+            if self.values["solver"] == EXACT:
+                return self._exact_step(c, self.t, h)
             if self.inputs:
                 # the input estimates change with every received value: new forcing, new solver
                 for signal in self.inputs.values():
@@ -688,7 +860,7 @@ class LscRuntime:
             signal = self.inputs[name]
             signal.value = saved["value"]
             signal.history = [tuple(h) for h in saved["history"]]
-            signal._coef = None
+            signal._derivs = None
             if signal.history:  # rebuild the polynomial from the saved points
                 last_t, last_v = signal.history.pop()
                 current, signal.value = signal.value, last_v
