@@ -231,5 +231,171 @@ def main():
         "(2 cores, 8 users): read the ratios, not the absolute times.\n\n" + table + "\n")
 
 
+PYTHONFMU_RUNNER = """
+import json, math, sys, time
+import numpy as np
+from fmpy import extract, read_model_description, simulate_fmu
+from fmpy.fmi2 import FMU2Slave
+
+cases = json.loads(sys.argv[1])
+
+
+def damper_exact(t):
+    p, dp, ddp = np.sin(t) + 0.5 * np.sin(3 * t), np.cos(t) + 1.5 * np.cos(3 * t), -np.sin(t) - 4.5 * np.sin(3 * t)
+    return np.array([p, dp, ddp + (0.5 + 0.2 * np.sin(t)) * dp + 2.0 * p])
+
+
+def loop(case):
+    # fmpy's FMU2Slave: setReal of the inputs, doStep, getReal of y, v, u per step (instantiation not timed)
+    path, steps, stop = case["fmu"], case["steps"], case["stop"]
+    md = read_model_description(path)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    outs = [vr[n] for n in ("y", "v", "u")]
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName="bench")
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0, stopTime=stop)
+    fmu.enterInitializationMode()
+    for name, value in case.get("start", {}).items():
+        (fmu.setInteger if name == "solver" else fmu.setReal)([vr[name]], [value])
+    fmu.exitInitializationMode()
+    h = stop / steps
+    inp = case.get("input")
+    ts = h * np.arange(steps + 1)
+    u = (np.sin(ts) + 0.5 * np.sin(3 * ts) if inp == "p" else 0.5 + 0.2 * np.sin(ts)).tolist() if inp else None
+    ivr = [vr[inp]] if inp else None
+    X = np.empty((steps + 1, 3))
+    X[0] = fmu.getReal(outs)
+    t0 = time.perf_counter()
+    for i in range(steps):
+        if ivr:
+            fmu.setReal(ivr, [u[i]])
+        fmu.doStep(currentCommunicationPoint=i * h, communicationStepSize=h)
+        X[i + 1] = fmu.getReal(outs)
+    elapsed = time.perf_counter() - t0
+    fmu.terminate()
+    fmu.freeInstance()
+    return elapsed, ts, X
+
+
+def simulate(case):
+    t0 = time.perf_counter()
+    simulate_fmu(case["fmu"], stop_time=case["stop"], output_interval=case["stop"] / case["steps"],
+                 output=["y", "v", "u"], start_values=case.get("start", {}))
+    return time.perf_counter() - t0
+
+
+best = {}
+for _ in range(int(sys.argv[2])):  # interleaved, best of: the machine is shared
+    for key, case in cases.items():
+        elapsed, ts, X = loop(case)
+        if elapsed < best.get(key, {}).get("loop", math.inf):
+            entry = {"loop": elapsed, "y_end": float(X[-1, 0])}
+            if case.get("input") == "c":
+                err = np.abs(X - damper_exact(ts).T)
+                entry["err_end"] = float(err[-1].max())
+                entry["err_late"] = float(err[ts >= 0.5 * ts[-1]].max())
+            best.setdefault(key, {}).update(entry)
+        if case.get("simulate"):
+            best[key]["simulate"] = min(best[key].get("simulate", math.inf), simulate(case))
+print(json.dumps(best))
+"""
+
+
+def _build_with(code_root, spec, dest):
+    """Build `spec` into `dest` with the fmu_build of another checkout (a fresh process on its path)."""
+    import os
+
+    env = dict(os.environ, PYTHONPATH=str(code_root))
+    out = subprocess.run([sys.executable, "-c", "import sys; from fmu_build import build_fmu; "
+                          "print(build_fmu(sys.argv[1], sys.argv[2]))", str(spec), str(dest)],
+                         cwd=str(code_root), env=env, capture_output=True, text=True, check=True)
+    return out.stdout.strip().splitlines()[-1]
+
+
+def pythonfmu_main(reference=None, repeats=REPEATS):
+    """The pythonfmu FMU's exact stepping against the do-nothing FMU; inputs; the damper (docs/_generated/bench_fmu.md).
+
+    ``reference``: another checkout of the project (e.g. the main branch) whose builds run side by
+    side in the same fmpy process (each FMU carries its own code).
+    """
+    specs = ROOT / "examples" / "specs"
+    out_dir = ROOT / "out" / "bench_pythonfmu"
+    noop = build_noop(out_dir)
+    cases = {
+        "noop": {"fmu": str(noop), "steps": STEPS, "stop": STOP, "simulate": True},
+        "path": {"fmu": str(build_fmu(specs / "prescribed_path.toml", out_dir / "path")), "steps": STEPS, "stop": STOP,
+                 "simulate": True},
+        "path_dop853": {"fmu": str(out_dir / "path" / "PrescribedPath.fmu"), "steps": STEPS, "stop": STOP,
+                        "start": {"solver": 1, "rtol": 1e-8, "atol": 1e-10}},
+        "input": {"fmu": str(build_fmu(specs / "path_input.toml", out_dir / "input")), "steps": STEPS, "stop": STOP,
+                  "input": "p"},
+        "damper": {"fmu": str(build_fmu(specs / "path_damper.toml", out_dir / "damper")), "steps": 1000, "stop": STOP,
+                   "input": "c"},
+    }
+    cases["damper_magnus"] = dict(cases["damper"], start={"solver": 5})
+    if reference is not None:
+        ref_dir = out_dir / "reference"
+        cases["ref_path"] = dict(cases["path"], fmu=_build_with(reference, specs / "prescribed_path.toml", ref_dir / "path"),
+                                 simulate=False, start={"rtol": 1e-8, "atol": 1e-10})
+        cases["ref_input"] = dict(cases["input"], fmu=_build_with(reference, specs / "path_input.toml", ref_dir / "input"))
+        cases["ref_damper"] = dict(cases["damper"], fmu=_build_with(reference, specs / "path_damper.toml", ref_dir / "damper"))
+    out = subprocess.run([sys.executable, "-c", PYTHONFMU_RUNNER, json.dumps(cases), str(repeats)],
+                         capture_output=True, text=True, check=True)
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    per = lambda key, what="loop": r[key][what] / cases[key]["steps"] * 1e6  # noqa: E731
+    labels = {
+        "noop": "do-nothing pythonfmu FMU (floor)",
+        "path": "PrescribedPath, exact stepping (default)",
+        "path_dop853": "PrescribedPath, solver = 1 (DOP853, rtol 1e-8)",
+        "input": "PathInput (input p in f), exact stepping (default)",
+        "damper": "PathDamper (input c in B, time-varying), RK45 (default)",
+        "damper_magnus": "PathDamper, solver = 5 (Magnus4)",
+        "ref_path": "reference build: PrescribedPath (DOP853, rtol 1e-8)",
+        "ref_input": "reference build: PathInput (RK45)",
+        "ref_damper": "reference build: PathDamper (RK45)",
+    }
+    lines = ["| FMU | steps | per step, FMU2Slave loop [us] | per step, simulate_fmu [us] | y(10) | damper error, t >= 5 |",
+             "|---|---:|---:|---:|---:|---:|"]
+    for key in cases:
+        sim = f"{per(key, 'simulate'):.1f}" if "simulate" in r[key] else ""
+        err = f"{r[key]['err_late']:.1e}" if "err_late" in r[key] else ""
+        lines.append(f"| {labels[key]} | {cases[key]['steps']:,} | {per(key):.1f} | {sim} | {r[key]['y_end']:.10f} | {err} |")
+    ratios = [
+        f"- exact stepping / do-nothing FMU: **{r['path']['loop'] / r['noop']['loop']:.2f}** in the FMU2Slave loop, "
+        f"**{r['path']['simulate'] / r['noop']['simulate']:.2f}** in simulate_fmu (target <= 1.3)",
+        f"- with the input in f / the same model without inputs (both exact): **{r['input']['loop'] / r['path']['loop']:.2f}** "
+        "(target <= 1.5; the input's loop also sets it each step)",
+    ]
+    if reference is not None:
+        ratios += [
+            f"- reference PathDamper / this PathDamper: **{r['ref_damper']['loop'] / r['damper_magnus']['loop']:.1f}** "
+            f"with Magnus4, **{r['ref_damper']['loop'] / r['damper']['loop']:.1f}** with RK45 (target >= 10 at error <= 1e-6)",
+            f"- reference PathInput / this PathInput: **{r['ref_input']['loop'] / r['input']['loop']:.1f}**; "
+            f"reference PrescribedPath (DOP853) / exact: **{r['ref_path']['loop'] / r['path']['loop']:.1f}**",
+        ]
+    table = "\n".join(lines + [""] + ratios)
+    print(table)
+    gen = ROOT / "docs" / "_generated"
+    gen.mkdir(parents=True, exist_ok=True)
+    (gen / "bench_fmu.md").write_text(
+        "<!-- written by examples/bench_fmu.py --pythonfmu: do not edit -->\n"
+        f"pythonfmu FMUs over t in [0, {STOP:g}] in one fmpy process, best of {repeats}, interleaved, side by side in one "
+        "run on a shared, loaded machine (2 cores, 8 users): read the ratios, not the absolute times. Inputs: "
+        "p = sin t + 0.5 sin 3t, c = 0.5 + 0.2 sin t, set before each step. "
+        + ("The reference builds are of the project's main branch before exact stepping. " if reference else "")
+        + "\n\n" + table + "\n")
+
+
 if __name__ == "__main__":
-    main()
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pythonfmu", action="store_true", help="only the pythonfmu FMU's exact stepping and inputs")
+    parser.add_argument("--reference", help="another checkout of the project, built and run side by side")
+    parser.add_argument("--repeats", type=int, default=REPEATS)
+    args = parser.parse_args()
+    if args.pythonfmu:
+        pythonfmu_main(args.reference, args.repeats)
+    else:
+        main()
