@@ -200,6 +200,7 @@ def start_name(state):
     return state + "_0"
 
 
+_FACTORIALS = np.array([float(math.factorial(j)) for j in range(32)])
 _DIFFERENTIATORS = {}  # normalized node times -> matrix from values to scaled derivatives at the last node
 
 
@@ -269,13 +270,10 @@ class _InputSignal:
             m = min(top + 1, d.size)
             out[:m] = d[:m]
             return out
+        # Taylor shift: u^(j)(t0 + s) = sum_m d_(j+m) s^m / m!
+        w = s ** np.arange(d.size) / _FACTORIALS[: d.size]
         for j in range(min(top + 1, d.size)):
-            # Taylor shift: u^(j)(t0 + s) = sum_m d_(j+m) s^m / m!
-            acc, term = 0.0, 1.0
-            for m in range(d.size - j):
-                acc += d[j + m] * term
-                term *= s / (m + 1)
-            out[j] = acc
+            out[j] = d[j:] @ w[: d.size - j]
         return out
 
     def jet(self, t):
@@ -287,6 +285,16 @@ class _InputSignal:
     def taylor(self, t, top):
         """Every derivative 0..top of the extrapolation polynomial at t (zero beyond its degree)."""
         return self._at(t, top)
+
+
+def _lagrange_weights(ts, s):
+    """Weights ``w`` with ``p(s) = sum_k w_k p(ts[k])`` for the polynomial through the points `ts`."""
+    w = np.ones(len(ts))
+    for k, tk in enumerate(ts):
+        for j, tj in enumerate(ts):
+            if j != k:
+                w[k] *= (s - tj) / (tk - tj)
+    return w
 
 
 def _expm_small(A):
@@ -420,11 +428,11 @@ class _ExactStepper:
                 B = self._BATCH
                 times = self._anchor + h * np.arange(b * B, (b + 1) * B)
                 F = self._f0_many(times, self._params, self.p + self.q)
-                U = entry["K"] @ F.reshape(-1, B)
+                U = np.ascontiguousarray((entry["K"] @ F.reshape(-1, B)).T)  # one row per step
                 if not np.isfinite(U).all():
                     raise ValueError(f"the forcing is not finite between t={times[0]!r} and t={times[-1]!r}")
                 entry["batch"] = (b, U)
-            return U[:, i - b * self._BATCH]
+            return U[i - b * self._BATCH]
         F = self._f0_many(np.array([s]), self._params, self.p + self.q)[:, :, 0]
         return entry["K"] @ F.reshape(-1)
 
@@ -482,6 +490,7 @@ class LscRuntime:
         self.values = {"lambda": M["lam"], "method": METHODS.index(M["method"]), "project_initial": False,
                        "rtol": 1e-6, "atol": 1e-9, "solver": solver_start}
         self._exact = None  # _ExactStepper of the current completion
+        self._magnus_history, self._magnus_key = [], None  # (t, A) at the last step ends of the Magnus step
         self.errors = {}  # variable -> message of a rejected value
         self.t = M["start"]
         self.x = np.array([s["start"] for s in M["states"]], dtype=float)
@@ -804,19 +813,32 @@ class LscRuntime:
         if h == 0.0:
             return True
         x = ex.step(t, self.x, h)
-        if not math.isfinite(x.sum()):
+        if not math.isfinite(sum(x.tolist())):
             self._log_error(f"doStep at t={t!r}, h={h!r} produced non-finite values")
             return False
         self.x = x
         self.t = t + h
         return True
 
-    def _magnus_step(self, c, t, h):
-        """One fourth-order Magnus step of ``z' = [[G, g], [0, 0]] z``, ``z = [x; 1]``: True, or False (logged).
+    def _magnus_matrix(self, c, t):
+        """``[[G, g], [0, 0]]`` at time t (inputs from their extrapolation polynomial)."""
+        n = self.n
+        A = np.zeros((n + 1, n + 1))
+        G, g = c.matrices(t)
+        A[:n, :n], A[:n, n] = G, g
+        return A
 
-        ``G, g`` at the two Gauss nodes of the step, the inputs taken from their
-        extrapolation polynomial there: ``Omega = h/2 (A1 + A2) + sqrt(3)/12 h^2 [A2, A1]``,
-        ``z(t + h) = exp(Omega) z(t)``; local error O(h^5). No solver to restart when an input changes.
+    def _magnus_step(self, c, t, h):
+        """One fourth-order Magnus step of ``z' = A(t) z``, ``A = [[G, g], [0, 0]]``, ``z = [x; 1]``.
+
+        ``Omega = h/2 (A1 + A2) + sqrt(3)/12 h^2 [A2, A1]`` with ``A1, A2`` at the
+        two Gauss nodes of the step, ``z(t + h) = exp(Omega) z(t)``: local error
+        O(h^5). ``A`` is evaluated once per step, at the step's end, and
+        interpolated at the nodes by the cubic through the last four step ends
+        (inputs taken from their extrapolation polynomial at each). After a
+        restart (the first step, a changed value, a time or state set) the step
+        evaluates ``A`` at the Gauss nodes and at both ends. No solver restarts
+        when only an input changed. Returns True, or False with the reason logged.
         """
         if self.inputs:
             for signal in self.inputs.values():
@@ -825,15 +847,27 @@ class LscRuntime:
                 c._cache.clear()
         if h == 0.0:
             return True
-        n = self.n
-        A1, A2 = np.zeros((n + 1, n + 1)), np.zeros((n + 1, n + 1))
-        for A, node in ((A1, _GAUSS[0]), (A2, _GAUSS[1])):
-            G, g = c.matrices(t + node * h)
-            A[:n, :n], A[:n, n] = G, g
+        history = self._magnus_history
+        if history and (history[-1][0] != t or self._magnus_key != self._completion_key):
+            history.clear()
+        nodes = (t + _GAUSS[0] * h, t + _GAUSS[1] * h)
+        if not history:
+            self._magnus_key = self._completion_key
+            history.append((t, self._magnus_matrix(c, t)))
+            A1, A2 = (self._magnus_matrix(c, s) for s in nodes)
+            history.append((t + h, self._magnus_matrix(c, t + h)))
+        else:
+            history.append((t + h, self._magnus_matrix(c, t + h)))
+            del history[:-4]
+            ts = [e[0] for e in history]
+            stack = np.array([e[1] for e in history])
+            A1, A2 = (np.tensordot(_lagrange_weights(ts, s), stack, axes=1) for s in nodes)
         Omega = (0.5 * h) * (A1 + A2) + (math.sqrt(3.0) / 12.0 * h * h) * (A2 @ A1 - A1 @ A2)
         E = _expm_small(Omega)
+        n = self.n
         x = E[:n, :n] @ self.x + E[:n, n]
         if not math.isfinite(x.sum()):
+            history.clear()
             self._log_error(f"doStep at t={t!r}, h={h!r} produced non-finite values")
             return False
         self.x = x
@@ -911,6 +945,7 @@ class LscRuntime:
         # Restart the solver here, so that stepping on from this snapshot now
         # and after restoring it later start identically.
         self._solver = None
+        self._magnus_history.clear()
         return {"model": self.model.MODEL.get("build"), "t": self.t, "x": self.x.tolist(), "values": dict(self.values),
                 "errors": dict(self.errors), "t_stop": self.t_stop,
                 "inputs": {n: {"value": s.value, "history": [list(h) for h in s.history]} for n, s in self.inputs.items()}}
@@ -976,6 +1011,7 @@ class LscRuntime:
                 signal.record(last_t)
                 signal.value = current
         self._solver = None
+        self._magnus_history.clear()
         self._dirty = True
 
 
