@@ -848,7 +848,8 @@ class LscRuntime:
         if h == 0.0:
             return True
         history = self._magnus_history
-        if history and (history[-1][0] != t or self._magnus_key != self._completion_key):
+        if history and (abs(history[-1][0] - t) > _TIME_TOLERANCE * max(1.0, abs(t))
+                        or self._magnus_key != self._completion_key):
             history.clear()
         nodes = (t + _GAUSS[0] * h, t + _GAUSS[1] * h)
         if not history:
@@ -875,10 +876,12 @@ class LscRuntime:
         return True
 
     def step(self, t, h):
-        if (self._exact is not None and t == self.t and self.values["solver"] == EXACT and not self._dirty
-                and not self.errors and self.mode == STEP_MODE and 0.0 < h < math.inf):
-            # Fast path: exact stepping with the step matrices of the current completion.
-            return self._exact_step(self._completion, t, h)
+        if (self._exact is not None and self.values["solver"] == EXACT and not self._dirty and not self.errors
+                and self.mode == STEP_MODE and 0.0 < h < math.inf
+                and abs(t - self.t) <= _TIME_TOLERANCE * max(1.0, abs(self.t))):
+            # Fast path: exact stepping with the step matrices of the current completion (the master's
+            # time rules within rounding, as in the checked path).
+            return self._exact_step(self._completion, float(t), h)
         target = t + h
         dense = self._dense
         # (the interpolant outlives its solver: every reset -- snapshot, tolerance, solver -- sets

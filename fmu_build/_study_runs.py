@@ -165,7 +165,7 @@ def _run_fmu(fmu, point, settings, start):
         if fmi_name not in var:
             raise ValueError(f"the FMU has no variable {fmi_name!r} to set from the grid's `{name}`")
         if fmi_name == "solver" and isinstance(value, str):
-            value = ("RK45", "DOP853", "Radau", "BDF").index(value)
+            value = ("RK45", "DOP853", "Radau", "BDF", "exact", "Magnus4").index(value)
         values[fmi_name] = value
     offset = float(point.get("offset", 0.0))
     if offset:
