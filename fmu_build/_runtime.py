@@ -289,7 +289,7 @@ class _InputSignal:
 
 def _lagrange_weights(ts, s):
     """Weights ``w`` with ``p(s) = sum_k w_k p(ts[k])`` for the polynomial through the points `ts`."""
-    w = np.ones(len(ts))
+    w = [1.0] * len(ts)
     for k, tk in enumerate(ts):
         for j, tj in enumerate(ts):
             if j != k:
@@ -307,9 +307,12 @@ def _expm_small(A):
     norm = float(np.max(np.sum(np.abs(A), axis=1)))
     squarings = max(0, math.ceil(math.log2(norm / 0.25))) if norm > 0.25 else 0
     X = A / 2.0 ** squarings
+    diagonal = np.arange(A.shape[0])
     E = np.eye(A.shape[0])
     for k in range(12, 0, -1):  # Horner: I + X/1 (I + X/2 (I + ...))
-        E = np.eye(A.shape[0]) + (X @ E) / k
+        E = X @ E
+        E *= 1.0 / k
+        E[diagonal, diagonal] += 1.0
     for _ in range(squarings):
         E = E @ E
     return E
@@ -538,10 +541,13 @@ class LscRuntime:
             self.values[key] = s["start"]
             reg(Real(key, causality=par, variability=fixed, start=s["start"], description=f"initial value of {s['name']}",
                      getter=lambda key=key: self.values[key], setter=lambda v, key=key: self._set(key, v)))
+        self._input_of_vr = {}  # value reference -> input name, for the fast set_real
         for u in M.get("inputs", []):
-            reg(Real(u["name"], causality=inp, variability=cont, start=u["start"], description=u["description"],
-                     getter=lambda name=u["name"]: self.inputs[name].value,
-                     setter=lambda v, name=u["name"]: self._set_input(name, v)))
+            var = Real(u["name"], causality=inp, variability=cont, start=u["start"], description=u["description"],
+                       getter=lambda name=u["name"]: self.inputs[name].value,
+                       setter=lambda v, name=u["name"]: self._set_input(name, v))
+            reg(var)
+            self._input_of_vr[var.value_reference] = u["name"]
         self._good_values = self._model_values()  # the build checked that these run
         self._fastest_rate = None
         self._state_of_vr = {}  # value reference -> state index, for the fast get_real
@@ -588,6 +594,18 @@ class LscRuntime:
         else:
             value = float(value)
         self.values[name] = value
+
+    def set_inputs(self, vrs, values):
+        """Set Real inputs straight away (a master sets them before every step); False if `vrs` are not all inputs.
+
+        An input can be set in every mode but after terminate; the value is checked by `_set_input`.
+        """
+        names = self._input_of_vr
+        if self.mode == TERMINATED or not all(vr in names for vr in vrs):
+            return False
+        for vr, value in zip(vrs, values):
+            self._set_input(names[vr], value)
+        return True
 
     def _set_input(self, name, value):
         if not math.isfinite(value):
@@ -862,7 +880,8 @@ class LscRuntime:
             del history[:-4]
             ts = [e[0] for e in history]
             stack = np.array([e[1] for e in history])
-            A1, A2 = (np.tensordot(_lagrange_weights(ts, s), stack, axes=1) for s in nodes)
+            weights = np.array([_lagrange_weights(ts, s) for s in nodes])
+            A1, A2 = (weights @ stack.reshape(len(ts), -1)).reshape((2,) + stack.shape[1:])
         Omega = (0.5 * h) * (A1 + A2) + (math.sqrt(3.0) / 12.0 * h * h) * (A2 @ A1 - A1 @ A2)
         E = _expm_small(Omega)
         n = self.n
@@ -1127,7 +1146,8 @@ def _make_slave_base():
 
         @_never_raises(_nothing)
         def set_real(self, vrs, values):
-            self._set(vrs, values, Real)
+            if self.rt is None or not self.rt.set_inputs(vrs, values):
+                self._set(vrs, values, Real)
 
         @_never_raises(_nothing)
         def set_integer(self, vrs, values):
