@@ -10,7 +10,12 @@ Design rules, from pythonfmu's behaviour:
   valid value is set. No step ever runs on a bad value.
 - The completion is rebuilt only when something it depends on changed
   (``lambda``, ``method`` or a parameter); otherwise it is reused.
-- One ODE solver runs across communication steps; a step end is read from
+- Constant coefficients A, B are stepped exactly by default (`_ExactStepper`:
+  the matrix exponential of lsc._expm.Propagator, once per step size; the
+  inputs' extrapolation polynomials are polynomial forcing, stepped exactly).
+  Time-varying completions can take a fourth-order Magnus step with one
+  evaluation of the completion per communication step (``solver = 5``).
+- Otherwise one ODE solver runs across communication steps; a step end is read from
   the solver's dense output, so a communication step costs a few Python
   calls, not a fresh integration. The solver restarts from the current
   state when anything it depends on changes (``lambda``, ``method``, a
@@ -241,8 +246,10 @@ class _InputSignal:
         self.value = start
         self.degree = order + 2 if order >= 0 else 0  # order -1: the input is never used
         self._derivs = None  # derivatives 0..deg of the polynomial at _t0
+        self._jet_at = (None, None)  # (t, jet): A, B and f read the same jet at one time
 
     def record(self, t):
+        self._jet_at = (None, None)
         if self.history and t <= self.history[-1][0]:
             # a repeated or earlier time (rollback handled by the snapshot): replace
             self.history = [h for h in self.history if h[0] < t]
@@ -277,9 +284,13 @@ class _InputSignal:
         return out
 
     def jet(self, t):
-        """[u, u', ..., u^(order_max)] at t (zeros beyond the orders in use)."""
+        """[u, u', ..., u^(order_max)] at t (zeros beyond the orders in use; read only)."""
+        at, out = self._jet_at
+        if at == t and self._derivs is not None:
+            return out
         out = self._at(t, self.order_max)
         out[(min(self.order, self.order_max) + 1 if self.order >= 0 else 1):] = 0.0
+        self._jet_at = (t, out)
         return out
 
     def taylor(self, t, top):
@@ -329,9 +340,10 @@ class _ExactStepper:
     polynomial, and no other time dependence), with local error
     ``O(h^(q+2) |g^(q+1)|)`` otherwise. A forcing that depends on t itself
     is stepped in equal substeps no longer than ``H``, with the local error
-    bound ``H^(q+2) max |g^(q+1)| / (q+2)!`` at 1e-13 (times ``max(1, |x|)``
+    bound ``H^(q+2) max |g^(q+1)| / (q+2)!`` at 1e-13 (times ``max(1, |g|)``
     at the start), ``max |g^(q+1)|`` sampled at 33 times over the experiment
-    (the generated code has that derivative). ``K = Psi Wbig`` acts on the stacked
+    (the generated code has that derivative). With a fixed step size the
+    forcing terms are read on the grid ``start + i h`` (256 at once). ``K = Psi Wbig`` acts on the stacked
     jet ``[f; f'; ...; f^(p+q)](t)`` directly, so a step is one call of the
     generated ``f_jet`` and two matrix-vector products; a constant forcing
     folds into one vector ``K``. The matrices are computed once per step size
@@ -388,7 +400,9 @@ class _ExactStepper:
             bound = max(bound, float(np.max(np.abs(g))))
         if not (bound > 0.0 and math.isfinite(bound)):
             return math.inf
-        tol = 1e-13 * max(1.0, float(np.max(np.abs(x), initial=0.0)))
+        start = self._f_jet(t_span[0], self._params, p, zeros) if self._inputs else self._f_jet(t_span[0], self._params, p)
+        scale = float(np.max(np.abs(c._W @ start.reshape(-1)), initial=0.0))  # |g| at the start
+        tol = 1e-13 * max(1.0, scale)
         return (tol * math.factorial(q + 2) / bound) ** (1.0 / (q + 2))
 
     def blocks(self, h):
@@ -493,6 +507,7 @@ class LscRuntime:
         self.values = {"lambda": M["lam"], "method": METHODS.index(M["method"]), "project_initial": False,
                        "rtol": 1e-6, "atol": 1e-9, "solver": solver_start}
         self._exact = None  # _ExactStepper of the current completion
+        self._t_start = M["start"]  # the experiment's start (set again at exitInitializationMode)
         self._magnus_history, self._magnus_key = [], None  # (t, A) at the last step ends of the Magnus step
         self.errors = {}  # variable -> message of a rejected value
         self.t = M["start"]
@@ -743,6 +758,7 @@ class LscRuntime:
         if self._sequence_error("exitInitializationMode is allowed only after enterInitializationMode, once", (INITIALIZATION_MODE,)):
             return
         self.mode = STEP_MODE
+        self._t_start = self.t
         self.x = np.array([self.values[start_name(s["name"])] for s in self.model.MODEL["states"]], dtype=float)
         self._solver = None
         if self.values["project_initial"] and not self.errors:
@@ -822,9 +838,11 @@ class LscRuntime:
         """One exact step from the FMU's time (already checked): True, or False with the reason logged."""
         ex = self._exact
         if ex is None or ex.key != self._completion_key:
+            # the grid and the step bound depend only on the experiment, never on when the stepper
+            # was made: a state restored across a change of lambda repeats its steps bit for bit
             ex = self._exact = _ExactStepper(c, self._completion_key, self.model.MODEL.get("exact_degree", 0),
-                                             self.model, self._params(), self.inputs, self.x,
-                                             (min(self.t, self.t_stop), max(self.t, self.t_stop)))
+                                             self.model, self._params(), self.inputs, None,
+                                             (self._t_start, max(self._t_start, self.t_stop)))
         if self.inputs:
             for signal in self.inputs.values():
                 signal.record(t)
