@@ -26,12 +26,14 @@ from collections import OrderedDict
 import numpy as np
 import scipy.linalg
 
-from ._derivative_array import array_jets, lam_jet, stabilization_jets
+from ._derivative_array import array_jets, stabilization_jets
 from ._exceptions import DimensionError, IndexDeterminationError
 from ._index import check_solvability, determine_index, k_works
 from ._linalg import numerical_rank, validate_rcond
-from ._timefunc import TimeFunction, _contains_sympy, _shape_str, as_time_function
-from ._validate import check_dae, check_k, check_lam_value, check_t_span
+from ._problem import check_dae
+from ._rate import as_rate, lam_at
+from ._timefunc import TimeFunction, _shape_str
+from ._validate import check_k, check_t_span
 
 __all__ = [
     "Completion",
@@ -141,23 +143,6 @@ class _Factors:
         return ((X @ self.Vt[:r].T) / self.s[:r]) @ self.U[:, :r].T
 
 
-def _as_rate(lam):
-    """A positive constant (float) or a TimeFunction of shape () for lam(t)."""
-    if lam is None or isinstance(lam, TimeFunction):
-        return lam
-    if callable(lam) or _contains_sympy(lam):
-        return as_time_function("lam", lam, ())
-    return check_lam_value(lam)
-
-
-def lam_at(lam, t, order=0):
-    """Derivatives ``0..order`` of a rate at `t`, refusing a non-positive value."""
-    jet = lam_jet(lam, t, order)
-    if not jet[0] > 0.0:
-        raise ValueError(f"`lam` must be positive wherever the completion is evaluated; lam({t!r}) = {jet[0]!r}.")
-    return jet
-
-
 class Completion:
     """Base class of the ODE completions ``x' = G x + g(t)`` of a linear DAE.
 
@@ -241,7 +226,7 @@ class Completion:
                 f"`lam` is required for the {self.method!r} completion: a positive finite rate "
                 "(e.g. lam=1.0), a sympy expression in t or a callable lam(t, d); found None."
             )
-        lam = _as_rate(lam)
+        lam = as_rate(lam)
         if isinstance(lam, TimeFunction):
             times = [self._t_ref] if self.t_span is None else np.linspace(*self.t_span, 101)
             for t in times:

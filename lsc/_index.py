@@ -6,7 +6,8 @@ import scipy.linalg
 from ._derivative_array import array_jets
 from ._exceptions import IndexDeterminationError
 from ._linalg import default_rcond, numerical_rank, validate_rcond
-from ._validate import check_dae, check_k, check_time
+from ._problem import check_dae
+from ._validate import check_k, check_t_span, check_time
 
 __all__ = ["differentiation_index", "check_solvability", "ArrayRanks", "SolvabilityReport"]
 
@@ -261,8 +262,6 @@ def check_solvability(dae, t_span, *, k=None, kmax=10, rcond=None, samples=21):
     >>> report.k, sorted(set(report.pointwise_index.tolist()))
     (2, [1, 2])
     """
-    from ._validate import check_t_span
-
     check_dae(dae)
     t0, t1 = check_t_span(t_span)
     kmax = check_k(kmax, "kmax")

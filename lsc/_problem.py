@@ -6,7 +6,7 @@ from ._exceptions import DimensionError
 from ._timefunc import _as_float_array, _contains_sympy, _shape_str, as_time_function
 from ._validate import check_state
 
-__all__ = ["LinearDAE"]
+__all__ = ["LinearDAE", "check_dae"]
 
 
 class LinearDAE:
@@ -111,6 +111,13 @@ class LinearDAE:
         if self.f is not None:
             r = r - self.f(t)
         return r
+
+
+def check_dae(dae):
+    """`dae` itself when it is a LinearDAE; a TypeError naming what was found otherwise."""
+    if not isinstance(dae, LinearDAE):
+        raise TypeError(f"`dae` must be an lsc.LinearDAE; found {type(dae).__name__}.")
+    return dae
 
 
 def _infer_n(value, name):

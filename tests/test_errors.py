@@ -66,7 +66,7 @@ CASES = [
     (lambda: complete(CHAIN, "alternative", lam=lambda s, d: np.ones(2)), DimensionError, "`lam(t, d)` must return shape ()"),
     (lambda: complete(CHAIN, "alternative", lam=1 + sympy.Symbol("a") * t), ValueError, "`lam` may depend on the symbol t only"),
     (lambda: complete(CHAIN, "alternative", lam=1 - t, t_span=(0.0, 2.0)), ValueError, "`lam` must be positive wherever the completion is evaluated"),
-    (lambda: complete(CHAIN, "stabilized", lam=-1 + 0 * t), ValueError, "`lam` must be positive"),
+    (lambda: complete(CHAIN, "stabilized", lam=-1 + 0 * t), ValueError, "`lam` must be a positive finite real number; found -1.0"),
     (lambda: check_solvability(CHAIN, (0.0, 1.0), samples=1), ValueError, "`samples` must be an int >= 2; found 1"),
 ]
 
