@@ -30,7 +30,7 @@ from ._derivative_array import array_jets, stabilization_jets
 from ._exceptions import DimensionError, IndexDeterminationError
 from ._index import check_solvability, determine_index, k_works
 from ._linalg import numerical_rank, validate_rcond
-from ._problem import check_dae
+from ._problem import check_dae, varying_view
 from ._rate import as_rate, lam_at
 from ._timefunc import TimeFunction, _shape_str
 from ._validate import check_k, check_t_span
@@ -198,6 +198,9 @@ class Completion:
         self.t_span = None if t_span is None else check_t_span(t_span)
         self._t_ref = 0.0 if self.t_span is None else min(self.t_span)
         self.lam = self._check_lam(lam)
+        if dae.is_constant and isinstance(self.lam, TimeFunction):
+            # G(t) follows lam(t): evaluate it where it is asked for, like time-varying coefficients.
+            self.dae = dae = varying_view(dae)
         self.k = self._check_k(k)
         self._order = self.k + self.extra_order
         self._cache = OrderedDict()
@@ -228,10 +231,17 @@ class Completion:
             )
         lam = as_rate(lam)
         if isinstance(lam, TimeFunction):
-            times = [self._t_ref] if self.t_span is None else np.linspace(*self.t_span, 101)
-            for t in times:
-                lam_at(lam, float(t))
+            self._check_rate_on([self._t_ref] if self.t_span is None else self.t_span, lam)
         return lam
+
+    def _check_rate_on(self, t_span, lam=None):
+        """Refuse a time-varying rate that is not positive at 101 points of `t_span` (or at one time)."""
+        lam = self.lam if lam is None else lam
+        if not isinstance(lam, TimeFunction):
+            return
+        times = np.linspace(t_span[0], t_span[-1], 101 if len(t_span) == 2 else 1)
+        for t in times:
+            lam_at(lam, float(t))
 
     def _check_k(self, k):
         dae, t = self.dae, self._t_ref

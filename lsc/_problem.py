@@ -120,6 +120,19 @@ def check_dae(dae):
     return dae
 
 
+def varying_view(dae):
+    """A copy of `dae` with ``is_constant = False``, sharing its coefficients.
+
+    A completion whose rate ``lam(t)`` varies changes with time even when
+    ``A`` and ``B`` do not; its `dae` is this copy, so everything that
+    integrates or analyses a completion evaluates it where it varies.
+    """
+    view = object.__new__(LinearDAE)
+    view.__dict__.update(dae.__dict__)
+    view.is_constant = False
+    return view
+
+
 def _infer_n(value, name):
     """n from a sympy matrix, or from one evaluation of a callable at t = 0."""
     if _contains_sympy(value):

@@ -45,5 +45,5 @@ def lam_at(lam, t, order=0):
     """Derivatives ``0..order`` of a rate at `t`, refusing a non-positive value."""
     jet = lam_jet(lam, t, order)
     if not jet[0] > 0.0:
-        raise ValueError(f"`lam` must be positive wherever the completion is evaluated; lam({t!r}) = {jet[0]!r}.")
+        raise ValueError(f"`lam` must be positive wherever the completion is evaluated; lam({float(t)!r}) = {float(jet[0])!r}.")
     return jet
