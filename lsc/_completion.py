@@ -30,7 +30,7 @@ from ._derivative_array import array_jets, stabilization_jets
 from ._exceptions import DimensionError, IndexDeterminationError
 from ._index import check_solvability, determine_index, k_works
 from ._linalg import numerical_rank, validate_rcond
-from ._problem import check_dae, varying_view
+from ._problem import check_dae, row_equilibration, row_scaled, varying_view
 from ._rate import as_rate, lam_at
 from ._timefunc import TimeFunction, _shape_str
 from ._validate import check_k, check_t_span
@@ -204,12 +204,19 @@ class Completion:
         self.k = self._check_k(k)
         self._order = self.k + self.extra_order
         self._cache = OrderedDict()
+        # Badly scaled rows are equilibrated once (constant scales, so the solutions do not change);
+        # the arrays are built from the scaled equations, `_W` still acts on the given f.
+        self._row_scales = row_equilibration(dae, self._t_ref)
+        self._eq = dae if self._row_scales is None else row_scaled(dae, self._row_scales)
         if dae.is_constant:
-            fac = _Factors(dae, self.k, self._t_ref, self.extra_order, self.rcond)
+            fac = _Factors(self._eq, self.k, self._t_ref, self.extra_order, self.rcond)
             self._std = fac
             self._rank = fac.rank
             self._G, self._W = self._maps(fac, self._t_ref)
             self._W_c = fac.cg
+            if self._row_scales is not None:
+                columns = np.tile(self._row_scales, self._order + 1)
+                self._W, self._W_c = self._W * columns, self._W_c * columns
             self._setup_forcing()
         else:
             fac = self._factors(self._t_ref, check=False)
@@ -264,8 +271,8 @@ class Completion:
     # -- evaluation ---------------------------------------------------------
     def _factors(self, t, check=True):
         """The standard-array factors at `t`, with the forcing as values at `t`."""
-        fstack = self.dae.f_jet(t, self._order).reshape(-1)
-        return _Factors(self.dae, self.k, t, self.extra_order, self.rcond, fmap=fstack,
+        fstack = self._eq.f_jet(t, self._order).reshape(-1)
+        return _Factors(self._eq, self.k, t, self.extra_order, self.rcond, fmap=fstack,
                         expected_rank=self._rank if check else None)
 
     def _evaluate(self, t):
