@@ -173,6 +173,9 @@ class Completion:
     Attributes
     ----------
     dae : LinearDAE
+        The DAE; for a time-varying ``lam`` on constant coefficients a copy
+        of it with ``is_constant = False``, so every consumer evaluates the
+        completion where it varies.
     n : int
         Number of unknowns.
     k : int
@@ -561,6 +564,16 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None):
     Returns
     -------
     Completion
+
+    Notes
+    -----
+    When the norms of the rows of ``[A, B]`` (at the start of `t_span`, or
+    t = 0) spread by more than 1024, the equations are multiplied by powers
+    of two that equilibrate them before any rank decision: the solutions,
+    the DAE's eigenvalues and the added eigenvalues ``-lam`` do not change,
+    the standard and stabilized LSC's least-squares metric does (see
+    docs/reliability_library.md). A time-varying ``lam`` makes the
+    completion time-varying even for constant ``A`` and ``B``.
 
     Examples
     --------

@@ -232,7 +232,9 @@ def solve_completion(
         ``'auto'`` picks 'Radau' when the completion is stiff on `t_span`
         (``stiffness_ratio`` > 100, see below) and 'DOP853' otherwise. An
         explicit method on a stiff completion runs as asked, and the
-        result's message says that an implicit one would be faster.
+        result's message says that an implicit one would be faster; when
+        stability alone would need more than 1e5 evaluations, a
+        `StiffnessWarning` with the estimated cost is issued before the run.
     t_eval : array_like, optional
         Output times (default: the solver's steps).
     rtol, atol : float or array_like, optional
@@ -262,8 +264,17 @@ def solve_completion(
     -------
     CompletionResult
         ``success=False`` with a message when the integration fails,
-        including when the forcing becomes non-finite during the run; bad
-        arguments raise before integrating.
+        including when the forcing becomes non-finite or cannot be evaluated
+        during the run; the result then holds the trajectory computed up to
+        the last accepted step, as `scipy.integrate.solve_ivp` does. Bad
+        arguments (including a time-varying ``lam`` that is not positive on
+        `t_span`) raise before integrating.
+
+    Warns
+    -----
+    StiffnessWarning
+        Before the run, when an explicit method is asked for on a completion
+        so stiff that it would take more than 1e5 evaluations.
 
     Examples
     --------
@@ -416,7 +427,7 @@ def _partial_run(fun, t0, t_ok, x0, method, t_eval, options):
     options.pop("events", None)
     try:
         sol = solve_ivp(fun, (t0, t_ok), x0, method=method, t_eval=t_eval, **options)
-    except _ForcingFailed:  # a re-run that fails again (a solver probing past its bound): keep the start only
+    except (_ForcingFailed, ValueError):  # fails again (a solver probing past its bound, a first_step too long)
         return np.array([t0]), x0[:, None].copy(), 0
     return sol.t, sol.y, sol.nfev
 
