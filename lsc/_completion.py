@@ -279,8 +279,9 @@ class Completion:
                 raise ValueError(
                     f"`k`={k} is {k - index} above the differentiation index {index} (at t={t:g}); at most "
                     f"index + {K_ABOVE_INDEX} = {index + K_ABOVE_INDEX} is accepted. More differentiations gain "
-                    "nothing in exact arithmetic (the solutions are those of k = index), but the derivative array's entries "
-                    "grow like binomial coefficients and f's derivatives of order up to k + 1, so rounding grows: "
+                    "nothing in exact arithmetic (the solutions are those of k = index), but the derivative "
+                    "array's entries grow like binomial coefficients and f's derivatives of order up to k + 1, "
+                    "so rounding grows: "
                     "on gallery.prescribed_path (index 3) the error is 8e-9 up to k = 15, then 7e-8 at k = 18, "
                     "4e-3 at k = 28 and 2 at k = 33. Use k=None."
                 )
