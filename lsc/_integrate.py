@@ -341,9 +341,9 @@ def solve_completion(
         message += (f" (the completion is stiff on this interval: |rate| x length = {stiffness:.3g}; "
                     "method='Radau' or 'auto' takes far fewer steps)")
     elif not sol.success and not _is_implicit(method):
-        message += (f" (the step size collapsed near t={float(sol.t[-1]):g}, but the completion is not stiff: its known "
+        message += (f" (the step size collapsed after t={float(sol.t[-1]):g}, but the completion is not stiff: its known "
                     f"rates (lam, and the eigenvalues of G for constant coefficients) x length = {stiffness:.3g}; look "
-                    "for a singularity of the coefficients or the forcing there)")
+                    "for a singularity of the coefficients or the forcing just after it)")
     return CompletionResult(
         t=sol.t, x=x, success=bool(sol.success), status=sol.status, message=message,
         nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=sol.sol, completion=completion,
