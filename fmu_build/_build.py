@@ -13,7 +13,7 @@ import numpy as np
 import lsc
 
 from ._runtime import start_name
-from ._spec import MAX_K, METHODS, ModelSpec, SpecError, load_spec, model_name_problems, parse_spec
+from ._spec import MAX_K, METHODS, ModelSpec, SpecError, lam_problem, load_spec, model_name_problems, parse_spec
 
 __all__ = ["build_fmu"]
 
@@ -337,6 +337,8 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
         spec.method = method
     if lam is not None:
         spec.lam = lsc._validate.check_lam_value(lam)
+        if lam_problem(spec.lam):
+            raise ValueError(f"lam: {lam_problem(spec.lam)}")
     if model_name is not None:
         problems = model_name_problems(model_name, field="model_name")
         if problems:
