@@ -14,7 +14,7 @@ import numpy as np
 import lsc
 
 from ._runtime import start_name
-from ._spec import MAX_K, METHODS, ModelSpec, SpecError, load_spec, model_name_problems, parse_spec
+from ._spec import MAX_K, METHODS, ModelSpec, SpecError, derivative_problems, lam_problem, load_spec, model_name_problems, parse_spec
 
 __all__ = ["build_fmu"]
 
@@ -351,6 +351,8 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
         spec.method = method
     if lam is not None:
         spec.lam = lsc._validate.check_lam_value(lam)
+        if lam_problem(spec.lam):
+            raise ValueError(f"lam: {lam_problem(spec.lam)}")
     if model_name is not None:
         problems = model_name_problems(model_name, field="model_name")
         if problems:
@@ -362,6 +364,10 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
         spec.k = k
     if target not in ("pythonfmu", "native"):
         raise ValueError(f"`target` must be one of ('pythonfmu', 'native'); found {target!r}.")
+    # k + 2 derivatives are taken symbolically; without completion.k, k is at most the index (<= n, <= 10)
+    problems = derivative_problems(spec, (spec.k if spec.k is not None else min(spec.n, 10)) + 2)
+    if problems:
+        raise SpecError(problems, source=spec.name)
     if target == "native":
         from ._native import build_native
 
