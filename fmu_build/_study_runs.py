@@ -306,6 +306,10 @@ def ssp_layout(scenario):
 
 
 def _run_ssp(cosimulate, scenario, point, settings, start):
+    import os
+
+    if not isinstance(scenario, dict) and os.path.isdir(scenario):  # an unpacked SSP: its description
+        scenario = os.path.join(scenario, "SystemStructure.ssd")
     t_span = settings.get("t_span")
     if not t_span:
         raise ValueError("an SSP target needs `t_span` (the start and stop time of the co-simulation)")
