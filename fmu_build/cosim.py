@@ -15,7 +15,10 @@ The master couples FMUs by their connections, at a fixed macro step ``H``:
   exact ones where the source provides them. An FMU that declares
   ``canInterpolateInputs`` receives the polynomial's derivatives at the step
   start with ``fmi2SetRealInputDerivatives``; any other FMU receives values only
-  (our pythonfmu DAE FMUs then estimate the derivatives themselves).
+  (our pythonfmu DAE FMUs then estimate the derivatives themselves; our native
+  DAE FMUs, ``build_fmu(..., target="native")``, interpolate). Each connected
+  output is asked for its derivative once: those an FMU refuses (a native lsc
+  FMU's outputs that depend on inputs) are estimated from values.
 - **Algebraic loops**: a cycle of direct feedthrough (from the model
   descriptions' output ``dependencies``; an output without the attribute
   depends on every input) is reported. With ``iterations = 0`` it is cut (one
