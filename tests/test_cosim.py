@@ -362,8 +362,8 @@ def test_native_dae_fmu_with_fixed_lambda_loses_one_order(native_loops):
 
 
 def test_native_dae_fmu_in_the_loop_diverges_beyond_unit_gain(native_loops):
-    """g = 1.1 > 1: the run blows up (or stops at a non-finite value) at every H."""
-    errs = _native_loop_errors(native_loops[1.1], 1.1, 2, 2.0)
+    """g = 1.1 > 1, p = 2: the derivative sweeps (contraction factor g) blow up at every H."""
+    errs = _native_loop_errors(native_loops[1.1], 1.1, 2, 2.0, stop=0.4)
     assert all(e > 1.0 for e in errs), errs
 
 
@@ -407,3 +407,12 @@ print(json.dumps({{"res": res}}))
         ref = scenarios.path_reference(np.array(t))
         errs.append(max(np.abs(np.array(x) - ref[3]).max(), np.abs(np.array(v) - ref[4]).max()))
     assert abs(np.log2(errs[0] / errs[1]) - 3) < 0.3 and errs[1] < 1e-4, errs
+
+
+def test_native_dae_fmu_beyond_unit_gain_p1_stable_iff_lambda_h_below_bound(native_loops):
+    """g = 1.1, p = 1: the root e^{-lam H} (1 + g) - g is inside the unit circle iff
+    lam H < ln((g + 1)/(g - 1)) = 3.04: lam H = 2 converges at order 1, lam H = 4 diverges."""
+    inside = _native_loop_errors(native_loops[1.1], 1.1, 1, 2.0, stop=2.0)
+    outside = _native_loop_errors(native_loops[1.1], 1.1, 1, 4.0, stop=2.0)
+    assert abs(np.log2(inside[0] / inside[1]) - 1) < 0.2 and inside[1] < 5e-3, inside
+    assert outside[1] > 10 * outside[0] and outside[1] > 1.0, outside
