@@ -579,7 +579,9 @@ def _complete_at_start(dae, spec, span):
         if np.all(np.isfinite(G)) and np.all(np.isfinite(g)):
             return completion
         k, reason = completion.k, "its right-hand side is not finite there"
-    except ArithmeticError as exc:
+    except (lsc.IndexDeterminationError, lsc.DimensionError):
+        raise  # not solvable, or a shape error: said as it is
+    except (ArithmeticError, ValueError) as exc:  # a coefficient outside its domain (lsc says which, as ValueError)
         k, reason = spec.k if spec.k is not None else 3, f"{type(exc).__name__}: {exc}"
     bad = []
     for label, tf, vector in (("A", dae.A, False), ("B", dae.B, False), ("f", dae.f, True)):
@@ -587,7 +589,7 @@ def _complete_at_start(dae, spec, span):
             try:
                 with np.errstate(all="ignore"):
                     values = np.asarray(tf.jet(t0, d)[d], dtype=float).reshape(tf.shape)
-            except ArithmeticError:
+            except (ArithmeticError, ValueError):
                 bad.append(f"{_entries_failing(tf, d, t0, label, vector) or label} (derivative {d})")
                 break
             entries = [f"equations.{label}[{i[0]}]" if vector else f"equations.{label}[{i[0]}][{i[1]}]"

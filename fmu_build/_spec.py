@@ -45,11 +45,9 @@ full reference is docs/spec_reference.md.
 """
 
 import difflib
-import importlib.util
 import keyword
 import math
 import re
-import sys
 import tomllib
 import unicodedata
 
@@ -87,8 +85,6 @@ MAX_DERIVATIVE_SIZE = 2000
 # time (1e20 + 0.01 == 1e20); a double carries about 16 significant digits.
 MIN_RELATIVE_STEP = 1e-12
 # Names the generated slave module defines next to the class named after the model.
-_SLAVE_NAMES = {"MODEL", "Fmi2Slave", "DefaultExperiment", "LscRuntime", "give_back_loader_reference",
-                "release_loader_state_at_exit", "pythonfmu"}
 # Matched with fullmatch: ``$`` would also match before a final newline ("x\n").
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
@@ -228,28 +224,21 @@ def _identifier(name, field, problems):
 def model_name_problems(name, field="model.name"):
     """Problems of a model name: a list of messages, empty when the name is fine.
 
-    The name becomes a Python module, a class and the FMU's file name, so it
-    must be an identifier of at most `MAX_MODEL_NAME` characters and must
-    not shadow a module importable in the building Python (``os``,
-    ``json``, ``numpy``, ``lsc``, ...) or a name the generated slave
-    module uses (``MODEL``, ``Fmi2Slave``, ...).
+    The name becomes the FMU's file name, its model identifier (the shared
+    library's name) and the slave's class name, so it must be an identifier
+    of at most `MAX_MODEL_NAME` characters. It may equal a module name
+    (``os``, ``json``, ``lsc``): the modules inside an FMU are named by a
+    hash of its content, so no model name shadows a module of the host.
 
     Examples
     --------
-    >>> model_name_problems("PrescribedPath")
-    []
-    >>> model_name_problems("json")
-    ["model.name: 'json' would shadow the importable module 'json' inside the FMU; choose another name"]
+    >>> model_name_problems("PrescribedPath"), model_name_problems("json")
+    ([], [])
+    >>> model_name_problems("1x")
+    ["model.name: '1x' is not a valid identifier (letters, digits, _; not a Python keyword)"]
     """
     problem = _name_problem(name, MAX_MODEL_NAME)
-    if problem is not None:
-        return [f"{field}: {problem}"]
-    if name in _SLAVE_NAMES:
-        return [f"{field}: {name!r} is a name the generated FMU code uses ({', '.join(sorted(_SLAVE_NAMES))}); choose another name"]
-    for module in (name, f"{name}_lsc", f"{name}_model"):
-        if _importable(module):
-            return [f"{field}: {name!r} would shadow the importable module {module!r} inside the FMU; choose another name"]
-    return []
+    return [] if problem is None else [f"{field}: {problem}"]
 
 
 def lam_problem(lam):
@@ -313,16 +302,6 @@ def derivative_problems(spec, order):
     return problems
 
 
-def _importable(module):
-    """Whether a top-level module of that name can be imported here (found, never imported)."""
-    if module in sys.builtin_module_names or module in sys.stdlib_module_names or module in sys.modules:
-        return True
-    try:
-        return importlib.util.find_spec(module) is not None
-    except (ImportError, ValueError):
-        return True
-
-
 def _text(info, key, field, problems, default=""):
     """A description or unit: text without control characters (it goes into XML).
 
@@ -380,7 +359,7 @@ def _entries(data, section, problems, bare=None):
 
     `bare` names the key a bare value stands for (``m = 1.0`` in [parameters]).
     """
-    table = _table(data.get(section), section, problems, f"a table of name = {{ ... }} entries")
+    table = _table(data.get(section), section, problems, "a table of name = { ... } entries")
     out = []
     for name, info in table.items():
         field = f"{section}.{name}"

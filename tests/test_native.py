@@ -21,7 +21,7 @@ import pytest
 import lsc
 from fmu_build import build_fmu, parse_spec
 from fmu_build._build import _numeric_dae
-from fmu_build._native import NativeTargetError
+from fmu_build._native import TAYLOR_DEGREE, NativeTargetError
 from lsc import gallery
 
 HERE = Path(__file__).parent
@@ -105,7 +105,9 @@ def library(spec, t, x0=None, lam=None):
     dae = _numeric_dae(spec)
     c = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else (lam or spec.lam))
     x0 = np.array([s["start"] for s in spec.states]) if x0 is None else x0
-    res = lsc.solve_completion(c, (t[0], t[-1]), x0, method="expm", t_eval=t)
+    # the FMU's scheme: one exact step per communication step, forcing by its Taylor polynomial of degree 3
+    res = lsc.solve_completion(c, (t[0], t[-1]), x0, method="expm", t_eval=t, taylor_degree=TAYLOR_DEGREE,
+                               max_step=float(np.min(np.diff(t))))
     assert res.success
     return res.x, c
 
