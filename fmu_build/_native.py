@@ -327,10 +327,10 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     G0, G1, W0, W1, comp, lam_tunable = _affine_maps(dae, spec.method, spec.lam, k)
     fpars = [p["name"] for p in spec.parameters if p["name"] not in kpars]
     ident = spec.name
-    digest = hashlib.sha256(repr((ident, G0.tobytes(), G1.tobytes(), W0.tobytes(), W1.tobytes(), str(spec.f),
-                                  [o["expr"] for o in spec.outputs], fpars, kpars)).encode()).hexdigest()
-    guid = "{" + str(uuid.UUID(digest[:32])) + "}"
-    header, info = _model_header(spec, ident=ident, guid=guid, G0=G0, G1=G1, W0=W0, W1=W1, comp=comp,
+    # the GUID is a hash of everything compiled into the binary (model.h: matrices, start values, formulas;
+    # the fixed sources) and of the variables the model description declares: any change gives another GUID
+    placeholder = "{00000000-0000-0000-0000-000000000000}"
+    header, info = _model_header(spec, ident=ident, guid=placeholder, G0=G0, G1=G1, W0=W0, W1=W1, comp=comp,
                                  lam_tunable=lam_tunable, fpars=fpars, kpars=kpars)
     fixed_note = (f" Parameters in A or B fixed at their spec values: {', '.join(kpars)}." if kpars else "")
     lam_note = {"alternative": "lambda tunable (G and the forcing map are affine in lambda, checked at build time)",
@@ -339,6 +339,12 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     note = f"native C, constant A and B; {spec.method} completion, {lam_note}.{fixed_note}"
     variables = _variables(spec, fpars=fpars, kpars=kpars, vr=info["vr"], lam_tunable=lam_tunable,
                            method=spec.method, linear=info["linear"])
+    digest = hashlib.sha256()
+    for part in (header, *((_TEMPLATES / name).read_text() for name in _FIXED_SOURCES), repr(variables),
+                 repr(sorted(spec.experiment.items()))):
+        digest.update(part.encode())
+    guid = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
+    header = header.replace(placeholder, guid)
     flags_common = dict(needsExecutionTool=False, canBeInstantiatedOnlyOncePerProcess=False, canNotUseMemoryManagementFunctions=False,
                         canGetAndSetFMUstate=True, canSerializeFMUstate=True, providesDirectionalDerivative=False)
     xml = model_description(

@@ -105,7 +105,8 @@ def library(spec, t, x0=None, lam=None):
     dae = _numeric_dae(spec)
     c = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else (lam or spec.lam))
     x0 = np.array([s["start"] for s in spec.states]) if x0 is None else x0
-    res = lsc.solve_completion(c, (t[0], t[-1]), x0, method="expm", t_eval=t)
+    # the FMU's scheme: a degree-3 Taylor forcing over each communication step
+    res = lsc.solve_completion(c, (t[0], t[-1]), x0, method="expm", t_eval=t, taylor_degree=3, max_step=t[1] - t[0])
     assert res.success
     return res.x, c
 

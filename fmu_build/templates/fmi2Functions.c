@@ -16,6 +16,7 @@
  *   all phi_j from one exponential of the block matrix [[Gh, I, 0..], [0, 0, I, ..], ..].
  */
 #include <float.h>
+#include <stddef.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -33,7 +34,8 @@
 #define NUD (NF)                 /* length of an input jet: u, u', ..., u^(NF-1) */
 #define HN (UDEG + 1)            /* input history points */
 #define STEP_RTOL 1e-10          /* step sizes this close share one set of step matrices */
-#define STATE_MAGIC 0x4c534331u  /* "LSC1" */
+#define STATE_MAGIC 0x4c534332u  /* "LSC2" */
+#define TIME_ULPS 16.0           /* a communication point may differ from the FMU time by this many ulps */
 
 typedef enum {
     StartAndEnd = 1 << 0, Instantiated = 1 << 1, InitializationMode = 1 << 2, EventMode = 1 << 3,
@@ -62,8 +64,10 @@ typedef struct {
     int hist_n;
     int project_initial;
     int invalid[NR];             /* a value was rejected: steps are discarded until a valid one is set */
-    double t_stop;
+    int type;                    /* fmi2CoSimulation or fmi2ModelExchange: a state belongs to one interface */
+    double t_stop;               /* INFINITY unless a stop time was defined */
     int stop_defined;
+    unsigned int check;          /* checksum of a serialized state (0 in memory) */
 } State;
 
 typedef struct {
@@ -81,7 +85,7 @@ typedef struct {
     double Phi[NX * NX];
     double F[NX * NX * NF];      /* the forcing terms of one step acting on [f; f'; ...; f^(NF-1)] */
     /* work space */
-    double Mb[MB * MB], E[MB * MB], w1[MB * MB], w2[MB * MB], w3[MB * MB];
+    double Mb[MB * MB], E[MB * MB], work[6 * MB * MB];
     int piv[MB];
     double fj[NF * NX];
     double uj[A1(NU) * NUD];
@@ -111,6 +115,18 @@ static int allowed(Instance *c, const char *f, int phases) {
     }
     return 1;
 }
+
+/* a function of one interface called on an instance of the other */
+static int wrong_type(Instance *c, const char *f, fmi2Type type) {
+    if (c->type == type) return 0;
+    logmsg(c, fmi2Error, "%s: a %s function, this instance was instantiated for %s", f,
+           type == fmi2ModelExchange ? "Model Exchange" : "Co-Simulation",
+           c->type == fmi2ModelExchange ? "Model Exchange" : "Co-Simulation");
+    return 1;
+}
+
+/* before the end of initialization the states are the start values being set */
+static int before_init(const Instance *c) { return (c->s.phase & (Instantiated | InitializationMode)) != 0; }
 
 static int nullarg(Instance *c, const char *f, const void *p, const char *what) {
     if (p == NULL) {
@@ -219,7 +235,7 @@ static void state_derivatives(Instance *c) {
     int d, i, j;
     form_gw(c);
     eval_f(c, c->s.t);
-    memcpy(c->xd, c->s.x, sizeof(double) * NX);
+    memcpy(c->xd, before_init(c) ? c->s.x0 : c->s.x, sizeof(double) * NX);
     for (d = 1; d <= NQ + 1; d++) {
         const double *prev = c->xd + (d - 1) * NX;
         double *cur = c->xd + d * NX;
@@ -240,9 +256,10 @@ static int step_matrices(Instance *c, double h) {
     memset(c->Mb, 0, sizeof c->Mb);
     for (i = 0; i < NX; i++)
         for (j = 0; j < NX; j++) c->Mb[i * MB + j] = c->G[i * NX + j] * h;
+    /* h I above the diagonal (as lsc's method='expm'): block (0, j) of the exponential is h^j phi_j(G h) */
     for (q = 1; q < NQ + 2; q++)
-        for (i = 0; i < NX; i++) c->Mb[((q - 1) * NX + i) * MB + q * NX + i] = 1.0;
-    if (lsc_expm(c->E, c->Mb, MB, c->w1, c->w2, c->w3, c->piv) != 0) {
+        for (i = 0; i < NX; i++) c->Mb[((q - 1) * NX + i) * MB + q * NX + i] = h;
+    if (lsc_expm(c->E, c->Mb, MB, c->work, c->piv) != 0) {
         c->cache_valid = 0;
         return -1;
     }
@@ -251,13 +268,12 @@ static int step_matrices(Instance *c, double h) {
     /* F[:, j*NX + col] = sum over Taylor terms q with j = q + r: h^(q+1) phi_(q+1) W[:, r*NX + col] */
     memset(c->F, 0, sizeof c->F);
     for (q = 0; q <= NQ; q++) {
-        const double hq = pow(h, q + 1);
         for (i = 0; i < NX; i++) {
             for (r = 0; r < NJ; r++) {
                 for (j = 0; j < NX; j++) {
                     double v = 0.0;
                     for (l = 0; l < NX; l++) v += c->E[i * MB + (q + 1) * NX + l] * c->W[l * NXJ + r * NX + j];
-                    c->F[i * NX * NF + (q + r) * NX + j] += hq * v;
+                    c->F[i * NX * NF + (q + r) * NX + j] += v;
                 }
             }
         }
@@ -335,7 +351,13 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                                                  fmuGUID ? fmuGUID : "(null)", INSTANTIATION_TOKEN);
         return NULL;
     }
-    if (fmuType != fmi2CoSimulation && fmuType != fmi2ModelExchange) return NULL;
+    if (fmuType != fmi2CoSimulation && fmuType != fmi2ModelExchange) {
+        if (functions->logger) functions->logger(functions->componentEnvironment, instanceName, fmi2Error, "logStatusError",
+                                                 "fmi2Instantiate: fmuType %d is neither fmi2ModelExchange (%d) nor "
+                                                 "fmi2CoSimulation (%d)", (int)fmuType, (int)fmi2ModelExchange,
+                                                 (int)fmi2CoSimulation);
+        return NULL;
+    }
     c = (Instance *)functions->allocateMemory(1, sizeof(Instance));
     if (c == NULL) return NULL;
     memset(c, 0, sizeof(Instance));
@@ -349,11 +371,13 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     c->s.size = (unsigned int)sizeof(State);
     c->s.token = token_hash();
     c->s.phase = Instantiated;
+    c->s.type = (int)fmuType;
     c->s.lam = LAMBDA_START;
     for (i = 0; i < NPAR; i++) c->s.p[i] = PAR_START[i];
     for (i = 0; i < NX; i++) c->s.x0[i] = c->s.x[i] = X_START[i];
     for (i = 0; i < NU; i++) c->s.u[i] = U_START[i];
     c->s.t = START_TIME;
+    c->s.t_stop = INFINITY;
     c->lam_gw = NAN;
     return c;
 }
@@ -395,8 +419,8 @@ fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined,
         return fmi2Error;
     }
     c->s.t = startTime;
-    c->s.stop_defined = stopTimeDefined;
-    c->s.t_stop = stopTime;
+    c->s.stop_defined = stopTimeDefined ? 1 : 0;
+    c->s.t_stop = stopTimeDefined ? stopTime : INFINITY;
     return fmi2OK;
 }
 
@@ -457,11 +481,13 @@ fmi2Status fmi2Reset(fmi2Component comp) {
     c->s.size = (unsigned int)sizeof(State);
     c->s.token = token_hash();
     c->s.phase = Instantiated;
+    c->s.type = (int)c->type;
     c->s.lam = LAMBDA_START;
     for (i = 0; i < NPAR; i++) c->s.p[i] = PAR_START[i];
     for (i = 0; i < NX; i++) c->s.x0[i] = c->s.x[i] = X_START[i];
     for (i = 0; i < NU; i++) c->s.u[i] = U_START[i];
     c->s.t = START_TIME;
+    c->s.t_stop = INFINITY;
     return fmi2OK;
 }
 
@@ -502,6 +528,11 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
         if (kind == 0 && !LAMBDA_TUNABLE) {
             logmsg(c, fmi2Error, "fmi2SetReal: lambda is a constant of this FMU (the completion is not affine in lambda, "
                    "so its matrices were computed at build time for this value)");
+            return fmi2Error;
+        }
+        if ((kind == 0 || kind == 1) && (c->s.phase & ContinuousTimeMode)) {
+            logmsg(c, fmi2Error, "fmi2SetReal: value reference %u is a tunable parameter: in Model Exchange it can be "
+                   "changed in Event Mode only, not in Continuous-Time Mode (FMI 2.0)", vr[i]);
             return fmi2Error;
         }
         if ((kind == 2 && !initial) || (kind == 1 && !initial && !PAR_TUNABLE[vr[i] - VR_PAR])) {
@@ -597,15 +628,52 @@ fmi2Status fmi2SetString(fmi2Component comp, const fmi2ValueReference vr[], size
 
 /* ---- FMU state ------------------------------------------------------------- */
 
-static int state_valid(const State *s) {
-    int i;
-    if (s->magic != STATE_MAGIC || s->size != (unsigned int)sizeof(State) || s->token != token_hash()) return 0;
-    if (!(s->phase & (ANY_ALIVE)) || !isfinite(s->t) || !(s->lam > 0.0) || !isfinite(s->lam)) return 0;
+/* The header of a state (magic, size, token) is read first, and nothing else
+ * unless it matches: a state of another lsc FMU has the same header, with its own size
+ * and token, and may be smaller than this one's. */
+static int state_header_ok(const State *s) {
+    return s->magic == STATE_MAGIC && s->size == (unsigned int)sizeof(State) && s->token == token_hash();
+}
+
+static int is_flag(int v) { return v == 0 || v == 1; }
+
+/* every field within its domain; the reason of a refusal in *why */
+static int state_valid(const State *s, int type, const char **why) {
+    int i, k, one_phase = 0;
+    if (!state_header_ok(s)) { *why = "magic number, size or GUID hash differ (another FMU's state?)"; return 0; }
+    if (s->type != type) {
+        *why = type == fmi2ModelExchange ? "it is a Co-Simulation state, this is a Model Exchange instance"
+                                         : "it is a Model Exchange state, this is a Co-Simulation instance";
+        return 0;
+    }
+    for (k = 0; k <= 6; k++) one_phase |= s->phase == (1 << k);
+    *why = "a field is out of its range or not finite";
+    if (!one_phase || !isfinite(s->t) || !(s->lam > 0.0) || !isfinite(s->lam)) return 0;
+    if (!is_flag(s->project_initial) || !is_flag(s->stop_defined) || s->check != 0) return 0;
+    if (isnan(s->t_stop) || (s->stop_defined && !isfinite(s->t_stop)) || (!s->stop_defined && s->t_stop != INFINITY)) return 0;
     if (s->hist_n < 0 || s->hist_n > HN) return 0;
     for (i = 0; i < NX; i++) if (!isfinite(s->x[i]) || !isfinite(s->x0[i])) return 0;
     for (i = 0; i < NPAR; i++) if (!isfinite(s->p[i])) return 0;
     for (i = 0; i < NU; i++) if (!isfinite(s->u[i])) return 0;
+    for (i = 0; i < A1(NU) * NUD; i++) if (!is_flag(s->ud_set[i]) || !isfinite(s->ud[i])) return 0;
+    for (k = 0; k < s->hist_n; k++) {
+        if (!isfinite(s->hist_t[k]) || (k > 0 && !(s->hist_t[k] < s->hist_t[k - 1]))) return 0;
+        for (i = 0; i < NU; i++) if (!isfinite(s->hist_u[k * A1(NU) + i])) return 0;
+    }
+    for (i = 0; i < NR; i++) if (!is_flag(s->invalid[i])) return 0;
     return 1;
+}
+
+/* FNV-1a (64 bit) over the bytes of a serialized state, its check field counted as zero */
+static unsigned int state_checksum(const unsigned char *b) {
+    const size_t at = offsetof(State, check);
+    unsigned long long h = 14695981039346656037ull;
+    size_t i;
+    for (i = 0; i < sizeof(State); i++) {
+        h ^= (i >= at && i < at + sizeof(unsigned int)) ? 0u : b[i];
+        h *= 1099511628211ull;
+    }
+    return (unsigned int)(h ^ (h >> 32));
 }
 
 fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
@@ -614,6 +682,10 @@ fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
     if (!allowed(c, "fmi2GetFMUstate", ANY_ALIVE)) return fmi2Error;
     if (nullarg(c, "fmi2GetFMUstate", FMUstate, "FMUstate")) return fmi2Error;
     s = (State *)*FMUstate;
+    if (s != NULL && !state_header_ok(s)) {
+        logmsg(c, fmi2Error, "fmi2GetFMUstate: *FMUstate is not NULL and not a state of this FMU to overwrite");
+        return fmi2Error;
+    }
     if (s == NULL) {
         s = (State *)c->cb.allocateMemory(1, sizeof(State));
         if (s == NULL) {
@@ -626,15 +698,24 @@ fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
     return fmi2OK;
 }
 
+/* the state behind a handle, or NULL with a logged reason */
+static const State *checked_state(Instance *c, const char *f, fmi2FMUstate FMUstate) {
+    const char *why;
+    if (nullarg(c, f, FMUstate, "FMUstate")) return NULL;
+    if (!state_valid((const State *)FMUstate, (int)c->type, &why)) {
+        logmsg(c, fmi2Error, "%s: not a valid state of this FMU: %s", f, why);
+        return NULL;
+    }
+    return (const State *)FMUstate;
+}
+
 fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate FMUstate) {
     Instance *c = (Instance *)comp;
+    const State *s;
     if (!allowed(c, "fmi2SetFMUstate", ANY_ALIVE)) return fmi2Error;
-    if (nullarg(c, "fmi2SetFMUstate", FMUstate, "FMUstate")) return fmi2Error;
-    if (!state_valid((const State *)FMUstate)) {
-        logmsg(c, fmi2Error, "fmi2SetFMUstate: the state is not a valid state of this FMU");
-        return fmi2Error;
-    }
-    memcpy(&c->s, FMUstate, sizeof(State));
+    s = checked_state(c, "fmi2SetFMUstate", FMUstate);
+    if (s == NULL) return fmi2Error;
+    memcpy(&c->s, s, sizeof(State));
     return fmi2OK;
 }
 
@@ -651,28 +732,35 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component comp, fmi2FMUstate FMUstate,
     Instance *c = (Instance *)comp;
     if (!allowed(c, "fmi2SerializedFMUstateSize", ANY_ALIVE)) return fmi2Error;
     if (nullarg(c, "fmi2SerializedFMUstateSize", size, "size")) return fmi2Error;
-    (void)FMUstate;
+    if (checked_state(c, "fmi2SerializedFMUstateSize", FMUstate) == NULL) return fmi2Error;
     *size = sizeof(State);
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size) {
     Instance *c = (Instance *)comp;
+    State tmp;
+    const State *s;
     if (!allowed(c, "fmi2SerializeFMUstate", ANY_ALIVE)) return fmi2Error;
-    if (nullarg(c, "fmi2SerializeFMUstate", FMUstate, "FMUstate")
-        || nullarg(c, "fmi2SerializeFMUstate", serializedState, "serializedState")) return fmi2Error;
+    s = checked_state(c, "fmi2SerializeFMUstate", FMUstate);
+    if (s == NULL || nullarg(c, "fmi2SerializeFMUstate", serializedState, "serializedState")) return fmi2Error;
     if (size < sizeof(State)) {
         logmsg(c, fmi2Error, "fmi2SerializeFMUstate: size %lu is smaller than %lu", (unsigned long)size,
                (unsigned long)sizeof(State));
         return fmi2Error;
     }
-    memcpy(serializedState, FMUstate, sizeof(State));
+    memcpy(&tmp, s, sizeof(State));
+    tmp.check = 0;
+    tmp.check = state_checksum((const unsigned char *)&tmp);
+    memcpy(serializedState, &tmp, sizeof(State));
     return fmi2OK;
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte serializedState[], size_t size, fmi2FMUstate *FMUstate) {
     Instance *c = (Instance *)comp;
     State tmp;
+    const char *why;
+    unsigned int check;
     if (!allowed(c, "fmi2DeSerializeFMUstate", ANY_ALIVE)) return fmi2Error;
     if (nullarg(c, "fmi2DeSerializeFMUstate", serializedState, "serializedState")
         || nullarg(c, "fmi2DeSerializeFMUstate", FMUstate, "FMUstate")) return fmi2Error;
@@ -681,9 +769,20 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte serialized
                (unsigned long)sizeof(State));
         return fmi2Error;
     }
+    if (*FMUstate != NULL && !state_header_ok((const State *)*FMUstate)) {
+        logmsg(c, fmi2Error, "fmi2DeSerializeFMUstate: *FMUstate is not NULL and not a state of this FMU to overwrite");
+        return fmi2Error;
+    }
     memcpy(&tmp, serializedState, sizeof(State));
-    if (!state_valid(&tmp)) {
-        logmsg(c, fmi2Error, "fmi2DeSerializeFMUstate: the bytes are not a valid state of this FMU");
+    check = tmp.check;
+    if (check != state_checksum((const unsigned char *)&tmp)) {
+        logmsg(c, fmi2Error, "fmi2DeSerializeFMUstate: the bytes are not a valid state of this FMU: checksum mismatch "
+               "(changed after serialization, or serialized elsewhere)");
+        return fmi2Error;
+    }
+    tmp.check = 0;
+    if (!state_valid(&tmp, (int)c->type, &why)) {
+        logmsg(c, fmi2Error, "fmi2DeSerializeFMUstate: not a valid state of this FMU: %s", why);
         return fmi2Error;
     }
     if (*FMUstate == NULL) {
@@ -711,14 +810,15 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component comp, const fmi2ValueRefer
 
 fmi2Status fmi2EnterEventMode(fmi2Component comp) {
     Instance *c = (Instance *)comp;
-    if (!allowed(c, "fmi2EnterEventMode", EventMode | ContinuousTimeMode) || c->type != fmi2ModelExchange) return fmi2Error;
+    if (!allowed(c, "fmi2EnterEventMode", EventMode | ContinuousTimeMode) || wrong_type(c, "fmi2EnterEventMode", fmi2ModelExchange))
+        return fmi2Error;
     c->s.phase = EventMode;
     return fmi2OK;
 }
 
 fmi2Status fmi2NewDiscreteStates(fmi2Component comp, fmi2EventInfo *info) {
     Instance *c = (Instance *)comp;
-    if (!allowed(c, "fmi2NewDiscreteStates", EventMode) || nullarg(c, "fmi2NewDiscreteStates", info, "fmi2eventInfo"))
+    if (!allowed(c, "fmi2NewDiscreteStates", EventMode) || wrong_type(c, "fmi2NewDiscreteStates", fmi2ModelExchange) || nullarg(c, "fmi2NewDiscreteStates", info, "fmi2eventInfo"))
         return fmi2Error;
     info->newDiscreteStatesNeeded = fmi2False;
     info->terminateSimulation = fmi2False;
@@ -731,7 +831,7 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component comp, fmi2EventInfo *info) {
 
 fmi2Status fmi2EnterContinuousTimeMode(fmi2Component comp) {
     Instance *c = (Instance *)comp;
-    if (!allowed(c, "fmi2EnterContinuousTimeMode", EventMode)) return fmi2Error;
+    if (!allowed(c, "fmi2EnterContinuousTimeMode", EventMode) || wrong_type(c, "fmi2EnterContinuousTimeMode", fmi2ModelExchange)) return fmi2Error;
     c->s.phase = ContinuousTimeMode;
     return fmi2OK;
 }
@@ -740,7 +840,7 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetFMUS
                                        fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation) {
     Instance *c = (Instance *)comp;
     (void)noSetFMUStatePriorToCurrentPoint;
-    if (!allowed(c, "fmi2CompletedIntegratorStep", ContinuousTimeMode)) return fmi2Error;
+    if (!allowed(c, "fmi2CompletedIntegratorStep", ContinuousTimeMode) || wrong_type(c, "fmi2CompletedIntegratorStep", fmi2ModelExchange)) return fmi2Error;
     if (nullarg(c, "fmi2CompletedIntegratorStep", enterEventMode, "enterEventMode")
         || nullarg(c, "fmi2CompletedIntegratorStep", terminateSimulation, "terminateSimulation")) return fmi2Error;
     /* the input history for the derivative estimates: points at least the default experiment's step
@@ -758,7 +858,7 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetFMUS
 
 fmi2Status fmi2SetTime(fmi2Component comp, fmi2Real time) {
     Instance *c = (Instance *)comp;
-    if (!allowed(c, "fmi2SetTime", EventMode | ContinuousTimeMode)) return fmi2Error;
+    if (!allowed(c, "fmi2SetTime", EventMode | ContinuousTimeMode) || wrong_type(c, "fmi2SetTime", fmi2ModelExchange)) return fmi2Error;
     if (!isfinite(time)) {
         logmsg(c, fmi2Error, "fmi2SetTime: time %g is not finite", time);
         return fmi2Error;
@@ -770,7 +870,7 @@ fmi2Status fmi2SetTime(fmi2Component comp, fmi2Real time) {
 fmi2Status fmi2SetContinuousStates(fmi2Component comp, const fmi2Real x[], size_t nx) {
     Instance *c = (Instance *)comp;
     size_t i;
-    if (!allowed(c, "fmi2SetContinuousStates", EventMode | ContinuousTimeMode)) return fmi2Error;
+    if (!allowed(c, "fmi2SetContinuousStates", EventMode | ContinuousTimeMode) || wrong_type(c, "fmi2SetContinuousStates", fmi2ModelExchange)) return fmi2Error;
     if (nullarg(c, "fmi2SetContinuousStates", x, "x")) return fmi2Error;
     if (nx != NX) {
         logmsg(c, fmi2Error, "fmi2SetContinuousStates: nx = %lu, expected %d", (unsigned long)nx, NX);
@@ -788,8 +888,9 @@ fmi2Status fmi2SetContinuousStates(fmi2Component comp, const fmi2Real x[], size_
 
 fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real derivatives[], size_t nx) {
     Instance *c = (Instance *)comp;
+    const double *x;
     int i, j;
-    if (!allowed(c, "fmi2GetDerivatives", InitializationMode | EventMode | ContinuousTimeMode | Terminated | Error))
+    if (!allowed(c, "fmi2GetDerivatives", InitializationMode | EventMode | ContinuousTimeMode | Terminated | Error) || wrong_type(c, "fmi2GetDerivatives", fmi2ModelExchange))
         return fmi2Error;
     if (nullarg(c, "fmi2GetDerivatives", derivatives, "derivatives")) return fmi2Error;
     if (nx != NX) {
@@ -798,9 +899,10 @@ fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real derivatives[], size_t
     }
     form_gw(c);
     eval_f(c, c->s.t);
+    x = before_init(c) ? c->s.x0 : c->s.x;
     for (i = 0; i < NX; i++) {
         double v = 0.0;
-        for (j = 0; j < NX; j++) v += c->G[i * NX + j] * c->s.x[j];
+        for (j = 0; j < NX; j++) v += c->G[i * NX + j] * x[j];
         for (j = 0; j < NXJ; j++) v += c->W[i * NXJ + j] * c->fj[j];
         if (!isfinite(v)) {
             logmsg(c, fmi2Error, "fmi2GetDerivatives: non-finite derivative at t = %g", c->s.t);
@@ -814,7 +916,7 @@ fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real derivatives[], size_t
 fmi2Status fmi2GetEventIndicators(fmi2Component comp, fmi2Real eventIndicators[], size_t ni) {
     Instance *c = (Instance *)comp;
     (void)eventIndicators;
-    if (!allowed(c, "fmi2GetEventIndicators", ANY_ALIVE)) return fmi2Error;
+    if (!allowed(c, "fmi2GetEventIndicators", ANY_ALIVE) || wrong_type(c, "fmi2GetEventIndicators", fmi2ModelExchange)) return fmi2Error;
     if (ni != 0) {
         logmsg(c, fmi2Error, "fmi2GetEventIndicators: ni = %lu, this FMU has no event indicators", (unsigned long)ni);
         return fmi2Error;
@@ -824,7 +926,7 @@ fmi2Status fmi2GetEventIndicators(fmi2Component comp, fmi2Real eventIndicators[]
 
 fmi2Status fmi2GetContinuousStates(fmi2Component comp, fmi2Real x[], size_t nx) {
     Instance *c = (Instance *)comp;
-    if (!allowed(c, "fmi2GetContinuousStates", ANY_ALIVE)) return fmi2Error;
+    if (!allowed(c, "fmi2GetContinuousStates", ANY_ALIVE) || wrong_type(c, "fmi2GetContinuousStates", fmi2ModelExchange)) return fmi2Error;
     if (nullarg(c, "fmi2GetContinuousStates", x, "x")) return fmi2Error;
     if (nx != NX) {
         logmsg(c, fmi2Error, "fmi2GetContinuousStates: nx = %lu, expected %d", (unsigned long)nx, NX);
@@ -837,7 +939,7 @@ fmi2Status fmi2GetContinuousStates(fmi2Component comp, fmi2Real x[], size_t nx) 
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component comp, fmi2Real x_nominal[], size_t nx) {
     Instance *c = (Instance *)comp;
     size_t i;
-    if (!allowed(c, "fmi2GetNominalsOfContinuousStates", ANY_ALIVE)) return fmi2Error;
+    if (!allowed(c, "fmi2GetNominalsOfContinuousStates", ANY_ALIVE) || wrong_type(c, "fmi2GetNominalsOfContinuousStates", fmi2ModelExchange)) return fmi2Error;
     if (nullarg(c, "fmi2GetNominalsOfContinuousStates", x_nominal, "x_nominal")) return fmi2Error;
     if (nx != NX) {
         logmsg(c, fmi2Error, "fmi2GetNominalsOfContinuousStates: nx = %lu, expected %d", (unsigned long)nx, NX);
@@ -853,7 +955,7 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueRefere
                                        const fmi2Integer order[], const fmi2Real value[]) {
     Instance *c = (Instance *)comp;
     size_t i;
-    if (!allowed(c, "fmi2SetRealInputDerivatives", Instantiated | InitializationMode | StepComplete)) return fmi2Error;
+    if (!allowed(c, "fmi2SetRealInputDerivatives", Instantiated | InitializationMode | StepComplete) || wrong_type(c, "fmi2SetRealInputDerivatives", fmi2CoSimulation)) return fmi2Error;
     if (nvr == 0) return fmi2OK;
     if (nullarg(c, "fmi2SetRealInputDerivatives", vr, "vr") || nullarg(c, "fmi2SetRealInputDerivatives", order, "order")
         || nullarg(c, "fmi2SetRealInputDerivatives", value, "value")) return fmi2Error;
@@ -881,7 +983,7 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueRefer
     Instance *c = (Instance *)comp;
     size_t i;
     double zero[NX];
-    if (!allowed(c, "fmi2GetRealOutputDerivatives", StepComplete | Terminated | Error)) return fmi2Error;
+    if (!allowed(c, "fmi2GetRealOutputDerivatives", StepComplete | Terminated | Error) || wrong_type(c, "fmi2GetRealOutputDerivatives", fmi2CoSimulation)) return fmi2Error;
     if (nvr == 0) return fmi2OK;
     if (nullarg(c, "fmi2GetRealOutputDerivatives", vr, "vr") || nullarg(c, "fmi2GetRealOutputDerivatives", order, "order")
         || nullarg(c, "fmi2GetRealOutputDerivatives", value, "value")) return fmi2Error;
@@ -916,13 +1018,20 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     int i, j, bad;
     const double t = currentCommunicationPoint, h = communicationStepSize;
     (void)noSetFMUStatePriorToCurrentPoint;
-    if (!allowed(c, "fmi2DoStep", StepComplete)) return fmi2Error;
+    if (!allowed(c, "fmi2DoStep", StepComplete) || wrong_type(c, "fmi2DoStep", fmi2CoSimulation)) return fmi2Error;
     if (!isfinite(t) || !isfinite(h) || h < 0.0) {
         logmsg(c, fmi2Error, "fmi2DoStep: rejected step from t = %g with h = %g (the step must be finite and >= 0)", t, h);
         return fmi2Error;
     }
-    if (fabs(t - c->s.t) > 1e-9 * (1.0 + fabs(t))) {
-        logmsg(c, fmi2Error, "fmi2DoStep: currentCommunicationPoint %.17g differs from the FMU time %.17g", t, c->s.t);
+    /* masters form t_(k+1) as t_k + h or t_0 + (k + 1) h: a few units in the last place apart, never more */
+    if (fabs(t - c->s.t) > TIME_ULPS * DBL_EPSILON * fmax(fmax(fabs(t), fabs(c->s.t)), h) + 1e-12 * h) {
+        logmsg(c, fmi2Error, "fmi2DoStep: currentCommunicationPoint %.17g differs from the FMU time %.17g (by %g)", t,
+               c->s.t, t - c->s.t);
+        return fmi2Error;
+    }
+    if (c->s.stop_defined && t + h > c->s.t_stop + TIME_ULPS * DBL_EPSILON * fmax(fabs(c->s.t_stop), h) + 1e-12 * h) {
+        logmsg(c, fmi2Error, "fmi2DoStep: the step from %.17g to %.17g ends after the stop time %.17g set by "
+               "fmi2SetupExperiment", t, t + h, c->s.t_stop);
         return fmi2Error;
     }
     bad = first_invalid(c);
@@ -962,7 +1071,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
 
 fmi2Status fmi2CancelStep(fmi2Component comp) {
     Instance *c = (Instance *)comp;
-    if (!allowed(c, "fmi2CancelStep", StepComplete)) return fmi2Error;
+    if (!allowed(c, "fmi2CancelStep", StepComplete) || wrong_type(c, "fmi2CancelStep", fmi2CoSimulation)) return fmi2Error;
     logmsg(c, fmi2Error, "fmi2CancelStep: steps are never asynchronous here (canRunAsynchronuously=false)");
     return fmi2Error;
 }
