@@ -171,6 +171,7 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars
     nc = C.shape[0]
     njc = Wc.shape[1] // n if nc else 1
     nf = max(nj + TAYLOR_DEGREE, njc)
+    nfe = nf + 2  # two more derivatives: the error estimate of a step (the next two Taylor terms)
     nu, no, nk = len(spec.inputs), len(spec.outputs), len(kpars)
     npar = len(fpars)
     Cpinv = comp._std.C_pinv if nc else np.zeros((n, 1))
@@ -195,7 +196,7 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars
         "#ifndef LSC_MODEL_H", "#define LSC_MODEL_H", "#include <math.h>", "",
         f'#define INSTANTIATION_TOKEN "{guid}"',
         f"#define NX {n}", f"#define NPAR {npar}", f"#define NU {nu}", f"#define NO {no}", f"#define NC {nc}",
-        f"#define NK {nk}", f"#define NJ {nj}", f"#define NJC {njc}", f"#define NQ {TAYLOR_DEGREE}", f"#define NF {nf}",
+        f"#define NK {nk}", f"#define NJ {nj}", f"#define NJC {njc}", f"#define NQ {TAYLOR_DEGREE}", f"#define NF {nf}", f"#define NFE {nfe}",
         f"#define UDEG {udeg}", f"#define MAX_OUTPUT_DERIVATIVE_ORDER {TAYLOR_DEGREE + 1}",
         *[f"#define VR_{key} {value}" for key, value in vr.items()], f"#define NR {nr}", "#define VRB_PROJECT 0",
         f"#define LAMBDA_START {float(spec.lam)!r}", f"#define LAMBDA_TUNABLE {int(lam_tunable)}",
@@ -210,21 +211,21 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars
         _c_array("U_START", [u["start"] for u in spec.inputs]),
         _c_array("K_VALUE", [values[spec.symbols[q]] for q in kpars]),
     ]
-    # f and its derivatives, inputs' derivatives (named by the builder's `_mangled`) read from u[i * NF + j]
+    # f and its derivatives, inputs' derivatives (named by the builder's `_mangled`) read from u[i * NFE + j]
     f = spec.f.subs(values)
     for i, (uname, usym) in enumerate(spec.input_symbols.items()):
-        for j in range(nf):
-            names[sympy.Symbol(_mangled("u", uname, j), real=True)] = f"u[{i * nf + j}]"
-    derivs = _derivatives_with_inputs(f, spec.t, spec.input_symbols, nf)
+        for j in range(nfe):
+            names[sympy.Symbol(_mangled("u", uname, j), real=True)] = f"u[{i * nfe + j}]"
+    derivs = _derivatives_with_inputs(f, spec.t, spec.input_symbols, nfe)
     exprs, targets = [], []
     for d, D in enumerate(derivs):
         for i in range(n):
             if D[i] != 0:
                 exprs.append(D[i])
                 targets.append(f"fj[{d * n + i}]")
-    lines += ["", "/* fj[d * NX + i] = d-th derivative of f_i at t; u[i * NF + j] = j-th derivative of input i */",
+    lines += ["", "/* fj[d * NX + i] = d-th derivative of f_i at t (d < NFE); u[i * NFE + j] = j-th derivative of input i */",
               "static void model_f_jet(double t, const double *p, const double *u, double *fj) {",
-              "    int i;", "    (void)t; (void)p; (void)u;", f"    for (i = 0; i < {nf * n}; i++) fj[i] = 0.0;"]
+              "    int i;", "    (void)t; (void)p; (void)u;", f"    for (i = 0; i < {nfe * n}; i++) fj[i] = 0.0;"]
     if exprs:
         lines += _ccode_block(exprs, targets, names)
     lines.append("}")

@@ -30,11 +30,13 @@
 #include "lsc_linalg.h"
 
 #define NXJ (NX * NJ)            /* columns of W */
-#define MB (NX * (NQ + 2))       /* order of the block matrix */
+#define MB (NX * (NQ + 4))       /* order of the block matrix: phi_0 .. phi_(NQ+3) */
 #define NUD (NF)                 /* length of an input jet: u, u', ..., u^(NF-1) */
 #define HN (UDEG + 1)            /* input history points */
 #define STEP_RTOL 1e-10          /* step sizes this close share one set of step matrices */
 #define STATE_MAGIC 0x4c534332u  /* "LSC2" */
+#define STEP_TOL 1e-11            /* default bound of a sub-step's error estimate, relative to 1 + |x| */
+#define MAX_LEVEL 20              /* at most 2^20 sub-steps in one communication step */
 #define TIME_ULPS 16.0           /* a communication point may differ from the FMU time by this many ulps */
 
 typedef enum {
@@ -65,6 +67,7 @@ typedef struct {
     int project_initial;
     int invalid[NR];             /* a value was rejected: steps are discarded until a valid one is set */
     int type;                    /* fmi2CoSimulation or fmi2ModelExchange: a state belongs to one interface */
+    double tol;                  /* bound of a sub-step's error estimate relative to 1 + |x| */
     double t_stop;               /* INFINITY unless a stop time was defined */
     int stop_defined;
     unsigned int check;          /* checksum of a serialized state (0 in memory) */
@@ -84,13 +87,18 @@ typedef struct {
     int cache_valid;
     double Phi[NX * NX];
     double F[NX * NX * NF];      /* the forcing terms of one step acting on [f; f'; ...; f^(NF-1)] */
+    double Fe[NX * NX * NFE];    /* the next two Taylor terms (error estimate) acting on [f; ...; f^(NFE-1)] */
+    /* the matrices of the sub-step h / 2^level, kept beside those of the master's step */
+    double sub_h, sub_lam;
+    int sub_valid;
+    double sub_Phi[NX * NX], sub_F[NX * NX * NF], sub_Fe[NX * NX * NFE];
     /* work space */
     double Mb[MB * MB], E[MB * MB], work[6 * MB * MB];
     int piv[MB];
-    double fj[NF * NX];
-    double uj[A1(NU) * NUD];
+    double fj[NFE * NX];
+    double uj[A1(NU) * NFE];
     double xd[(NQ + 2) * NX];
-    double tmp[NX];
+    double tmp[NX], tmp2[NX];
 } Instance;
 
 /* ---- logging ------------------------------------------------------------ */
@@ -152,6 +160,7 @@ static void form_gw(Instance *c) {
     for (i = 0; i < NX * NXJ; i++) c->W[i] = W0[i] + c->s.lam * W1[i];
     c->lam_gw = c->s.lam;
     c->cache_valid = 0;
+    c->sub_valid = 0;
 }
 
 /* Jet [u, u', ...] of every input at t: the master's derivatives when it set
@@ -160,12 +169,23 @@ static void form_gw(Instance *c) {
 static void input_jets(Instance *c, double t) {
     int i, d, k, m, n = c->s.hist_n;
     for (i = 0; i < NU; i++) {
-        double *uj = c->uj + i * NUD;
+        double *uj = c->uj + i * NFE;
         int given = 0;
         for (d = 1; d < NUD; d++) given |= c->s.ud_set[i * NUD + d];
-        for (d = 0; d < NUD; d++) uj[d] = 0.0;
+        for (d = 0; d < NFE; d++) uj[d] = 0.0;
         if (given) {
-            for (d = 1; d < NUD; d++) uj[d] = c->s.ud_set[i * NUD + d] ? c->s.ud[i * NUD + d] : 0.0;
+            /* the master's Taylor polynomial at the FMU time, shifted to t (a sub-step's start) */
+            const double dt = t - c->s.t;
+            for (d = 0; d < NUD; d++) {
+                double v = 0.0, term = 1.0;
+                for (k = d; k < NUD; k++) {
+                    const double coef = k == 0 ? c->s.u[i] : (c->s.ud_set[i * NUD + k] ? c->s.ud[i * NUD + k] : 0.0);
+                    v += coef * term;
+                    term *= dt / (double)(k - d + 1);
+                }
+                uj[d] = v;
+            }
+            continue;
         } else if (n > 1) {
             /* Newton form through the n newest points (newest first), expanded to a
              * Taylor polynomial at t: coefficient a[d] of (tau - t)^d */
@@ -182,10 +202,10 @@ static void input_jets(Instance *c, double t) {
                     basis[0] = -nodes[k] * basis[0];
                 }
             }
-            for (d = 1; d < n && d < NUD; d++) { fact *= d; uj[d] = a[d] * fact; }
+            for (d = 1; d < n && d < NFE; d++) { fact *= d; uj[d] = a[d] * fact; }
             /* Model Exchange with a host that holds the input since the last recorded point (fmpy
              * does, between communication points): the extrapolated value, not the stale one */
-            if (c->type == fmi2ModelExchange && c->s.u[i] == c->s.hist_u[i]) { uj[0] = a[0]; continue; }
+            if ((c->type == fmi2ModelExchange && c->s.u[i] == c->s.hist_u[i]) || t != c->s.t) { uj[0] = a[0]; continue; }
         }
         uj[0] = c->s.u[i];
     }
@@ -211,7 +231,7 @@ static void record_inputs(Instance *c, double t) {
     if (c->s.hist_n < HN) c->s.hist_n++;
 }
 
-/* f and its derivatives 0..NF-1 at t into c->fj */
+/* f and its derivatives 0..NFE-1 at t into c->fj */
 static void eval_f(Instance *c, double t) {
     input_jets(c, t);
     model_f_jet(t, c->s.p, c->uj, c->fj);
@@ -248,39 +268,52 @@ static void state_derivatives(Instance *c) {
     }
 }
 
-/* Phi and F for step h at the current lambda; 0 or -1 */
-static int step_matrices(Instance *c, double h) {
+/* Phi, F and Fe for step h at the current lambda into the given arrays; 0 or -1 */
+static int form_step(Instance *c, double h, double *Phi, double *F, double *Fe) {
     int i, j, q, r, l;
-    form_gw(c);
-    if (c->cache_valid && c->cache_lam == c->s.lam && fabs(h - c->cache_h) <= STEP_RTOL * fabs(c->cache_h)) return 0;
     memset(c->Mb, 0, sizeof c->Mb);
     for (i = 0; i < NX; i++)
         for (j = 0; j < NX; j++) c->Mb[i * MB + j] = c->G[i * NX + j] * h;
     /* h I above the diagonal (as lsc's method='expm'): block (0, j) of the exponential is h^j phi_j(G h) */
-    for (q = 1; q < NQ + 2; q++)
+    for (q = 1; q < NQ + 4; q++)
         for (i = 0; i < NX; i++) c->Mb[((q - 1) * NX + i) * MB + q * NX + i] = h;
-    if (lsc_expm(c->E, c->Mb, MB, c->work, c->piv) != 0) {
-        c->cache_valid = 0;
-        return -1;
-    }
+    if (lsc_expm(c->E, c->Mb, MB, c->work, c->piv) != 0) return -1;
     for (i = 0; i < NX; i++)
-        for (j = 0; j < NX; j++) c->Phi[i * NX + j] = c->E[i * MB + j];
-    /* F[:, j*NX + col] = sum over Taylor terms q with j = q + r: h^(q+1) phi_(q+1) W[:, r*NX + col] */
-    memset(c->F, 0, sizeof c->F);
-    for (q = 0; q <= NQ; q++) {
+        for (j = 0; j < NX; j++) Phi[i * NX + j] = c->E[i * MB + j];
+    /* F[:, j*NX + col] = sum over Taylor terms q <= NQ with j = q + r: h^(q+1) phi_(q+1) W[:, r*NX + col];
+     * Fe the same for the terms q = NQ + 1, NQ + 2 the step leaves out */
+    memset(F, 0, sizeof(double) * NX * NX * NF);
+    memset(Fe, 0, sizeof(double) * NX * NX * NFE);
+    for (q = 0; q <= NQ + 2; q++) {
         for (i = 0; i < NX; i++) {
             for (r = 0; r < NJ; r++) {
                 for (j = 0; j < NX; j++) {
                     double v = 0.0;
                     for (l = 0; l < NX; l++) v += c->E[i * MB + (q + 1) * NX + l] * c->W[l * NXJ + r * NX + j];
-                    c->F[i * NX * NF + (q + r) * NX + j] += v;
+                    if (q <= NQ) F[i * NX * NF + (q + r) * NX + j] += v;
+                    else Fe[i * NX * NFE + (q + r) * NX + j] += v;
                 }
             }
         }
     }
-    c->cache_h = h;
-    c->cache_lam = c->s.lam;
-    c->cache_valid = 1;
+    return 0;
+}
+
+/* The matrices for step h: the master's step (cache 0) or a sub-step (cache 1); NULL when not finite */
+static int step_matrices(Instance *c, double h, int sub, const double **Phi, const double **F, const double **Fe) {
+    double *ph = sub ? c->sub_Phi : c->Phi, *f = sub ? c->sub_F : c->F, *fe = sub ? c->sub_Fe : c->Fe;
+    double *ch = sub ? &c->sub_h : &c->cache_h, *cl = sub ? &c->sub_lam : &c->cache_lam;
+    int *ok = sub ? &c->sub_valid : &c->cache_valid;
+    form_gw(c);
+    *Phi = ph; *F = f; *Fe = fe;
+    if (*ok && *cl == c->s.lam && fabs(h - *ch) <= STEP_RTOL * fabs(*ch)) return 0;
+    if (form_step(c, h, ph, f, fe) != 0) {
+        *ok = 0;
+        return -1;
+    }
+    *ch = h;
+    *cl = c->s.lam;
+    *ok = 1;
     return 0;
 }
 
@@ -378,6 +411,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     for (i = 0; i < NU; i++) c->s.u[i] = U_START[i];
     c->s.t = START_TIME;
     c->s.t_stop = INFINITY;
+    c->s.tol = STEP_TOL;
     c->lam_gw = NAN;
     return c;
 }
@@ -410,9 +444,11 @@ fmi2Status fmi2SetDebugLogging(fmi2Component comp, fmi2Boolean loggingOn, size_t
 fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
     Instance *c = (Instance *)comp;
-    (void)toleranceDefined;
-    (void)tolerance;
     if (!allowed(c, "fmi2SetupExperiment", Instantiated)) return fmi2Error;
+    if (toleranceDefined && !(tolerance > 0.0 && tolerance < 1.0)) {
+        logmsg(c, fmi2Error, "fmi2SetupExperiment: tolerance must be in (0, 1) (found %g)", tolerance);
+        return fmi2Error;
+    }
     if (!isfinite(startTime) || (stopTimeDefined && !(stopTime >= startTime))) {
         logmsg(c, fmi2Error, "fmi2SetupExperiment: startTime must be finite and stopTime >= startTime (found %g, %g)",
                startTime, stopTime);
@@ -421,6 +457,8 @@ fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined,
     c->s.t = startTime;
     c->s.stop_defined = stopTimeDefined ? 1 : 0;
     c->s.t_stop = stopTimeDefined ? stopTime : INFINITY;
+    /* the master's relative tolerance bounds the error estimate of a sub-step (never looser than 1e-6) */
+    c->s.tol = toleranceDefined ? fmin(tolerance, 1e-6) : STEP_TOL;
     return fmi2OK;
 }
 
@@ -488,6 +526,7 @@ fmi2Status fmi2Reset(fmi2Component comp) {
     for (i = 0; i < NU; i++) c->s.u[i] = U_START[i];
     c->s.t = START_TIME;
     c->s.t_stop = INFINITY;
+    c->s.tol = STEP_TOL;
     return fmi2OK;
 }
 
@@ -648,7 +687,7 @@ static int state_valid(const State *s, int type, const char **why) {
     }
     for (k = 0; k <= 6; k++) one_phase |= s->phase == (1 << k);
     *why = "a field is out of its range or not finite";
-    if (!one_phase || !isfinite(s->t) || !(s->lam > 0.0) || !isfinite(s->lam)) return 0;
+    if (!one_phase || !isfinite(s->t) || !(s->lam > 0.0) || !isfinite(s->lam) || !(s->tol > 0.0 && s->tol < 1.0)) return 0;
     if (!is_flag(s->project_initial) || !is_flag(s->stop_defined) || s->check != 0) return 0;
     if (isnan(s->t_stop) || (s->stop_defined && !isfinite(s->t_stop)) || (!s->stop_defined && s->t_stop != INFINITY)) return 0;
     if (s->hist_n < 0 || s->hist_n > HN) return 0;
@@ -1015,7 +1054,8 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueRefer
 fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
     Instance *c = (Instance *)comp;
-    int i, j, bad;
+    int i, j, bad, level = 0;
+    long idx = 0;
     const double t = currentCommunicationPoint, h = communicationStepSize;
     (void)noSetFMUStatePriorToCurrentPoint;
     if (!allowed(c, "fmi2DoStep", StepComplete) || wrong_type(c, "fmi2DoStep", fmi2CoSimulation)) return fmi2Error;
@@ -1046,21 +1086,50 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     return fmi2OK;
 #endif
     record_inputs(c, t);
-    if (step_matrices(c, h) != 0) {
-        logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the step matrices for h = %g, lambda = %g are not finite",
-               t, h, c->s.lam);
-        return fmi2Discard;
-    }
-    eval_f(c, t);
-    for (i = 0; i < NX; i++) {
-        double v = 0.0;
-        for (j = 0; j < NX; j++) v += c->Phi[i * NX + j] * c->s.x[j];
-        for (j = 0; j < NX * NF; j++) v += c->F[i * NX * NF + j] * c->fj[j];
-        if (!isfinite(v)) {
-            logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the forcing or the state is not finite", t);
+    /* Sub-steps h / 2^level: the next two Taylor terms of the forcing, h^5 phi_5(G h) g^(4) + h^6 phi_6(G h) g^(5),
+     * estimate a sub-step's error; where it exceeds tol (1 + |x|) the level goes up (error ~ h^5, fast modes ~ h^4) */
+    memcpy(c->tmp, c->s.x, sizeof c->tmp);
+    for (;;) {
+        const double H = ldexp(h, -level);
+        const double *Phi, *F, *Fe;
+        double est = 0.0, size = 0.0;
+        if (idx == (1L << level)) break;
+        if (step_matrices(c, H, level > 0, &Phi, &F, &Fe) != 0) {
+            logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the step matrices for h = %g, lambda = %g are not "
+                   "finite", t, H, c->s.lam);
             return fmi2Discard;
         }
-        c->tmp[i] = v;
+        eval_f(c, t + (double)idx * H);
+        for (i = 0; i < NX; i++) {
+            double e = 0.0;
+            for (j = 0; j < NX * NFE; j++) e += Fe[i * NX * NFE + j] * c->fj[j];
+            est = fmax(est, fabs(e));
+            size = fmax(size, fabs(c->tmp[i]));
+        }
+        if (!(est <= c->s.tol * (1.0 + size))) {
+            int up = isfinite(est) ? (int)ceil(log2(est / (c->s.tol * (1.0 + size))) / 4.0) : 1;
+            if (up < 1) up = 1;
+            if (level + up > MAX_LEVEL) {
+                logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the forcing varies too fast for a step of %g "
+                       "(estimated error %g with 2^%d sub-steps); take smaller communication steps", t, h, est, level);
+                return fmi2Discard;
+            }
+            level += up;
+            idx <<= up;
+            continue;
+        }
+        for (i = 0; i < NX; i++) {
+            double v = 0.0;
+            for (j = 0; j < NX; j++) v += Phi[i * NX + j] * c->tmp[j];
+            for (j = 0; j < NX * NF; j++) v += F[i * NX * NF + j] * c->fj[j];
+            if (!isfinite(v)) {
+                logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the forcing or the state is not finite", t);
+                return fmi2Discard;
+            }
+            c->tmp2[i] = v;
+        }
+        memcpy(c->tmp, c->tmp2, sizeof c->tmp);
+        idx++;
     }
     memcpy(c->s.x, c->tmp, sizeof c->tmp);
     c->s.t = t + h;
