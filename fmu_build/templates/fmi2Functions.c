@@ -83,15 +83,13 @@ typedef struct {
     double lam_gw;               /* lambda at which G, W were formed (NAN: never) */
     double G[NX * NX];
     double W[NX * NXJ];
-    double cache_h, cache_lam;
-    int cache_valid;
-    double Phi[NX * NX];
-    double F[NX * NX * NF];      /* the forcing terms of one step acting on [f; f'; ...; f^(NF-1)] */
-    double Fe[NX * NX * NFE];    /* the next two Taylor terms (error estimate) acting on [f; ...; f^(NFE-1)] */
-    /* the matrices of the sub-step h / 2^level, kept beside those of the master's step */
-    double sub_h, sub_lam;
-    int sub_valid;
-    double sub_Phi[NX * NX], sub_F[NX * NX * NF], sub_Fe[NX * NX * NFE];
+    /* the matrices of a step h / 2^level, one set per level (a step that needs sub-steps does not
+     * recompute those of the master's step, nor the other way round) */
+    double cache_h[MAX_LEVEL + 1], cache_lam[MAX_LEVEL + 1];
+    int cache_valid[MAX_LEVEL + 1];
+    double Phi[(MAX_LEVEL + 1) * NX * NX];
+    double F[(MAX_LEVEL + 1) * NX * NX * NF];   /* the forcing terms of one step acting on [f; f'; ...; f^(NF-1)] */
+    double Fe[(MAX_LEVEL + 1) * NX * NX * NFE]; /* the next two Taylor terms (error estimate) on [f; ...; f^(NFE-1)] */
     /* work space */
     double Mb[MB * MB], E[MB * MB], work[6 * MB * MB];
     int piv[MB];
@@ -159,8 +157,7 @@ static void form_gw(Instance *c) {
     for (i = 0; i < NX * NX; i++) c->G[i] = G0[i] + c->s.lam * G1[i];
     for (i = 0; i < NX * NXJ; i++) c->W[i] = W0[i] + c->s.lam * W1[i];
     c->lam_gw = c->s.lam;
-    c->cache_valid = 0;
-    c->sub_valid = 0;
+    memset(c->cache_valid, 0, sizeof c->cache_valid);
 }
 
 /* Jet [u, u', ...] of every input at t: the master's derivatives when it set
@@ -299,11 +296,11 @@ static int form_step(Instance *c, double h, double *Phi, double *F, double *Fe) 
     return 0;
 }
 
-/* The matrices for step h: the master's step (cache 0) or a sub-step (cache 1); NULL when not finite */
-static int step_matrices(Instance *c, double h, int sub, const double **Phi, const double **F, const double **Fe) {
-    double *ph = sub ? c->sub_Phi : c->Phi, *f = sub ? c->sub_F : c->F, *fe = sub ? c->sub_Fe : c->Fe;
-    double *ch = sub ? &c->sub_h : &c->cache_h, *cl = sub ? &c->sub_lam : &c->cache_lam;
-    int *ok = sub ? &c->sub_valid : &c->cache_valid;
+/* The matrices for the step h of a level (cached per level); 0 or -1 when not finite */
+static int step_matrices(Instance *c, double h, int level, const double **Phi, const double **F, const double **Fe) {
+    double *ph = c->Phi + level * NX * NX, *f = c->F + level * NX * NX * NF, *fe = c->Fe + level * NX * NX * NFE;
+    double *ch = c->cache_h + level, *cl = c->cache_lam + level;
+    int *ok = c->cache_valid + level;
     form_gw(c);
     *Phi = ph; *F = f; *Fe = fe;
     if (*ok && *cl == c->s.lam && fabs(h - *ch) <= STEP_RTOL * fabs(*ch)) return 0;
@@ -1094,7 +1091,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
         const double *Phi, *F, *Fe;
         double est = 0.0, size = 0.0;
         if (idx == (1L << level)) break;
-        if (step_matrices(c, H, level > 0, &Phi, &F, &Fe) != 0) {
+        if (step_matrices(c, H, level, &Phi, &F, &Fe) != 0) {
             logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the step matrices for h = %g, lambda = %g are not "
                    "finite", t, H, c->s.lam);
             return fmi2Discard;
