@@ -6,9 +6,11 @@ x2 = -w' goes back to the plant. Exact: w = exp(-t / (1 + g)), x2 = w / (1 + g).
 Writes into docs/_generated/: cosim_loop_values.md (our pythonfmu DAE FMU, which receives values
 only and estimates w' itself), cosim_loop_derivatives.md (a DAE FMU that receives w, w', w''
 from the plant's output derivatives: the C follower), cosim_loop_damper.md (the second loop),
-cosim_loop.png (a case on each side of each stability condition).
+cosim_loop.png (a case on each side of each stability condition), cosim_loop_native.md (the
+recommended configuration: our native C DAE FMU, build_fmu(..., target="native"), which receives
+w, w', w'' from the C plant's output derivatives; lambda fixed or scaled with the macro step).
 
-Run: PYTHONPATH=. python examples/cosim_loop.py
+Run: PYTHONPATH=. python examples/cosim_loop.py [--native]   (--native: only the native table)
 """
 import sys
 import tempfile
@@ -26,11 +28,13 @@ STEPS = [0.04, 0.02, 0.01, 0.005]
 STOP = 2.0
 
 
-def loop_errors(ssp, g, algorithm, p, start_values=None):
+def loop_errors(ssp, g, algorithm, p, start_values=None, lam_h=None):
+    """End-time errors for each H; ``lam_h``: set the DAE FMU's lambda to lam_h / H."""
     errs, last = [], None
     for H in STEPS:
+        values = dict(start_values or {}, **({"dae.lambda": lam_h / H} if lam_h else {}))
         r = cosimulate(ssp, STOP, H, algorithm=algorithm, extrapolation=p, output=["plant.w", "dae.x2"],
-                       start_values=start_values, progress=False)
+                       start_values=values, progress=False)
         w, _, x2 = scenarios.loop_reference(r["time"], g)
         # at the end time: the DAE FMU's first steps, taken with fewer past values than its
         # estimator uses, leave an O(H) error there that the completion damps (alternative, lam)
@@ -52,8 +56,39 @@ def table(rows, header):
     return "\n".join(lines) + "\n"
 
 
+def native_table(tmp):
+    """The recommended configuration: C plant (output derivatives) -> native DAE FMU (input derivatives)."""
+    rows = []
+    for g in (0.2, 0.9, 1.1):
+        ssp = scenarios.build_loop_system(tmp / f"n{g}", g=g, plant="c", dae="native", name="loop_native")
+        for p in (1, 2):
+            for lam_h in (None, 1.0, 2.0, 8.0):
+                if g != 0.2 and lam_h not in (None, 1.0):
+                    continue
+                errs, _ = loop_errors(ssp, g, "jacobi", p, lam_h=lam_h)
+                rows.append((f"g = {g}, jacobi, p = {p}, " + (f"lambda H = {lam_h:g}" if lam_h else "lambda = 10"), errs))
+    ssp = scenarios.build_damper_loop(tmp / "damper_native", target="native")
+    for p in (1, 2):
+        for lam_h in (None, 1.0):
+            errs = []
+            for H in STEPS:
+                values = {"dae.x1_0": 1.0, "dae.x2_0": 0.0, **({"dae.lambda": lam_h / H} if lam_h else {})}
+                r = cosimulate(ssp, STOP, H, algorithm="jacobi", extrapolation=p, output=["plant.x", "plant.v"],
+                               start_values=values, progress=False)
+                ref = scenarios.damper_loop_reference(r["time"][-1:])
+                errs.append(max(abs(r["plant.x"][-1] - ref[0][-1]), abs(r["plant.v"][-1] - ref[1][-1]))
+                            if r.success else np.inf)
+            rows.append((f"second loop, jacobi, p = {p}, " + (f"lambda H = {lam_h:g}" if lam_h else "lambda = 10"), errs))
+    text = table(rows, "derivatives passed (C plant -> native DAE FMU)")
+    (OUT / "cosim_loop_native.md").write_text(text)
+    print(text)
+
+
 def main():
     OUT.mkdir(parents=True, exist_ok=True)
+    if "--native" in sys.argv[1:]:
+        native_table(Path(tempfile.mkdtemp(prefix="cosim_loop_")))
+        return
     import matplotlib
 
     matplotlib.use("Agg")
@@ -105,6 +140,8 @@ def main():
     text = table(rows, "mass-spring-damper x -> Follower, x2 -> force")
     (OUT / "cosim_loop_damper.md").write_text(text)
     print(text)
+
+    native_table(tmp)
 
     fig, ax = plt.subplots(figsize=(7, 4))
     for label, r in curves.items():

@@ -3,11 +3,12 @@
 Writes into docs/_generated/: cosim_path_orders.md (coupling error for H, H/2, H/4, H/8 and the
 observed order, per algorithm and extrapolation order, against the monolithic lsc solution),
 cosim_path_crosscheck.md (our Jacobi + zero-order hold against libcosimpy and ecos on the same
-SSP file), cosim_path_cost.md (cost per macro step of each master, one run, side by side),
+SSP file), cosim_path_cost.md (cost per macro step of each master, one run, side by side, with the pythonfmu
+and the native C DAE FMU),
 cosim_path_orders.png and cosim_path_long.png (2,500 macro steps: path-following error and
 constraint residual for the standard completion and the alternative one at lam = 1, 10, 100).
 
-Run: PYTHONPATH=. python examples/cosim_path.py [--quick]
+Run: PYTHONPATH=. python examples/cosim_path.py [--quick] [--cost]   (--cost: only the cost table)
 """
 import sys
 import tempfile
@@ -44,6 +45,37 @@ def orders(ssp, stop=2.0, H0=0.04):
             rows.append((algorithm, p, errs, obs))
             curves[(algorithm, p)] = errs
     return steps, rows, curves
+
+
+def cost_table(ssp, ssp_native, quick=False, H=0.01):
+    """Cost per macro step of each master on scenario 1, pythonfmu and native DAE FMU, one run side by side."""
+    N = 500 if quick else 2000
+    outs = ["plant.x", "plant.v", "dae.y", "dae.F"]
+    cost, errors = {}, {}
+    ref = scenarios.path_reference(np.linspace(0.0, N * H, N + 1))[3:]
+    for dae, s in (("pythonfmu", ssp), ("native", ssp_native)):
+        for label, kw, out in (("ours, jacobi, p = 0", dict(algorithm="jacobi"), STATES),
+                               ("ours, jacobi, p = 0, also reading constraint_residual", dict(algorithm="jacobi"),
+                                STATES + ["dae.constraint_residual"]),
+                               ("ours, gauss-seidel, p = 2", dict(algorithm="gauss-seidel", extrapolation=2), STATES)):
+            t0 = time.perf_counter()
+            r = cosimulate(s, N * H, H, output=out, progress=False, **kw)
+            cost[(label, dae)] = (time.perf_counter() - t0) / N
+            errors[(label, dae)] = np.max(np.abs(np.array([r["plant.x"], r["plant.v"]]) - ref))
+        _, tl = other_masters.run_libcosim(s, H, N * H, outs)
+        cost[("libcosimpy (stepping loop)", dae)] = tl / N
+        _, e1 = other_masters.run_ecos(s, H, N * H, outs)
+        _, e2 = other_masters.run_ecos(s, H, 2 * N * H, outs)
+        cost[("ecos (t(2N) - t(N)) / N, CSV of every variable", dae)] = (e2 - e1) / N
+    labels = list(dict.fromkeys(k for k, _ in cost))
+    lines = [f"| master ({N} macro steps, H = {H:g}) | pythonfmu DAE FMU (µs) | native DAE FMU (µs) | ratio "
+             "| coupling error pythonfmu / native |", "|---|---|---|---|---|"]
+    for k in labels:
+        a, b = cost[(k, "pythonfmu")], cost[(k, "native")]
+        err = (f"{errors[(k, 'pythonfmu')]:.2e} / {errors[(k, 'native')]:.2e}" if (k, "native") in errors else "")
+        lines.append(f"| {k} | {a * 1e6:.0f} | {b * 1e6:.0f} | {a / b:.0f} | {err} |")
+    (OUT / "cosim_path_cost.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
 
 
 def main(quick=False):
@@ -91,24 +123,7 @@ def main(quick=False):
     print("\n".join(lines))
 
     # 3. cost per macro step, one run, side by side (ecos: difference of two run lengths)
-    N = 500 if quick else 2000
-    cost = {}
-    for label, kw, out in (("ours, jacobi, p = 0", dict(algorithm="jacobi"), STATES),
-                           ("ours, jacobi, p = 0, also reading constraint_residual", dict(algorithm="jacobi"),
-                            STATES + ["dae.constraint_residual"]),
-                           ("ours, gauss-seidel, p = 2", dict(algorithm="gauss-seidel", extrapolation=2), STATES)):
-        t0 = time.perf_counter()
-        cosimulate(ssp, N * H, H, output=out, progress=False, **kw)
-        cost[label] = (time.perf_counter() - t0) / N
-    _, tl = other_masters.run_libcosim(ssp, H, N * H, outs)
-    cost["libcosimpy (stepping loop)"] = tl / N
-    _, e1 = other_masters.run_ecos(ssp, H, N * H, outs)
-    _, e2 = other_masters.run_ecos(ssp, H, 2 * N * H, outs)
-    cost["ecos (t(2N) - t(N)) / N, CSV of every variable"] = (e2 - e1) / N
-    lines = ["| master | cost per macro step (µs) |", "|---|---|"]
-    lines += [f"| {k} | {v * 1e6:.0f} |" for k, v in cost.items()]
-    (OUT / "cosim_path_cost.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    cost_table(ssp, scenarios.build_path_system(tmp / "native", method="standard", target="native"), quick)
 
     # 4. long closed-loop run: 2,500 macro steps
     T_long, H_long = (10.0, 0.02) if quick else (50.0, 0.02)
@@ -133,4 +148,10 @@ def main(quick=False):
 
 
 if __name__ == "__main__":
-    main(quick="--quick" in sys.argv)
+    if "--cost" in sys.argv:  # only the cost table
+        tmp = Path(tempfile.mkdtemp(prefix="cosim_path_"))
+        cost_table(scenarios.build_path_system(tmp / "std", method="standard"),
+                   scenarios.build_path_system(tmp / "native", method="standard", target="native"),
+                   quick="--quick" in sys.argv)
+    else:
+        main(quick="--quick" in sys.argv)

@@ -14,7 +14,7 @@ import numpy as np
 import lsc
 
 from ._runtime import start_name
-from ._spec import MAX_K, METHODS, ModelSpec, SpecError, load_spec, model_name_problems, parse_spec
+from ._spec import MAX_K, METHODS, ModelSpec, SpecError, derivative_problems, lam_problem, load_spec, model_name_problems, parse_spec
 
 __all__ = ["build_fmu"]
 
@@ -427,6 +427,8 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
         spec.method = method
     if lam is not None:
         spec.lam = lsc._validate.check_lam_value(lam)
+        if lam_problem(spec.lam):
+            raise ValueError(f"lam: {lam_problem(spec.lam)}")
     if model_name is not None:
         problems = model_name_problems(model_name, field="model_name")
         if problems:
@@ -438,6 +440,10 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
         spec.k = k
     if target not in ("pythonfmu", "native"):
         raise ValueError(f"`target` must be one of ('pythonfmu', 'native'); found {target!r}.")
+    # k + 2 derivatives are taken symbolically; without completion.k, k is at most the index (<= n, <= 10)
+    problems = derivative_problems(spec, (spec.k if spec.k is not None else min(spec.n, 10)) + 2)
+    if problems:
+        raise SpecError(problems, source=spec.name)
     if target == "native":
         from ._native import build_native
 
@@ -649,7 +655,9 @@ def _complete_at_start(dae, spec, span):
         if np.all(np.isfinite(G)) and np.all(np.isfinite(g)):
             return completion
         k, reason = completion.k, "its right-hand side is not finite there"
-    except ArithmeticError as exc:
+    except (lsc.IndexDeterminationError, lsc.DimensionError):
+        raise  # not solvable, or a shape error: said as it is
+    except (ArithmeticError, ValueError) as exc:  # a coefficient outside its domain (lsc says which, as ValueError)
         k, reason = spec.k if spec.k is not None else 3, f"{type(exc).__name__}: {exc}"
     bad = []
     for label, tf, vector in (("A", dae.A, False), ("B", dae.B, False), ("f", dae.f, True)):
@@ -657,7 +665,7 @@ def _complete_at_start(dae, spec, span):
             try:
                 with np.errstate(all="ignore"):
                     values = np.asarray(tf.jet(t0, d)[d], dtype=float).reshape(tf.shape)
-            except ArithmeticError:
+            except (ArithmeticError, ValueError):
                 bad.append(f"{_entries_failing(tf, d, t0, label, vector) or label} (derivative {d})")
                 break
             entries = [f"equations.{label}[{i[0]}]" if vector else f"equations.{label}[{i[0]}][{i[1]}]"

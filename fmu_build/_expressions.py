@@ -20,12 +20,13 @@ import ast
 import math
 
 __all__ = ["ExpressionError", "FUNCTIONS", "CONSTANTS", "MAX_LENGTH", "MAX_DEPTH", "MAX_EXPONENT", "MAX_MAGNITUDE",
-           "parse_expression", "evaluate"]
+           "MAX_DEGREE", "parse_expression", "evaluate"]
 
 MAX_LENGTH = 10_000  # characters of one expression
 MAX_DEPTH = 100  # nesting of operators and calls
 MAX_EXPONENT = 1000  # magnitude of a numeric exponent
 MAX_MAGNITUDE = 1e308  # every number (a double's range)
+MAX_DEGREE = MAX_EXPONENT  # total polynomial degree of an expression, products included
 
 # Whitelisted functions: name in a spec -> sympy attribute.
 FUNCTIONS = {
@@ -75,6 +76,11 @@ def parse_expression(text, names, field):
         raise ExpressionError(f"{field}: expected a number or an expression string, got {type(text).__name__}")
     if len(text) > MAX_LENGTH:
         raise ExpressionError(f"{field}: expression of {len(text)} characters is too long (at most {MAX_LENGTH})")
+    for i, ch in enumerate(text):
+        # Python's parser NFKC-normalizes identifiers: fullwidth "ｔａｕ" would silently mean tau
+        if not ch.isascii():
+            raise ExpressionError(f"{field}: non-ASCII character {ch!r} (U+{ord(ch):04X}) at position {i}; "
+                                  f"names, numbers and operators in expressions are ASCII")
     try:
         tree = ast.parse(text.strip(), mode="eval")
     except SyntaxError as exc:
@@ -94,6 +100,7 @@ def parse_expression(text, names, field):
     except (TypeError, ValueError, ArithmeticError, RecursionError, MemoryError) as exc:
         raise ExpressionError(f"{field}: {_short(text)!r} cannot be converted ({type(exc).__name__}: {exc})") from None
     _check_result(expr, text, field, sympy)
+    _check_size(expr, text, field, sympy)
     return expr
 
 
@@ -156,6 +163,40 @@ def _check_result(expr, text, field, sympy):
         raise ExpressionError(f"{field}: {_short(text)!r} is not finite (a division by zero?)")
     if expr.has(sympy.I):
         raise ExpressionError(f"{field}: {_short(text)!r} is not real (e.g. the log or sqrt of a negative number)")
+
+
+def _degree(expr, memo):
+    """Total degree of `expr` as a polynomial in its symbols; a function counts as its argument.
+
+    Products combine into powers (``t**1000*t**1000`` is ``t**2000``, 1600 factors ``(t+1)`` are
+    ``(t+1)**1600``), so the exponent limit alone does not bound the degree.
+    """
+    if expr in memo:
+        return memo[expr]
+    if expr.is_Symbol:
+        value = 1
+    elif expr.is_Number or expr.is_NumberSymbol or not expr.args:
+        value = 0
+    elif expr.is_Mul:
+        value = sum(_degree(a, memo) for a in expr.args)
+    elif expr.is_Pow and expr.exp.is_Number:
+        value = _degree(expr.base, memo) * abs(float(expr.exp))
+    elif expr.is_Pow:
+        value = _degree(expr.base, memo) + _degree(expr.exp, memo)
+    else:  # Add, functions
+        value = max(_degree(a, memo) for a in expr.args)
+    memo[expr] = value
+    return value
+
+
+def _check_size(expr, text, field, sympy):
+    """Refuse an expression whose degree (after sympy combined its factors) is too large."""
+    if expr.is_Number:
+        return
+    degree = _degree(expr, {})
+    if degree > MAX_DEGREE:
+        raise ExpressionError(f"{field}: {_short(text)!r} has total degree {degree:g} in t, the parameters and the "
+                              f"inputs (at most {MAX_DEGREE}; products count: t**1000*t**1000 is t**2000)")
 
 
 def _group(node):

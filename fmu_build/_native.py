@@ -171,6 +171,7 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars
     nc = C.shape[0]
     njc = Wc.shape[1] // n if nc else 1
     nf = max(nj + TAYLOR_DEGREE, njc)
+    nfe = nf + 2  # two more derivatives: the error estimate of a step (the next two Taylor terms)
     nu, no, nk = len(spec.inputs), len(spec.outputs), len(kpars)
     npar = len(fpars)
     Cpinv = comp._std.C_pinv if nc else np.zeros((n, 1))
@@ -195,7 +196,7 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars
         "#ifndef LSC_MODEL_H", "#define LSC_MODEL_H", "#include <math.h>", "",
         f'#define INSTANTIATION_TOKEN "{guid}"',
         f"#define NX {n}", f"#define NPAR {npar}", f"#define NU {nu}", f"#define NO {no}", f"#define NC {nc}",
-        f"#define NK {nk}", f"#define NJ {nj}", f"#define NJC {njc}", f"#define NQ {TAYLOR_DEGREE}", f"#define NF {nf}",
+        f"#define NK {nk}", f"#define NJ {nj}", f"#define NJC {njc}", f"#define NQ {TAYLOR_DEGREE}", f"#define NF {nf}", f"#define NFE {nfe}",
         f"#define UDEG {udeg}", f"#define MAX_OUTPUT_DERIVATIVE_ORDER {TAYLOR_DEGREE + 1}",
         *[f"#define VR_{key} {value}" for key, value in vr.items()], f"#define NR {nr}", "#define VRB_PROJECT 0",
         f"#define LAMBDA_START {float(spec.lam)!r}", f"#define LAMBDA_TUNABLE {int(lam_tunable)}",
@@ -210,21 +211,21 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars
         _c_array("U_START", [u["start"] for u in spec.inputs]),
         _c_array("K_VALUE", [values[spec.symbols[q]] for q in kpars]),
     ]
-    # f and its derivatives, inputs' derivatives (named by the builder's `_mangled`) read from u[i * NF + j]
+    # f and its derivatives, inputs' derivatives (named by the builder's `_mangled`) read from u[i * NFE + j]
     f = spec.f.subs(values)
     for i, (uname, usym) in enumerate(spec.input_symbols.items()):
-        for j in range(nf):
-            names[sympy.Symbol(_mangled("u", uname, j), real=True)] = f"u[{i * nf + j}]"
-    derivs = _derivatives_with_inputs(f, spec.t, spec.input_symbols, nf)
+        for j in range(nfe):
+            names[sympy.Symbol(_mangled("u", uname, j), real=True)] = f"u[{i * nfe + j}]"
+    derivs = _derivatives_with_inputs(f, spec.t, spec.input_symbols, nfe)
     exprs, targets = [], []
     for d, D in enumerate(derivs):
         for i in range(n):
             if D[i] != 0:
                 exprs.append(D[i])
                 targets.append(f"fj[{d * n + i}]")
-    lines += ["", "/* fj[d * NX + i] = d-th derivative of f_i at t; u[i * NF + j] = j-th derivative of input i */",
+    lines += ["", "/* fj[d * NX + i] = d-th derivative of f_i at t (d < NFE); u[i * NFE + j] = j-th derivative of input i */",
               "static void model_f_jet(double t, const double *p, const double *u, double *fj) {",
-              "    int i;", "    (void)t; (void)p; (void)u;", f"    for (i = 0; i < {nf * n}; i++) fj[i] = 0.0;"]
+              "    int i;", "    (void)t; (void)p; (void)u;", f"    for (i = 0; i < {nfe * n}; i++) fj[i] = 0.0;"]
     if exprs:
         lines += _ccode_block(exprs, targets, names)
     lines.append("}")
@@ -327,10 +328,10 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     G0, G1, W0, W1, comp, lam_tunable = _affine_maps(dae, spec.method, spec.lam, k)
     fpars = [p["name"] for p in spec.parameters if p["name"] not in kpars]
     ident = spec.name
-    digest = hashlib.sha256(repr((ident, G0.tobytes(), G1.tobytes(), W0.tobytes(), W1.tobytes(), str(spec.f),
-                                  [o["expr"] for o in spec.outputs], fpars, kpars)).encode()).hexdigest()
-    guid = "{" + str(uuid.UUID(digest[:32])) + "}"
-    header, info = _model_header(spec, ident=ident, guid=guid, G0=G0, G1=G1, W0=W0, W1=W1, comp=comp,
+    # the GUID is a hash of everything compiled into the binary (model.h: matrices, start values, formulas;
+    # the fixed sources) and of the variables the model description declares: any change gives another GUID
+    placeholder = "{00000000-0000-0000-0000-000000000000}"
+    header, info = _model_header(spec, ident=ident, guid=placeholder, G0=G0, G1=G1, W0=W0, W1=W1, comp=comp,
                                  lam_tunable=lam_tunable, fpars=fpars, kpars=kpars)
     fixed_note = (f" Parameters in A or B fixed at their spec values: {', '.join(kpars)}." if kpars else "")
     lam_note = {"alternative": "lambda tunable (G and the forcing map are affine in lambda, checked at build time)",
@@ -339,6 +340,12 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     note = f"native C, constant A and B; {spec.method} completion, {lam_note}.{fixed_note}"
     variables = _variables(spec, fpars=fpars, kpars=kpars, vr=info["vr"], lam_tunable=lam_tunable,
                            method=spec.method, linear=info["linear"])
+    digest = hashlib.sha256()
+    for part in (header, *((_TEMPLATES / name).read_text() for name in _FIXED_SOURCES), repr(variables),
+                 repr(sorted(spec.experiment.items()))):
+        digest.update(part.encode())
+    guid = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
+    header = header.replace(placeholder, guid)
     flags_common = dict(needsExecutionTool=False, canBeInstantiatedOnlyOncePerProcess=False, canNotUseMemoryManagementFunctions=False,
                         canGetAndSetFMUstate=True, canSerializeFMUstate=True, providesDirectionalDerivative=False)
     xml = model_description(

@@ -45,11 +45,9 @@ full reference is docs/spec_reference.md.
 """
 
 import difflib
-import importlib.util
 import keyword
 import math
 import re
-import sys
 import tomllib
 import unicodedata
 
@@ -76,10 +74,19 @@ MAX_NAME = 100  # characters of a state, parameter, input or output name
 MAX_MODEL_NAME = 64  # characters of the model name (it names files and a class)
 MAX_TEXT = 10_000  # characters of a description or unit
 MAX_K = 20  # differentiations: a bound against runaway builds, not a statement of accuracy
+# completion.lam: powers of lam up to lam**(k+1) enter the completion's coefficients; beyond this
+# they overflow a double or swamp the model's own coefficients (a decay of exp(-1e12 t) is
+# already complete within any step a double can tell from zero time).
+MAX_LAM = 1e12
+# Nodes of each derivative of an entry of A, B, f up to the order the completion needs: a bound
+# that keeps every build short (derivatives of some short texts grow exponentially).
+MAX_DERIVATIVE_SIZE = 2000
+# experiment.step relative to the largest |time|: a smaller step is lost in the rounding of the
+# time (1e20 + 0.01 == 1e20); a double carries about 16 significant digits.
+MIN_RELATIVE_STEP = 1e-12
 # Names the generated slave module defines next to the class named after the model.
-_SLAVE_NAMES = {"MODEL", "Fmi2Slave", "DefaultExperiment", "LscRuntime", "give_back_loader_reference",
-                "release_loader_state_at_exit", "pythonfmu"}
-_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+# Matched with fullmatch: ``$`` would also match before a final newline ("x\n").
+_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
 class SpecError(ValueError):
@@ -140,10 +147,22 @@ def load_spec(path):
     ('PrescribedPath', ['y', 'v', 'u'])
     """
     with open(path, "rb") as fh:
-        try:
-            data = tomllib.load(fh)
-        except tomllib.TOMLDecodeError as exc:
-            raise SpecError([f"not valid TOML: {exc}"], source=str(path)) from None
+        raw = fh.read()
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        column = exc.start - (raw.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise SpecError([f"not UTF-8 text (TOML files are UTF-8): byte {raw[exc.start:exc.start + 1]!r} at byte "
+                         f"position {exc.start} (line {line}, column {column}) cannot be decoded ({exc.reason})"],
+                        source=str(path)) from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError([f"not valid TOML: {exc}"], source=str(path)) from None
+    except RecursionError:  # tomllib parses nested arrays and inline tables recursively
+        raise SpecError(["not a usable TOML spec: arrays or inline tables nested too deeply "
+                         "(a spec needs at most a few levels)"], source=str(path)) from None
     return parse_spec(data, source=str(path))
 
 
@@ -183,7 +202,7 @@ def _name_problem(name, max_length=MAX_NAME):
     """Why `name` cannot name a variable (or the model), or None."""
     if not isinstance(name, str):
         return f"expected a name (text), got {_show(name)}"
-    if not _IDENT.match(name) or keyword.iskeyword(name):
+    if not _IDENT.fullmatch(name) or keyword.iskeyword(name):
         return f"{_show(name)} is not a valid identifier (letters, digits, _; not a Python keyword)"
     if len(name) > max_length:
         return f"a name of {len(name)} characters is too long (at most {max_length})"
@@ -205,43 +224,94 @@ def _identifier(name, field, problems):
 def model_name_problems(name, field="model.name"):
     """Problems of a model name: a list of messages, empty when the name is fine.
 
-    The name becomes a Python module, a class and the FMU's file name, so it
-    must be an identifier of at most `MAX_MODEL_NAME` characters and must
-    not shadow a module importable in the building Python (``os``,
-    ``json``, ``numpy``, ``lsc``, ...) or a name the generated slave
-    module uses (``MODEL``, ``Fmi2Slave``, ...).
+    The name becomes the FMU's file name, its model identifier (the shared
+    library's name) and the slave's class name, so it must be an identifier
+    of at most `MAX_MODEL_NAME` characters. It may equal a module name
+    (``os``, ``json``, ``lsc``): the modules inside an FMU are named by a
+    hash of its content, so no model name shadows a module of the host.
 
     Examples
     --------
-    >>> model_name_problems("PrescribedPath")
-    []
-    >>> model_name_problems("json")
-    ["model.name: 'json' would shadow the importable module 'json' inside the FMU; choose another name"]
+    >>> model_name_problems("PrescribedPath"), model_name_problems("json")
+    ([], [])
+    >>> model_name_problems("1x")
+    ["model.name: '1x' is not a valid identifier (letters, digits, _; not a Python keyword)"]
     """
     problem = _name_problem(name, MAX_MODEL_NAME)
-    if problem is not None:
-        return [f"{field}: {problem}"]
-    if name in _SLAVE_NAMES:
-        return [f"{field}: {name!r} is a name the generated FMU code uses ({', '.join(sorted(_SLAVE_NAMES))}); choose another name"]
-    for module in (name, f"{name}_lsc", f"{name}_model"):
-        if _importable(module):
-            return [f"{field}: {name!r} would shadow the importable module {module!r} inside the FMU; choose another name"]
-    return []
+    return [] if problem is None else [f"{field}: {problem}"]
 
 
-def _importable(module):
-    """Whether a top-level module of that name can be imported here (found, never imported)."""
-    if module in sys.builtin_module_names or module in sys.stdlib_module_names or module in sys.modules:
-        return True
-    try:
-        return importlib.util.find_spec(module) is not None
-    except (ImportError, ValueError):
-        return True
+def lam_problem(lam):
+    """Why the rate `lam` (a positive finite float) cannot be used, or None.
+
+    Examples
+    --------
+    >>> lam_problem(2.0) is None
+    True
+    >>> lam_problem(1e308)
+    'must be at most 1e+12, got 1e+308: powers of lam up to lam**(k+1) enter the completion and would overflow or swamp the model in double arithmetic'
+    """
+    if lam > MAX_LAM:
+        return (f"must be at most {MAX_LAM:g}, got {lam!r}: powers of lam up to lam**(k+1) enter the completion "
+                f"and would overflow or swamp the model in double arithmetic")
+    return None
+
+
+def _size(expr, limit):
+    """Number of nodes of a sympy expression tree, counted up to just past `limit` (no recursion)."""
+    count, stack = 0, [expr]
+    while stack and count <= limit:
+        node = stack.pop()
+        count += 1
+        stack.extend(node.args)
+    return count
+
+
+def derivative_problems(spec, order):
+    """Entries of A, B, f whose derivatives up to `order` grow beyond `MAX_DERIVATIVE_SIZE` nodes.
+
+    The completion differentiates every coefficient up to order k + 2 symbolically; some short
+    texts have derivatives that grow exponentially with the order (a product of 40 factors,
+    nested functions). Each entry is differentiated one order at a time and abandoned as soon
+    as a derivative is too large, so the check itself stays short. Inputs count as functions of
+    ``t`` (their derivatives enter by the chain rule), parameters as symbols.
+
+    Returns a list of messages naming the field and the order, empty when every entry is fine.
+    """
+    import sympy
+
+    t = spec.t
+    as_functions = {u: sympy.Function(f"_lsc_fn_{name}")(t) for name, u in spec.input_symbols.items()}
+    problems = []
+    for label, M, vector in (("A", spec.A, False), ("B", spec.B, False), ("f", spec.f, True)):
+        for i in range(M.rows):
+            for j in range(M.cols):
+                expr = M[i, j].subs(as_functions) if as_functions else M[i, j]
+                for d in range(1, order + 1):
+                    if not expr.has(t):
+                        break
+                    expr = expr.diff(t)
+                    size = _size(expr, MAX_DERIVATIVE_SIZE)
+                    if size > MAX_DERIVATIVE_SIZE:
+                        where = f"equations.{label}[{i}]" if vector else f"equations.{label}[{i}][{j}]"
+                        problems.append(f"{where}: its derivative of order {d} has more than {MAX_DERIVATIVE_SIZE} "
+                                        f"terms and operations (the completion needs derivatives up to order {order}; "
+                                        f"a product of many factors or deeply nested functions grows exponentially "
+                                        f"when differentiated): simplify it, or lower completion.k")
+                        break
+    return problems
 
 
 def _text(info, key, field, problems, default=""):
-    """A description or unit: text without control characters (it goes into XML)."""
-    value = info.get(key, default)
+    """A description or unit: text without control characters (it goes into XML).
+
+    A default the user did not write (built from a name or an expression) is
+    never blamed: its control characters become spaces; a bad name is
+    reported under the name.
+    """
+    if key not in info:
+        return "".join(" " if unicodedata.category(ch) in ("Cc", "Cs") or ch in "\ufffe\uffff" else ch for ch in default[:MAX_TEXT])
+    value = info[key]
     if not isinstance(value, str):
         problems.append(f"{field}.{key}: expected text, got {_show(value)}")
         return default
@@ -289,7 +359,7 @@ def _entries(data, section, problems, bare=None):
 
     `bare` names the key a bare value stands for (``m = 1.0`` in [parameters]).
     """
-    table = _table(data.get(section), section, problems, f"a table of name = {{ ... }} entries")
+    table = _table(data.get(section), section, problems, "a table of name = { ... } entries")
     out = []
     for name, info in table.items():
         field = f"{section}.{name}"
@@ -403,6 +473,9 @@ def parse_spec(data, source="spec"):
     if method not in METHODS:
         problems.append(f"completion.method: must be one of {', '.join(METHODS)}; got {_show(method)}")
     lam = _number(comp.get("lam", 1.0), "completion.lam", problems, positive=True)
+    problem = lam_problem(lam) if lam is not None else None
+    if problem:
+        problems.append(f"completion.lam: {problem}")
     k = comp.get("k")
     if k is not None and (isinstance(k, bool) or not isinstance(k, int) or not 0 <= k <= MAX_K):
         problems.append(f"completion.k: must be an integer from 0 to {MAX_K}; got {_show(k)}")
@@ -413,6 +486,15 @@ def parse_spec(data, source="spec"):
     step = _number(exp.get("step", 0.01), "experiment.step", problems, positive=True)
     if start is not None and stop is not None and not stop > start:
         problems.append(f"experiment.stop: must be greater than experiment.start ({start}); got {stop}")
+    elif start is not None and stop is not None and not math.isfinite(stop - start):
+        problems.append(f"experiment.stop: the span stop - start = {stop!r} - ({start!r}) overflows a double "
+                        f"(at most about 1.8e308); the FMU's time could not advance")
+    elif start is not None and stop is not None and step is not None:
+        scale = max(abs(start), abs(stop))
+        if step < MIN_RELATIVE_STEP * scale:
+            problems.append(f"experiment.step: {step!r} is lost in the rounding of times of magnitude {scale:g} "
+                            f"({scale:g} + {step!r} = {scale + step!r} in double arithmetic); the step must be at "
+                            f"least {MIN_RELATIVE_STEP:g} times the largest |time|, here {MIN_RELATIVE_STEP * scale:g}")
 
     if start is not None and all(M is not None for M in (A, B, f)):
         values = {t: start, **{symbols[p["name"]]: p["value"] for p in parameters},

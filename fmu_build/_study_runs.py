@@ -246,13 +246,24 @@ def cosimulate_function():
     return function
 
 
+# Grid names of an SSP target that are options of ``cosimulate`` rather than start values.
+SSP_OPTIONS = ("algorithm", "extrapolation", "iterations", "exchange")
+
+_SSP_LAYOUT = {}  # (scenario, mtime) -> (connected outputs, residual outputs, components with lambda), per worker
+
+
 def run_ssp(scenario, point, settings):
     """Run an SSP scenario through ``fmu_build.cosimulate`` at one point of the grid.
 
-    The point's values are passed as keyword arguments, with ``t_span`` when
-    the study sets one; the result is read through its attributes ``t``
-    (shape (m,)), ``x`` (shape (n, m)), and where present ``residual``
-    (shape (m,)), ``success`` and ``message``.
+    The point maps onto ``cosimulate(scenario, stop_time, step_size, *,
+    start_time, start_values, output, ...)``: ``step`` is the macro step
+    (required), the study's ``t_span`` the start and stop times (required),
+    ``lam`` the start value of ``lambda`` in every component that has one,
+    ``algorithm``, ``extrapolation``, ``iterations``, ``exchange`` the
+    master's options, and a ``"component.variable"`` name a start value.
+    The trajectory ``x`` is every connected output, in the sorted order of
+    their ``"component.variable"`` names; the residual is the 2-norm of the
+    components' ``constraint_residual`` outputs (NaN when none has one).
     """
     start = time.perf_counter()
     try:
@@ -262,15 +273,77 @@ def run_ssp(scenario, point, settings):
         cosimulate = cosimulate_function()
         if cosimulate is None:
             return _failed("fmu_build.cosimulate is not available in this worker's installation", start)
-        options = {"t_span": settings["t_span"]} if settings.get("t_span") else {}
-        result = cosimulate(scenario, **options, **point)
-        t = np.asarray(result.t, dtype=float)
-        x = np.asarray(result.x, dtype=float)
-        residual = np.asarray(getattr(result, "residual", np.full(t.size, math.nan)), dtype=float)
-        finite = residual[np.isfinite(residual)]
-        return dict(success=bool(getattr(result, "success", True)), message=str(getattr(result, "message", "")),
-                    residual_final=float(residual[-1]) if residual.size else math.nan,
-                    residual_peak=float(np.max(finite)) if finite.size else math.nan,
-                    run_time=time.perf_counter() - start, steps=int(max(t.size - 1, 0)), t=t, x=x, residual=residual)
+        return _run_ssp(cosimulate, scenario, point, settings, start)
     except Exception as exc:
         return _failed(f"{type(exc).__name__}: {exc}", start)
+
+
+def ssp_layout(scenario):
+    """(connected outputs, constraint residual outputs, components with ``lambda``) of a scenario."""
+    import os
+    import shutil
+
+    from fmpy import read_model_description
+
+    from .cosim import read_system
+
+    key = (os.fspath(scenario), os.path.getmtime(scenario)) if not isinstance(scenario, dict) else None
+    if key is not None and key in _SSP_LAYOUT:
+        return _SSP_LAYOUT[key]
+    components, connections, workdir = read_system(scenario)
+    try:
+        names = {c: {v.name for v in read_model_description(path).modelVariables} for c, path in components.items()}
+    finally:
+        if workdir:
+            shutil.rmtree(workdir, ignore_errors=True)
+    outputs = sorted({f"{a}.{y}" for a, y, _, _ in connections})
+    residuals = [f"{c}.constraint_residual" for c in sorted(names) if "constraint_residual" in names[c]]
+    with_lambda = [c for c in sorted(names) if "lambda" in names[c]]
+    layout = (outputs, residuals, with_lambda)
+    if key is not None:
+        _SSP_LAYOUT[key] = layout
+    return layout
+
+
+def _run_ssp(cosimulate, scenario, point, settings, start):
+    import os
+
+    if not isinstance(scenario, dict) and os.path.isdir(scenario):  # an unpacked SSP: its description
+        scenario = os.path.join(scenario, "SystemStructure.ssd")
+    t_span = settings.get("t_span")
+    if not t_span:
+        raise ValueError("an SSP target needs `t_span` (the start and stop time of the co-simulation)")
+    if "step" not in point:
+        raise ValueError("an SSP target needs `step` (the macro step) in the grid")
+    outputs, residuals, with_lambda = ssp_layout(scenario)
+    start_values, options = {}, {}
+    for name, value in point.items():
+        if name == "step":
+            continue
+        if name == "lam":
+            if not with_lambda:
+                raise ValueError("`lam`: no component of the scenario has a variable `lambda`")
+            start_values.update({f"{c}.lambda": float(value) for c in with_lambda})
+        elif name in SSP_OPTIONS:
+            options[name] = int(value) if name in ("extrapolation", "iterations") else value
+        elif "." in name:
+            start_values[name] = value
+        else:
+            raise ValueError(f"an SSP target takes the grid names 'step', 'lam', {', '.join(map(repr, SSP_OPTIONS))} "
+                             f"and 'component.variable' start values; found {name!r}")
+    result = cosimulate(scenario, float(t_span[1]), float(point["step"]), start_time=float(t_span[0]),
+                        start_values=start_values, output=outputs + residuals, progress=False, **options)
+    t = np.asarray(result["time"], dtype=float)
+    x = np.array([result[o] for o in outputs], dtype=float).reshape(len(outputs), t.size)
+    if residuals:
+        residual = np.sqrt(np.sum([np.asarray(result[r], dtype=float) ** 2 for r in residuals], axis=0))
+    else:
+        residual = np.full(t.size, math.nan)
+    finite = residual[np.isfinite(residual)]
+    success, message = bool(result.success), str(result.message)
+    if success and not np.all(np.isfinite(x)):
+        success, message = False, "the run produced non-finite values"
+    return dict(success=success, message=message,
+                residual_final=float(residual[-1]) if residual.size else math.nan,
+                residual_peak=float(np.max(finite)) if finite.size else math.nan,
+                run_time=time.perf_counter() - start, steps=int(max(t.size - 1, 0)), t=t, x=x, residual=residual)

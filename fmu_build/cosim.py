@@ -15,7 +15,10 @@ The master couples FMUs by their connections, at a fixed macro step ``H``:
   exact ones where the source provides them. An FMU that declares
   ``canInterpolateInputs`` receives the polynomial's derivatives at the step
   start with ``fmi2SetRealInputDerivatives``; any other FMU receives values only
-  (our pythonfmu DAE FMUs then estimate the derivatives themselves).
+  (our pythonfmu DAE FMUs then estimate the derivatives themselves; our native
+  DAE FMUs, ``build_fmu(..., target="native")``, interpolate). Each connected
+  output is asked for its derivative once: those an FMU refuses (a native lsc
+  FMU's outputs that depend on inputs) are estimated from values.
 - **Algebraic loops**: a cycle of direct feedthrough (from the model
   descriptions' output ``dependencies``; an output without the attribute
   depends on every input) is reported. With ``iterations = 0`` it is cut (one
@@ -204,8 +207,16 @@ class _Component:
         return v
 
 
-def _make_callbacks(messages):
-    """FMI callbacks whose logger forwards every message under the component's name."""
+_KEEP_ALIVE = {}  # id(callbacks) -> the Python logger a proxy calls (dropped when the run ends)
+
+
+def _make_callbacks(messages, quiet=()):
+    """FMI callbacks whose logger forwards every message under the component's name.
+
+    The FMI logger is variadic (``"%s", text`` in C FMUs): fmpy's logger proxy
+    formats the message before the Python function sees it. Messages of the
+    components in ``quiet`` (a set, changed by the caller) go to DEBUG only.
+    """
     from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2CallbackAllocateMemoryTYPE, \
         fmi2CallbackFreeMemoryTYPE
     from fmpy import calloc, free
@@ -215,14 +226,27 @@ def _make_callbacks(messages):
     def log(env, instance, status, category, message):
         name = instance.decode(errors="replace") if instance else "?"
         text = message.decode(errors="replace") if message else ""
+        if name in quiet:
+            logger.debug("[%s] %s", name, text)
+            return
         messages.setdefault(name, []).append(text)
         del messages[name][:-20]
         logger.log(levels.get(status, logging.INFO), "[%s] %s", name, text)
 
     callbacks = fmi2CallbackFunctions()
-    callbacks.logger = fmi2CallbackLoggerTYPE(log)
+    python_logger = fmi2CallbackLoggerTYPE(log)
+    callbacks.logger = python_logger
     callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
     callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    try:
+        from ctypes import byref
+
+        from fmpy.logging import addLoggerProxy
+
+        addLoggerProxy(byref(callbacks))  # the proxy calls python_logger, which must stay alive
+        _KEEP_ALIVE[id(callbacks)] = python_logger
+    except Exception as exc:  # fmpy without its logging library: messages keep their format strings
+        logger.warning("fmpy's logger proxy is not available (%s): C FMUs' messages are not formatted", exc)
     return callbacks
 
 
@@ -463,15 +487,17 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
     names, connections, ssp_dir = read_system(system)
     workdir = tempfile.mkdtemp(prefix="lsc_cosim_fmus_")
     messages = {}
-    callbacks = _make_callbacks(messages)
+    quiet = set()
+    callbacks = _make_callbacks(messages, quiet)
     comps = {}
     try:
         for name, path in names.items():
             comps[name] = _Component(name, path, workdir, callbacks)
         return _run(comps, connections, stop_time, step_size, algorithm, extrapolation, iterations,
                     start_values or {}, output, start_time, rtol, messages, exchange,
-                    sys.stderr.isatty() if progress is None else progress)
+                    sys.stderr.isatty() if progress is None else progress, quiet)
     finally:
+        _KEEP_ALIVE.pop(id(callbacks), None)
         for c in comps.values():
             try:
                 c.fmu.terminate()
@@ -487,7 +513,7 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
 
 
 def _run(comps, connections, stop_time, H, algorithm, p, iterations, start_values, output, t0, rtol, messages, exchange,
-         show_progress):
+         show_progress, quiet=None):
     from fmpy.fmi1 import FMICallException
 
     names = list(comps)
@@ -600,6 +626,31 @@ def _run(comps, connections, stop_time, H, algorithm, p, iterations, start_value
     # derivatives then form a loop of their own (y' = A x + b u, y'' = A y' + b u'), solved by
     # fixed-point sweeps at each communication point
     deriv_loop = [n for n in names if comps[n].max_derivative and comps[n].can_interpolate and inputs_of[n]]
+    derivable = {}  # component -> its connected outputs whose derivatives it gives (probed once)
+
+    def derivative_outputs(n):
+        """The connected outputs of ``n`` with derivatives: ``maxOutputDerivativeOrder`` is one number
+        for the whole FMU, but an FMU may refuse some outputs (ours: outputs that depend on inputs);
+        each is asked once, the refusals logged at DEBUG only, and their derivatives estimated."""
+        if n not in derivable:
+            c, ok = comps[n], []
+            if quiet is not None:
+                quiet.add(n)
+            try:
+                for s, v in outputs_of[n]:
+                    try:
+                        c.fmu.getRealOutputDerivatives([v], [1])
+                        ok.append((s, v))
+                    except FMICallException:
+                        pass
+            finally:
+                if quiet is not None:
+                    quiet.discard(n)
+            if len(ok) < len(outputs_of[n]):
+                missing = [sources[s][1] for s, v in outputs_of[n] if (s, v) not in ok]
+                logger.info("[%s] no output derivatives of %s: their derivatives are estimated from values", n, missing)
+            derivable[n] = ok
+        return derivable[n]
 
     def record_derivs():
         """Output derivatives at the current communication point.
@@ -626,8 +677,8 @@ def _run(comps, connections, stop_time, H, algorithm, p, iterations, start_value
                             der = [float(d[j - 1, s]) if np.isfinite(d[j - 1, s]) else 0.0 for s in slots]
                             call(n, lambda: c.fmu.setRealInputDerivatives(vrs, [j] * len(vrs), der), t,
                                  "fmi2SetRealInputDerivatives")
-                for order in range(1, min(nder, c.max_derivative) + 1):
-                    pairs = outputs_of[n]
+                pairs = derivative_outputs(n)
+                for order in range(1, min(nder, c.max_derivative) + 1 if pairs else 0):
                     vals = call(n, lambda: c.fmu.getRealOutputDerivatives([v for _, v in pairs], [order] * len(pairs)),
                                 t, "fmi2GetRealOutputDerivatives")
                     for (s, _), x in zip(pairs, vals):

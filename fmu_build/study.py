@@ -213,9 +213,10 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
     target : path, dict, lsc.LinearDAE or lsc.gallery.Problem
         An ``.fmu``; a spec (``.toml`` path or parsed dict: built once into an
         FMU in a temporary folder); an SSP scenario (``.ssp``, ``.ssd`` or its
-        folder: run with ``fmu_build.cosimulate``); a LinearDAE (then `t_span`
-        and `x0` are required) or a gallery Problem (carries both and its exact
-        solution).
+        folder holding ``SystemStructure.ssd``: run with
+        ``fmu_build.cosimulate``, `t_span` and a ``step`` in the grid
+        required); a LinearDAE (then `t_span` and `x0` are required) or a
+        gallery Problem (carries both and its exact solution).
     grid : dict or (int, dict)
         ``{name: [values]}``: every combination (full grid). ``(size, {name:
         (low, high)})``: a Latin hypercube sample of that size
@@ -228,7 +229,8 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
         its exact solution. 'tightest' runs, for every combination of the
         model inputs, one extra run with the smallest step and tolerances and
         the largest ``lam`` of the grid. 'monolithic' (SSP targets only) is
-        the scenario's monolithic solution computed by ``cosimulate``. None:
+        reserved: ``cosimulate`` has no monolithic solve, so it raises
+        NotImplementedError (pass the monolithic solution as a callable). None:
         the exact solution if the target has one, else 'tightest'.
     metrics : dict, optional
         Extra columns ``{name: function(t, x, residual) -> float}``, computed

@@ -6,7 +6,7 @@ whose solutions contain the DAE's and whose extra solutions decay at a rate
 """
 from ._completion import COMPLETIONS, AlternativeCompletion, Completion, StabilizedCompletion, StandardCompletion, complete
 from ._derivative_array import DerivativeArray, derivative_array
-from ._exceptions import DimensionError, IndexDeterminationError, RankDecisionWarning
+from ._exceptions import DimensionError, IndexDeterminationError, RankDecisionWarning, StiffnessWarning
 from ._index import SolvabilityReport, check_solvability, differentiation_index
 from ._problem import LinearDAE
 from ._analysis import Eigenanalysis, eigenanalysis
@@ -36,4 +36,5 @@ __all__ = [
     "DimensionError",
     "IndexDeterminationError",
     "RankDecisionWarning",
+    "StiffnessWarning",
 ]

@@ -26,13 +26,15 @@ from collections import OrderedDict
 import numpy as np
 import scipy.linalg
 
-from ._derivative_array import array_jets, lam_jet, stabilization_jets
+from ._derivative_array import array_jets, stabilization_jets
 from ._exceptions import DimensionError, IndexDeterminationError
 from ._forcing import Forcing
 from ._index import check_solvability, determine_index, k_works
 from ._linalg import numerical_rank, validate_rcond
-from ._timefunc import TimeFunction, _contains_sympy, _shape_str, as_time_function
-from ._validate import check_dae, check_k, check_lam_value, check_t_span
+from ._problem import check_dae, row_equilibration, row_scaled, varying_view
+from ._rate import as_rate, lam_at
+from ._timefunc import TimeFunction, _shape_str
+from ._validate import check_k, check_t_span
 
 __all__ = [
     "Completion",
@@ -47,6 +49,9 @@ __all__ = [
 # sine of the angle between null(J) and {x' = 0} it is not.
 _ONE_FULL_TOL = np.sqrt(np.finfo(float).eps)
 _CACHE_SIZE = 4
+# The largest k - index accepted: measured on the gallery's constant problems (docs/reliability_library.md),
+# the error stays at the k = index level up to index + 12 at least and grows beyond index + 15.
+K_ABOVE_INDEX = 10
 
 
 def _norm2_if_above(X, tol):
@@ -142,23 +147,6 @@ class _Factors:
         return ((X @ self.Vt[:r].T) / self.s[:r]) @ self.U[:, :r].T
 
 
-def _as_rate(lam):
-    """A positive constant (float) or a TimeFunction of shape () for lam(t)."""
-    if lam is None or isinstance(lam, TimeFunction):
-        return lam
-    if callable(lam) or _contains_sympy(lam):
-        return as_time_function("lam", lam, ())
-    return check_lam_value(lam)
-
-
-def lam_at(lam, t, order=0):
-    """Derivatives ``0..order`` of a rate at `t`, refusing a non-positive value."""
-    jet = lam_jet(lam, t, order)
-    if not jet[0] > 0.0:
-        raise ValueError(f"`lam` must be positive wherever the completion is evaluated; lam({t!r}) = {jet[0]!r}.")
-    return jet
-
-
 class Completion:
     """Base class of the ODE completions ``x' = G x + g(t)`` of a linear DAE.
 
@@ -186,6 +174,9 @@ class Completion:
     Attributes
     ----------
     dae : LinearDAE
+        The DAE; for a time-varying ``lam`` on constant coefficients a copy
+        of it with ``is_constant = False``, so every consumer evaluates the
+        completion where it varies.
     n : int
         Number of unknowns.
     k : int
@@ -214,15 +205,25 @@ class Completion:
         self.t_span = None if t_span is None else check_t_span(t_span)
         self._t_ref = 0.0 if self.t_span is None else min(self.t_span)
         self.lam = self._check_lam(lam)
+        if dae.is_constant and isinstance(self.lam, TimeFunction):
+            # G(t) follows lam(t): evaluate it where it is asked for, like time-varying coefficients.
+            self.dae = dae = varying_view(dae)
         self.k = self._check_k(k)
         self._order = self.k + self.extra_order
         self._cache = OrderedDict()
+        # Badly scaled rows are equilibrated once (constant scales, so the solutions do not change);
+        # the arrays are built from the scaled equations, `_W` still acts on the given f.
+        self._row_scales = row_equilibration(dae, self._t_ref)
+        self._eq = dae if self._row_scales is None else row_scaled(dae, self._row_scales)
         if dae.is_constant:
-            fac = _Factors(dae, self.k, self._t_ref, self.extra_order, self.rcond)
+            fac = _Factors(self._eq, self.k, self._t_ref, self.extra_order, self.rcond)
             self._std = fac
             self._rank = fac.rank
             self._G, self._W = self._maps(fac, self._t_ref)
             self._W_c = fac.cg
+            if self._row_scales is not None:
+                columns = np.tile(self._row_scales, self._order + 1)
+                self._W, self._W_c = self._W * columns, self._W_c * columns
             self._setup_forcing()
         else:
             fac = self._factors(self._t_ref, check=False)
@@ -242,12 +243,19 @@ class Completion:
                 f"`lam` is required for the {self.method!r} completion: a positive finite rate "
                 "(e.g. lam=1.0), a sympy expression in t or a callable lam(t, d); found None."
             )
-        lam = _as_rate(lam)
+        lam = as_rate(lam)
         if isinstance(lam, TimeFunction):
-            times = [self._t_ref] if self.t_span is None else np.linspace(*self.t_span, 101)
-            for t in times:
-                lam_at(lam, float(t))
+            self._check_rate_on([self._t_ref] if self.t_span is None else self.t_span, lam)
         return lam
+
+    def _check_rate_on(self, t_span, lam=None):
+        """Refuse a time-varying rate that is not positive at 101 points of `t_span` (or at one time)."""
+        lam = self.lam if lam is None else lam
+        if not isinstance(lam, TimeFunction):
+            return
+        times = np.linspace(t_span[0], t_span[-1], 101 if len(t_span) == 2 else 1)
+        for t in times:
+            lam_at(lam, float(t))
 
     def _check_k(self, k):
         dae, t = self.dae, self._t_ref
@@ -258,20 +266,33 @@ class Completion:
             return k
         k = check_k(k)
         if not dae.is_constant and self.t_span is not None:
-            return check_solvability(dae, self.t_span, k=k, rcond=self.rcond).k
-        ok, ranks, nxt = k_works(dae, k, t, self.rcond)
-        if not ok:
-            raise IndexDeterminationError(
-                f"`k`={k} is too small at t={t:g}: the derivative array does not determine x' "
-                f"({ranks}; next: {nxt}). Use k=None for the differentiation index."
-            )
+            check_solvability(dae, self.t_span, k=k, rcond=self.rcond)
+        else:
+            ok, ranks, nxt = k_works(dae, k, t, self.rcond)
+            if not ok:
+                raise IndexDeterminationError(
+                    f"`k`={k} is too small at t={t:g}: the derivative array does not determine x' "
+                    f"({ranks}; next: {nxt}). Use k=None for the differentiation index."
+                )
+        if k > K_ABOVE_INDEX:
+            index, _ = determine_index(dae, t, k, self.rcond)
+            if k > index + K_ABOVE_INDEX:
+                raise ValueError(
+                    f"`k`={k} is {k - index} above the differentiation index {index} (at t={t:g}); at most "
+                    f"index + {K_ABOVE_INDEX} = {index + K_ABOVE_INDEX} is accepted. More differentiations gain "
+                    "nothing in exact arithmetic (the solutions are those of k = index), but the derivative "
+                    "array's entries grow like binomial coefficients and f's derivatives of order up to k + 1, "
+                    "so rounding grows: "
+                    "on gallery.prescribed_path (index 3) the error is 8e-9 up to k = 15, then 7e-8 at k = 18, "
+                    "4e-3 at k = 28 and 2 at k = 33. Use k=None."
+                )
         return k
 
     # -- evaluation ---------------------------------------------------------
     def _factors(self, t, check=True):
         """The standard-array factors at `t`, with the forcing as values at `t`."""
-        fstack = self.dae.f_jet(t, self._order).reshape(-1)
-        return _Factors(self.dae, self.k, t, self.extra_order, self.rcond, fmap=fstack,
+        fstack = self._eq.f_jet(t, self._order).reshape(-1)
+        return _Factors(self._eq, self.k, t, self.extra_order, self.rcond, fmap=fstack,
                         expected_rank=self._rank if check else None)
 
     def _evaluate(self, t):
@@ -530,8 +551,9 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None):
         (101 points) and wherever the completion is evaluated.
     k : int, optional
         Number of differentiations; None means the differentiation index.
-        A larger ``k`` is allowed (for the standard LSC it changes nothing,
-        thesis Theorem 5).
+        A larger ``k`` is allowed up to the index plus `K_ABOVE_INDEX` (10)
+        (for the standard LSC it changes nothing, thesis Theorem 5); beyond
+        that rounding errors grow with ``k`` and a ValueError says so.
     rcond : float, optional
         Relative threshold for every rank decision.
     t_span : pair of float, optional
@@ -545,6 +567,16 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None):
     Returns
     -------
     Completion
+
+    Notes
+    -----
+    When the norms of the rows of ``[A, B]`` (at the start of `t_span`, or
+    t = 0) spread by more than 1024, the equations are multiplied by powers
+    of two that equilibrate them before any rank decision: the solutions,
+    the DAE's eigenvalues and the added eigenvalues ``-lam`` do not change,
+    the standard and stabilized LSC's least-squares metric does (see
+    docs/reliability_library.md). A time-varying ``lam`` makes the
+    completion time-varying even for constant ``A`` and ``B``.
 
     Examples
     --------

@@ -19,7 +19,9 @@ from math import comb
 
 import numpy as np
 
-from ._timefunc import TimeFunction
+from ._problem import check_dae
+from ._rate import as_rate, lam_at, lam_jet
+from ._validate import check_k, check_time
 
 __all__ = ["DerivativeArray", "derivative_array"]
 
@@ -47,17 +49,6 @@ def _powers(jet, k, lam_jet):
     out = [jet]
     for _ in range(k):
         out.append(_apply_D(out[-1], lam_jet))
-    return out
-
-
-def lam_jet(lam, t, order):
-    """Derivatives ``0..order`` of ``lam`` at ``t`` (None for the standard array)."""
-    if lam is None:
-        return None
-    if isinstance(lam, TimeFunction):
-        return lam.jet(t, order)
-    out = np.zeros(order + 1)
-    out[0] = lam
     return out
 
 
@@ -192,14 +183,11 @@ def derivative_array(dae, k, t=0.0, lam=None):
            [1., 2., 0., 1.],
            [0., 1., 0., 0.]])
     """
-    from ._completion import _as_rate, lam_at
-    from ._validate import check_dae, check_k, check_time
-
     check_dae(dae)
     k = check_k(k)
     t = check_time("t", t)
     if lam is not None:
-        lam = _as_rate(lam)
+        lam = as_rate(lam)
         lam_at(lam, t)
     jets = array_jets(dae, k, t, lam)
     fstack = dae.f_jet(t, k).reshape(-1)

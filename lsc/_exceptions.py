@@ -4,7 +4,7 @@ Every class subclasses a builtin, so ``except ValueError`` keeps working for
 callers that do not know about lsc.
 """
 
-__all__ = ["DimensionError", "IndexDeterminationError", "RankDecisionWarning"]
+__all__ = ["DimensionError", "IndexDeterminationError", "RankDecisionWarning", "StiffnessWarning"]
 
 
 class DimensionError(ValueError):
@@ -30,4 +30,13 @@ class RankDecisionWarning(UserWarning):
     Some singular value lies close to the threshold ``rcond * sigma_max``, so
     a slightly different ``rcond`` (or slightly perturbed data) could change
     the rank, the index and therefore the completion.
+    """
+
+
+class StiffnessWarning(UserWarning):
+    """An explicit method was asked for on a stiff completion.
+
+    Raised before the run starts, with the estimated number of right-hand
+    side evaluations and time; ``method='auto'`` (or 'Radau', 'BDF', or
+    'expm' for constant coefficients) avoids the cost.
     """

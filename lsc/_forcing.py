@@ -124,9 +124,10 @@ class Forcing:
             return np.zeros(self.n)
         try:
             values = self._scalar(float(t))
-        except (ArithmeticError, ValueError) as exc:  # the math module raises where numpy gives inf/nan
-            raise ValueError(f"`{self.f.name}` is not finite at t={float(t)!r} (its derivatives that the completion "
-                             f"uses: {exc}).") from None
+        except (ArithmeticError, ValueError, TypeError) as exc:  # the math module raises where numpy gives inf/nan
+            # the same words as a sympy coefficient evaluated on its own (lsc._timefunc)
+            raise ValueError(f"`{self.f.name}` cannot be evaluated at t={float(t)!r} (the derivatives the completion "
+                             f"uses): {type(exc).__name__}: {exc}. Is t outside the expression's domain?") from None
         # a sum is non-finite when an entry is (and the builtin sum of a short list costs next to nothing)
         if not math.isfinite(sum(values)):
             _check_finite(np.array(values, dtype=float), self.f.name, t)

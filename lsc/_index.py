@@ -6,7 +6,8 @@ import scipy.linalg
 from ._derivative_array import array_jets
 from ._exceptions import IndexDeterminationError
 from ._linalg import default_rcond, numerical_rank, validate_rcond
-from ._validate import check_dae, check_k, check_time
+from ._problem import check_dae, row_equilibration
+from ._validate import check_k, check_t_span, check_time
 
 __all__ = ["differentiation_index", "check_solvability", "ArrayRanks", "SolvabilityReport"]
 
@@ -69,6 +70,10 @@ def array_ranks(dae, k, t, rcond, previous=None, memo=None):
     jets = array_jets(dae, k, t)
     J, F = jets.J[0], jets.F[0]
     rows = J.shape[0]
+    r = row_equilibration(dae, t)
+    if r is not None:  # diag(r) on every block row: the same ranks, told apart in floating point
+        scale = np.tile(r, k + 1)[:, None]
+        J, F = scale * J, scale * F
     rcond = default_rcond(J.shape) if rcond is None else rcond
     s = scipy.linalg.svdvals(J)
     scale = s[0] if s.size else 0.0
@@ -97,6 +102,9 @@ def pencil_is_regular(dae, rcond=None):
     the pencil is singular.
     """
     A, B = dae.A(0.0), dae.B(0.0)
+    r = row_equilibration(dae)
+    if r is not None:
+        A, B = r[:, None] * A, r[:, None] * B
     scale = (np.linalg.norm(B, 2) or 1.0) / (np.linalg.norm(A, 2) or 1.0)
     for s in (0.7317 * scale, -1.3641 * scale):
         M = s * A + B
@@ -283,8 +291,6 @@ def check_solvability(dae, t_span, *, k=None, kmax=10, rcond=None, samples=21):
     >>> report.k, sorted(set(report.pointwise_index.tolist()))
     (2, [1, 2])
     """
-    from ._validate import check_t_span
-
     check_dae(dae)
     t0, t1 = check_t_span(t_span)
     kmax = check_k(kmax, "kmax")

@@ -7,6 +7,7 @@ from . import _cvode, _expm
 from ._chebyshev import ChebyshevCoefficients, EvaluationFailed
 from ._completion import Completion, complete
 from ._derivative_array import lam_jet
+from ._exceptions import StiffnessWarning
 from ._validate import check_state, check_t_span
 
 __all__ = ["CompletionResult", "solve_completion", "solve_dae"]
@@ -161,7 +162,9 @@ def solve_completion(
         ``'auto'`` picks 'Radau' when the completion is stiff on `t_span`
         (``stiffness_ratio`` > 100, see below) and 'DOP853' otherwise. An
         explicit method on a stiff completion runs as asked, and the
-        result's message says that an implicit one would be faster.
+        result's message says that an implicit one would be faster; when
+        stability alone would need more than 1e5 evaluations, a
+        `StiffnessWarning` with the estimated cost is issued before the run.
     t_eval : array_like, optional
         Output times (default: the solver's steps).
     rtol, atol : float or array_like, optional
@@ -191,8 +194,17 @@ def solve_completion(
     -------
     CompletionResult
         ``success=False`` with a message when the integration fails,
-        including when the forcing becomes non-finite during the run; bad
-        arguments raise before integrating.
+        including when the forcing becomes non-finite or cannot be evaluated
+        during the run; the result then holds the trajectory computed up to
+        the last accepted step, as `scipy.integrate.solve_ivp` does. Bad
+        arguments (including a time-varying ``lam`` that is not positive on
+        `t_span`) raise before integrating.
+
+    Warns
+    -----
+    StiffnessWarning
+        Before the run, when an explicit method is asked for on a completion
+        so stiff that it would take more than 1e5 evaluations.
 
     Examples
     --------
@@ -209,6 +221,7 @@ def solve_completion(
     t0, t1 = check_t_span(t_span)
     x0 = check_state("x0", x0, completion.n)
     tol = _interpolation_tol(interpolate, rtol)  # bad input fails here, whatever the method
+    completion._check_rate_on((t0, t1))  # a time-varying lam must be positive on the whole run
     if method == "expm":
         if project:
             x0 = completion.project(t0, x0)
@@ -244,17 +257,25 @@ def solve_completion(
         return _solve_cvode(completion, rhs, jac, (t0, t1), x0, t_eval, rtol, atol, options, built)
     if _is_implicit(method) and "jac" not in options:
         options["jac"] = completion.jac(t0, x0) if completion.dae.is_constant else jac
+    if not _is_implicit(method):
+        _warn_if_costly(method, stiffness, completion, t0, x0)
+    solvers = []
     try:
-        sol = solve_ivp(fun, (t0, t1), x0, method=method, t_eval=t_eval, rtol=rtol, atol=atol, **options)
+        sol = solve_ivp(fun, (t0, t1), x0, method=_recording(method, solvers), t_eval=t_eval, rtol=rtol, atol=atol,
+                        **options)
     except _ForcingFailed as exc:
-        return _failed(completion, exc.t, exc.exc)
+        t_ok = getattr(solvers[-1], "t", t0) if solvers else t0
+        partial = _partial_run(fun, t0, t_ok, x0, method, t_eval, dict(options, rtol=rtol, atol=atol))
+        return _failed(completion, exc.t, exc.exc, partial)
     x = sol.y
     message = sol.message + built
     if not _is_implicit(method) and stiffness > _STIFF:
         message += (f" (the completion is stiff on this interval: |rate| x length = {stiffness:.3g}; "
                     "method='Radau' or 'auto' takes far fewer steps)")
     elif not sol.success and not _is_implicit(method):
-        message += " (an explicit method failing on a completion often means it is stiff: large lam; try method='Radau')"
+        message += (f" (the step size collapsed after t={float(sol.t[-1]):g}, but the completion is not stiff: its known "
+                    f"rates (lam, and the eigenvalues of G for constant coefficients) x length = {stiffness:.3g}; look "
+                    "for a singularity of the coefficients or the forcing just after it)")
     return CompletionResult(
         t=sol.t, x=x, success=bool(sol.success), status=sol.status, message=message,
         nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=sol.sol, completion=completion,
@@ -286,12 +307,75 @@ def _interpolation_tol(interpolate, rtol):
     raise ValueError(f"`interpolate` must be None, True, False or a relative accuracy in (0, 1); found {interpolate!r}.")
 
 
-def _failed(completion, t, exc):
+def _failed(completion, t, exc, partial=None):
+    """A failed run's result: the trajectory computed before the failure (like solve_ivp), and why."""
+    ts, xs, nfev = partial if partial is not None else (np.zeros(0), np.zeros((completion.n, 0)), 0)
+    kept = f"; the result holds the {ts.size} point(s) computed before it, up to t={float(ts[-1])!r}" if ts.size else ""
     return CompletionResult(
-        t=np.zeros(0), x=np.zeros((completion.n, 0)), residual=np.zeros(0), success=False, status=-2,
-        message=f"evaluating the right-hand side failed at t={float(t)!r}: {exc}",
-        nfev=0, njev=0, nlu=0, sol=None, completion=completion,
+        t=ts, x=xs, success=False, status=-2,
+        message=f"evaluating the right-hand side failed at t={float(t)!r}: {exc}{kept}",
+        nfev=nfev, njev=0, nlu=0, sol=None, completion=completion,
     )
+
+
+_EXPLICIT_COST = {"RK23": (2.5, 3), "RK45": (3.3, 6), "DOP853": (6.0, 12)}  # stability bound on -R, evaluations per step
+_COSTLY = 1e5  # right-hand side evaluations above which an explicit run is announced
+
+
+def _warn_if_costly(method, stiffness, completion, t0, x0):
+    """Warn before an explicit run whose step is bounded by stability to a large number of evaluations."""
+    bound, per_step = _EXPLICIT_COST.get(method if isinstance(method, str) else getattr(method, "__name__", ""),
+                                         (3.3, 6))
+    evaluations = stiffness / bound * per_step
+    if evaluations <= _COSTLY:
+        return
+    import time
+    import warnings
+
+    start = time.perf_counter()
+    for _ in range(20):
+        completion.rhs(t0, x0)
+    seconds = evaluations * ((time.perf_counter() - start) / 20 + 2e-5)  # + solve_ivp's own work per evaluation
+    warnings.warn(
+        f"method={method!r} is explicit and the completion is stiff on this interval (fastest rate x length = "
+        f"{stiffness:.3g}): stability alone needs about {evaluations:.2g} right-hand side evaluations, roughly "
+        f"{seconds:.2g} s here. Use method='auto' (Radau for a stiff completion), 'Radau' or 'BDF', or 'expm' for "
+        "constant coefficients, or a smaller lam.",
+        StiffnessWarning, stacklevel=3,
+    )
+
+
+def _recording(method, solvers):
+    """`method` as an OdeSolver class that appends each instance to `solvers` (to know how far a failed run got)."""
+    import scipy.integrate
+
+    base = getattr(scipy.integrate, method, None) if method in ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA") \
+        else method
+    if not (isinstance(base, type) and issubclass(base, OdeSolver)):
+        return method  # solve_ivp reports an unknown name
+
+    def __init__(self, *args, **kwargs):
+        solvers.append(self)
+        base.__init__(self, *args, **kwargs)
+
+    return type(base.__name__, (base,), {"__init__": __init__})
+
+
+def _partial_run(fun, t0, t_ok, x0, method, t_eval, options):
+    """``(t, x, nfev)`` of the run up to the last accepted step `t_ok` before a failed evaluation."""
+    if t_eval is not None:
+        t_eval = np.asarray(t_eval, dtype=float)
+        t_eval = t_eval[np.sign(t_ok - t0) * (t_eval - t_ok) <= 0] if t_ok != t0 else t_eval[t_eval == t0]
+    if t_ok == t0:
+        keep = t_eval is None or t_eval.size > 0
+        return (np.array([t0]), x0[:, None].copy(), 0) if keep else (np.zeros(0), np.zeros((x0.size, 0)), 0)
+    options.pop("dense_output", None)
+    options.pop("events", None)
+    try:
+        sol = solve_ivp(fun, (t0, t_ok), x0, method=method, t_eval=t_eval, **options)
+    except (_ForcingFailed, ValueError):  # fails again (a solver probing past its bound, a first_step too long)
+        return np.array([t0]), x0[:, None].copy(), 0
+    return sol.t, sol.y, sol.nfev
 
 
 def solve_dae(dae, t_span, x0, *, completion="alternative", lam=None, k=None, rcond=None, **options):

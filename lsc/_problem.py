@@ -3,10 +3,13 @@
 import numpy as np
 
 from ._exceptions import DimensionError
-from ._timefunc import _as_float_array, _contains_sympy, _shape_str, as_time_function
+from ._timefunc import ConstantFunction, TimeFunction, _as_float_array, _contains_sympy, _shape_str, as_time_function
 from ._validate import check_state
 
-__all__ = ["LinearDAE"]
+__all__ = ["LinearDAE", "check_dae"]
+
+# Rows of [A B] whose norms spread by more than this factor are equilibrated (see `row_equilibration`).
+ROW_SPREAD = 2.0**10
 
 
 class LinearDAE:
@@ -111,6 +114,74 @@ class LinearDAE:
         if self.f is not None:
             r = r - self.f(t)
         return r
+
+
+def check_dae(dae):
+    """`dae` itself when it is a LinearDAE; a TypeError naming what was found otherwise."""
+    if not isinstance(dae, LinearDAE):
+        raise TypeError(f"`dae` must be an lsc.LinearDAE; found {type(dae).__name__}.")
+    return dae
+
+
+def varying_view(dae):
+    """A copy of `dae` with ``is_constant = False``, sharing its coefficients.
+
+    A completion whose rate ``lam(t)`` varies changes with time even when
+    ``A`` and ``B`` do not; its `dae` is this copy, so everything that
+    integrates or analyses a completion evaluates it where it varies.
+    """
+    view = object.__new__(LinearDAE)
+    view.__dict__.update(dae.__dict__)
+    view.is_constant = False
+    return view
+
+
+def row_equilibration(dae, t=0.0):
+    """Row scales ``r`` (powers of two) that give the rows of ``[A(t), B(t)]`` norms in [0.7, 1.4], or None.
+
+    None when the nonzero row norms already lie within a factor `ROW_SPREAD`
+    of one another: the DAE is then used as given. Multiplying equation i by
+    ``r[i]`` changes neither the solutions nor any rank of the derivative
+    array (each block row is multiplied by ``diag(r)``), but it decides
+    whether the ranks can be *told* in floating point: rows spread over
+    1e-6..1e6 put the array's smallest nonzero singular values below the
+    rank threshold. Powers of two scale without rounding.
+    """
+    M = np.hstack([dae.A(t), dae.B(t)])
+    norms = np.linalg.norm(M, axis=1)
+    nonzero = norms > 0.0
+    if not np.any(nonzero) or norms[nonzero].max() <= ROW_SPREAD * norms[nonzero].min():
+        return None
+    r = np.ones(dae.n)
+    r[nonzero] = 2.0 ** -np.round(np.log2(norms[nonzero]))
+    return r
+
+
+class _RowScaled(TimeFunction):
+    """``diag(r) h(t)`` for a coefficient ``h`` (rows scaled, derivatives too: r is constant)."""
+
+    def __init__(self, h, r):
+        super().__init__(h.name, h.shape)
+        self.h = h
+        self.r = r.reshape((-1,) + (1,) * (len(h.shape) - 1))
+
+    def jet(self, t, order):
+        return self.r * self.h.jet(t, order)
+
+
+def row_scaled(dae, r):
+    """The DAE ``diag(r) (A x' + B x - f) = 0``: the same solutions, equations scaled by `r`."""
+    scaled = object.__new__(LinearDAE)
+    scaled.__dict__.update(dae.__dict__)
+    for name in ("A", "B", "f"):
+        h = getattr(dae, name)
+        if h is None:
+            continue
+        if isinstance(h, ConstantFunction):
+            setattr(scaled, name, ConstantFunction(h.name, h.value * r.reshape((-1,) + (1,) * (h.value.ndim - 1))))
+        else:
+            setattr(scaled, name, _RowScaled(h, r))
+    return scaled
 
 
 def _infer_n(value, name):

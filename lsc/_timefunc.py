@@ -19,6 +19,12 @@ def _shape_str(shape):
     return "(" + ", ".join(str(s) for s in shape) + (",)" if len(shape) == 1 else ")")
 
 
+def _brief(obj):
+    """A short repr of a value for a message (type and at most 60 characters)."""
+    text = repr(obj)
+    return f"{type(obj).__name__} {text[:57] + '...' if len(text) > 60 else text}"
+
+
 def _is_sympy(obj):
     # Imported lazily: sympy costs ~0.3 s to import and is only needed for
     # symbolic input.
@@ -96,9 +102,17 @@ class SympyFunction(TimeFunction):
         fn = self._compiled.get(order)
         if fn is None:
             fn = self._compile(order)
-        out = fn(float(t))
+        try:
+            out = fn(float(t))
+        except (ArithmeticError, ValueError, TypeError) as exc:
+            # math.sqrt(-1), 1/0, log(0), or a complex value from a negative base: the
+            # expression is outside its domain at t, which math reports without naming either.
+            raise ValueError(
+                f"`{self.name}` cannot be evaluated at t={float(t)!r} (derivatives of order 0..{order}): "
+                f"{type(exc).__name__}: {exc}. Is t outside the expression's domain?"
+            ) from None
         if not np.all(np.isfinite(out)):
-            raise ValueError(f"`{self.name}` is not finite at t={t!r}: derivatives of order 0..{order} are {out.tolist()}.")
+            raise ValueError(f"`{self.name}` is not finite at t={float(t)!r}: derivatives of order 0..{order} are {out.tolist()}.")
         return out
 
 
@@ -116,25 +130,39 @@ class CallableFunction(TimeFunction):
     def jet(self, t, order):
         if hasattr(self.fn, "jet"):
             # The callable computes all derivatives at once (e.g. by jets).
-            out = np.asarray(self.fn.jet(t, order), dtype=float)
+            raw = self.fn.jet(t, order)
+            try:
+                out = np.asarray(raw, dtype=float)
+            except (TypeError, ValueError):
+                raise TypeError(
+                    f"`{self.name}.jet(t, order)` must return real numbers of shape "
+                    f"{_shape_str((order + 1,) + self.shape)}; got {_brief(raw)} at t={float(t)!r}."
+                ) from None
             if out.shape != (order + 1,) + self.shape:
                 raise DimensionError(
                     f"`{self.name}.jet(t, order)` must return shape {_shape_str((order + 1,) + self.shape)}: "
-                    f"got {_shape_str(out.shape)} at t={t!r}."
+                    f"got {_shape_str(out.shape)} at t={float(t)!r}."
                 )
             if not np.all(np.isfinite(out)):
-                raise ValueError(f"`{self.name}.jet(t, order)` returned non-finite values at t={t!r}.")
+                raise ValueError(f"`{self.name}.jet(t, order)` returned non-finite values at t={float(t)!r}.")
             return out
         out = np.empty((order + 1,) + self.shape)
         for d in range(order + 1):
-            value = np.asarray(self.fn(t, d), dtype=float)
+            raw = self.fn(t, d)
+            try:
+                value = np.asarray(raw, dtype=float)
+            except (TypeError, ValueError):
+                raise TypeError(
+                    f"`{self.name}(t, d)` must return real numbers of shape {_shape_str(self.shape)}; "
+                    f"got {_brief(raw)} at t={float(t)!r}, d={d}."
+                ) from None
             if value.shape != self.shape:
                 raise DimensionError(
                     f"`{self.name}(t, d)` must return shape {_shape_str(self.shape)}: "
-                    f"expected {_shape_str(self.shape)}, got {_shape_str(value.shape)} at t={t!r}, d={d}."
+                    f"expected {_shape_str(self.shape)}, got {_shape_str(value.shape)} at t={float(t)!r}, d={d}."
                 )
             if not np.all(np.isfinite(value)):
-                raise ValueError(f"`{self.name}(t, d)` returned non-finite values at t={t!r}, d={d}: {value.tolist()}.")
+                raise ValueError(f"`{self.name}(t, d)` returned non-finite values at t={float(t)!r}, d={d}: {value.tolist()}.")
             out[d] = value
         return out
 
@@ -184,6 +212,14 @@ def _sympy_matrix(name, obj, shape):
     others = sorted(str(s) for s in symbols if s.name != "t")
     if others:
         raise ValueError(f"`{name}` may depend on the symbol t only; found other symbols {others}.")
+    if len(symbols) > 1:
+        # Symbol("t", real=True) and Symbol("t") are different symbols with one name: only
+        # one of them would be the time, the other a silent constant-looking unknown.
+        found = ", ".join(sorted(sympy.srepr(s) for s in symbols))
+        raise ValueError(
+            f"`{name}` contains {len(symbols)} different sympy symbols named t ({found}); "
+            "use one Symbol('t') (with the same assumptions) everywhere in it."
+        )
     t_symbol = next(iter(symbols)) if symbols else sympy.Symbol("t")
     return mat, t_symbol
 

@@ -11,15 +11,7 @@ import numpy as np
 from ._exceptions import DimensionError
 from ._timefunc import _shape_str
 
-__all__ = ["check_dae", "check_k", "check_lam_value", "check_time", "check_t_span", "check_state"]
-
-
-def check_dae(dae):
-    from ._problem import LinearDAE
-
-    if not isinstance(dae, LinearDAE):
-        raise TypeError(f"`dae` must be an lsc.LinearDAE; found {type(dae).__name__}.")
-    return dae
+__all__ = ["check_k", "check_lam_value", "check_time", "check_t_span", "check_state"]
 
 
 def check_k(k, name="k"):

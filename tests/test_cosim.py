@@ -310,3 +310,109 @@ def test_progress_bar_appears_only_after_the_delay(capsys):
     shown.close()
     err = capsys.readouterr().err
     assert "50/100 steps" in err and " 50.0%" in err and err.endswith("\n")
+
+
+# -- the recommended configuration: C plant (output derivatives) -> native DAE FMU (input derivatives)
+
+@pytest.fixture(scope="module")
+def native_loops(tmp_path_factory):
+    import scenarios
+
+    base = tmp_path_factory.mktemp("native_loops")
+    return {g: scenarios.build_loop_system(base / str(g), g=g, plant="c", dae="native", name="loop_native")
+            for g in (0.2, 1.1)}
+
+
+def _native_loop_errors(ssp, g, p, lam_h, steps=(0.02, 0.01), stop=1.0):
+    """End-time errors of w and x2 for each H, the DAE FMU's lambda = lam_h / H (or 10)."""
+    out, _ = run(f"""
+res = []
+for H in {list(steps)!r}:
+    lam = {lam_h!r} / H if {lam_h!r} else 10.0
+    r = cosimulate({str(ssp)!r}, {stop!r}, H, algorithm="jacobi", extrapolation={p}, output=["plant.w", "dae.x2"],
+                   start_values={{"dae.lambda": lam}})
+    res.append([r.success, r["time"][-1], r["plant.w"][-1], r["dae.x2"][-1]])
+print(json.dumps({{"res": res}}))
+""")
+    errs = []
+    for success, t, w, x2 in out["res"]:
+        we, _, x2e = scenarios_reference(t, g)
+        errs.append(float(max(abs(w - we[0]), abs(x2 - x2e[0]))) if success else np.inf)
+    return errs
+
+
+def scenarios_reference(t, g):
+    import scenarios
+
+    return scenarios.loop_reference(np.array([t]), g)
+
+
+@pytest.mark.parametrize("p", [1, 2])
+def test_native_dae_fmu_in_the_loop_converges_at_order_p_with_lambda_h_fixed(native_loops, p):
+    """g = 0.2 < 1, derivatives passed, the native DAE FMU's lambda = 2 / H: order p."""
+    errs = _native_loop_errors(native_loops[0.2], 0.2, p, 2.0)
+    assert abs(np.log2(errs[0] / errs[1]) - p) < 0.25, errs
+    assert errs[1] < (5e-3 if p == 1 else 2e-4), errs
+
+
+def test_native_dae_fmu_with_fixed_lambda_loses_one_order(native_loops):
+    """lambda fixed (10) while H shrinks: x2 lags -w' by O(w''/lambda) with p = 1: no convergence."""
+    errs = _native_loop_errors(native_loops[0.2], 0.2, 1, None)
+    assert abs(np.log2(errs[0] / errs[1])) < 0.3 and errs[1] > 5e-3, errs
+
+
+def test_native_dae_fmu_in_the_loop_diverges_beyond_unit_gain(native_loops):
+    """g = 1.1 > 1, p = 2: the derivative sweeps (contraction factor g) blow up at every H."""
+    errs = _native_loop_errors(native_loops[1.1], 1.1, 2, 2.0, stop=0.4)
+    assert all(e > 1.0 for e in errs), errs
+
+
+@pytest.fixture(scope="module")
+def native_path_ssp(tmp_path_factory):
+    import scenarios
+
+    return scenarios.build_path_system(tmp_path_factory.mktemp("native_path"), method="standard", target="native")
+
+
+def test_native_fmu_log_is_formatted_and_forwarded(native_path_ssp):
+    """A native FMU logs through the variadic FMI logger ("%s", text): the master formats it."""
+    out, proc = run(f"""
+import logging
+logging.basicConfig(level=logging.WARNING)
+r = cosimulate({str(native_path_ssp)!r}, 0.2, 0.02, algorithm="jacobi", output=["plant.x"],
+               start_values={{"dae.y_0": float("nan")}})
+print(json.dumps({{"success": bool(r.success), "message": r.message}}))
+""")
+    assert not out["success"] and "dae" in out["message"]
+    assert "not finite" in out["message"] and "%s" not in out["message"], out["message"]
+    assert "[dae] %s" not in proc.stderr
+
+
+def test_native_path_scenario_with_derivatives_of_some_outputs_only(native_path_ssp):
+    """The native DAE FMU gives derivatives of its states, not of F (it depends on inputs): the master
+    passes what exists and estimates the rest; Gauss-Seidel, p = 2 converges at order 3 as with pythonfmu."""
+    import scenarios
+
+    out, _ = run(f"""
+res = []
+for H in (0.04, 0.02):
+    r = cosimulate({str(native_path_ssp)!r}, 1.0, H, algorithm="gauss-seidel", extrapolation=2,
+                   output=["plant.x", "plant.v"])
+    res.append([bool(r.success), r.message, r["time"].tolist(), r["plant.x"].tolist(), r["plant.v"].tolist()])
+print(json.dumps({{"res": res}}))
+""")
+    errs = []
+    for success, message, t, x, v in out["res"]:
+        assert success, message
+        ref = scenarios.path_reference(np.array(t))
+        errs.append(max(np.abs(np.array(x) - ref[3]).max(), np.abs(np.array(v) - ref[4]).max()))
+    assert abs(np.log2(errs[0] / errs[1]) - 3) < 0.3 and errs[1] < 1e-4, errs
+
+
+def test_native_dae_fmu_beyond_unit_gain_p1_stable_iff_lambda_h_below_bound(native_loops):
+    """g = 1.1, p = 1: the root e^{-lam H} (1 + g) - g is inside the unit circle iff
+    lam H < ln((g + 1)/(g - 1)) = 3.04: lam H = 2 converges at order 1, lam H = 4 diverges."""
+    inside = _native_loop_errors(native_loops[1.1], 1.1, 1, 2.0, stop=2.0)
+    outside = _native_loop_errors(native_loops[1.1], 1.1, 1, 4.0, stop=2.0)
+    assert abs(np.log2(inside[0] / inside[1]) - 1) < 0.2 and inside[1] < 5e-3, inside
+    assert outside[1] > 10 * outside[0] and outside[1] > 1.0, outside

@@ -28,8 +28,8 @@ def run(scenario):
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def library(completion, t_span, x0, t_eval, lam_switch=None):
-    res = lsc.solve_completion(completion, t_span, x0, t_eval=t_eval, method="DOP853", rtol=1e-12, atol=1e-14)
+def library(completion, t_span, x0, t_eval, lam_switch=None, method="DOP853"):
+    res = lsc.solve_completion(completion, t_span, x0, t_eval=t_eval, method=method, rtol=1e-12, atol=1e-14)
     assert res.success
     return res
 
@@ -638,7 +638,7 @@ def test_model_named_like_a_module_leaves_the_callers_modules_alone_and_runs(tmp
 
 @pytest.mark.parametrize("name", ["class", "None", "_lsc_model", "1x", "a-b"])
 def test_model_name_that_cannot_be_a_class_is_refused(tmp_path, name):
-    with pytest.raises(ValueError, match="`model_name` must"):
+    with pytest.raises(ValueError, match=f"model_name: {name!r} is (not a valid identifier|reserved)"):
         build_fmu(_lag_spec("Lag", 2.0), tmp_path, model_name=name)
     assert list(tmp_path.iterdir()) == []
 
@@ -675,7 +675,7 @@ def test_stiff_completion_switches_to_an_implicit_solver_and_says_so(path_fmu):
     assert sum("doStep integrates with Radau instead of RK45" in m for m in r["logs"]) == 1, r["logs"]
     X = np.array([r["values"][n] for n in ("y", "v", "u")])
     ref = library(lsc.complete(p.dae, "alternative", lam=1e8), (0.0, 0.03), np.array([0.0, 2.5, 1.25]),
-                  np.array(r["time"]))
+                  np.array(r["time"]), method="Radau")  # an explicit reference would be stability-limited too
     np.testing.assert_allclose(X, ref.x, rtol=1e-6, atol=1e-7)
 
 

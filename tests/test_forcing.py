@@ -51,7 +51,7 @@ def test_compiled_forcing_reports_non_finite_values():
     dae = LinearDAE(np.eye(2, k=1), np.eye(2), [0, 1 / (1 - t)])
     c = complete(dae, "alternative", lam=1.0)
     c.rhs(0.5, np.zeros(2))
-    with pytest.raises(ValueError, match="not finite at t=1.0"):
+    with pytest.raises(ValueError, match="cannot be evaluated at t=1.0.*ZeroDivisionError"):
         c.rhs(1.0, np.zeros(2))
     with pytest.raises(ValueError, match="not finite"):
         c._forcing.jets(np.array([0.0, 1.0]), 2)

@@ -6,6 +6,7 @@ pytest process (a pythonfmu FMU loaded here would run this process's lsc).
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -270,26 +271,74 @@ def test_parquet_output(tmp_path):
     assert resumed["run_time"].tolist() == df["run_time"].tolist()  # read back, not recomputed
 
 
-def test_ssp_target_runs_through_cosimulate(tmp_path, monkeypatch):
-    """The dispatch: an SSP target calls fmu_build.cosimulate(scenario, t_span=..., **point)."""
-    import types
-
+def test_ssp_target_maps_the_point_onto_cosimulate(tmp_path, monkeypatch):
+    """An SSP target calls cosimulate(scenario, stop, step, start_time=..., start_values=..., output=...)."""
     import fmu_build
+    from fmu_build import _study_runs
 
     scenario = tmp_path / "scenario.ssp"
     scenario.write_bytes(b"")
+    layout = (["dae.x2", "plant.w"], ["dae.constraint_residual"], ["dae"])
+    monkeypatch.setattr(_study_runs, "ssp_layout", lambda s: layout)
     calls = []
 
-    def cosimulate(path, t_span, lam):
-        calls.append((path, t_span, lam))
-        t = np.linspace(*t_span, 11)
-        return types.SimpleNamespace(t=t, x=np.vstack([np.sin(t), np.exp(-lam * t)]), residual=np.exp(-lam * t),
-                                     success=True, message="done")
+    def cosimulate(system, stop_time, step_size, *, start_time=0.0, start_values=None, output=None, progress=None,
+                   algorithm="gauss-seidel", extrapolation=0):
+        calls.append((system, stop_time, step_size, start_time, start_values, output, algorithm, extrapolation))
+        t = np.arange(start_time, stop_time + step_size / 2, step_size)
+        lam = start_values["dae.lambda"]
+        result = np.zeros(t.size, dtype=[("time", float)] + [(o, float) for o in output]).view(fmu_build.cosim.CosimResult)
+        result["time"], result["dae.x2"], result["plant.w"] = t, np.sin(t), np.exp(-lam * t)
+        result["dae.constraint_residual"] = -np.exp(-lam * t)
+        result.success, result.message = True, "done"
+        return result
 
     monkeypatch.setattr(fmu_build, "cosimulate", cosimulate, raising=False)
     exact = lambda t: np.vstack([np.sin(t), np.zeros_like(t)])  # noqa: E731
-    df = sweep(scenario, {"lam": [1.0, 4.0]}, reference=exact, t_span=(0.0, 1.0), scheduler="serial", progress=False)
-    assert calls == [(os.fspath(scenario), (0.0, 1.0), 1.0), (os.fspath(scenario), (0.0, 1.0), 4.0)]
+    df = sweep(scenario, {"lam": [1.0, 4.0], "step": [0.1], "extrapolation": [2], "plant.w_0": [0.5]}, reference=exact,
+               t_span=(0.0, 1.0), scheduler="serial", progress=False)
+    assert [c[1:4] for c in calls] == [(1.0, 0.1, 0.0)] * 2
+    assert calls[0][4] == {"dae.lambda": 1.0, "plant.w_0": 0.5} and calls[1][4]["dae.lambda"] == 4.0
+    assert calls[0][5] == ["dae.x2", "plant.w", "dae.constraint_residual"] and calls[0][7] == 2
     np.testing.assert_allclose(df["error"], [1.0, 1.0])  # exp(0) at t = 0
-    np.testing.assert_allclose(df["residual_final"], np.exp([-1.0, -4.0]))
+    np.testing.assert_allclose(df["residual_final"], np.exp([-1.0, -4.0]))  # the norm: sign dropped
     assert df["steps"].tolist() == [10, 10] and df["message"].tolist() == ["done", "done"]
+    bad = sweep(scenario, {"lam": [1.0], "step": [0.1], "gain": [2.0]}, reference=exact, t_span=(0.0, 1.0),
+                scheduler="serial", progress=False)
+    assert not bad["success"][0] and "found 'gain'" in bad["message"][0]
+    no_step = sweep(scenario, {"lam": [1.0]}, reference=exact, t_span=(0.0, 1.0), scheduler="serial", progress=False)
+    assert not no_step["success"][0] and "needs `step`" in no_step["message"][0]
+
+
+@pytest.mark.skipif(not study._cosimulate_available() or shutil.which("gcc") is None,
+                    reason="needs fmu_build.cosimulate and gcc (the plant is compiled)")
+def test_ssp_study_against_cosimulate_runs(tmp_path):
+    """A study of the differentiated-input loop (C plant -> native DAE FMU) equals direct cosimulate runs."""
+    plants = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples", "plants")
+    code = textwrap.dedent(f"""
+        import json, sys
+        import numpy as np
+        sys.path.insert(0, {plants!r})
+        import scenarios
+        from fmu_build import sweep
+        from fmu_build.cosim import cosimulate
+        ssp = scenarios.build_loop_system({str(tmp_path)!r}, g=0.2, plant="c", dae="native", name="loop")
+        ref = lambda t: np.vstack(scenarios.loop_reference(t, 0.2)[::-2])  # sorted outputs: dae.x2, plant.w
+        df = sweep(ssp, {{"step": [0.02, 0.01], "lam": [100.0], "extrapolation": [1, 2]}}, reference=ref,
+                   t_span=(0.0, 1.0), scheduler="serial", progress=False)
+        direct = []
+        for _, row in df.iterrows():
+            r = cosimulate(ssp, 1.0, row["step"], extrapolation=int(row["extrapolation"]),
+                           start_values={{"dae.lambda": 100.0}}, output=["dae.x2", "plant.w"], progress=False)
+            direct.append(float(np.max(np.abs(np.vstack([r["dae.x2"], r["plant.w"]]) - ref(r["time"])))))
+        print(json.dumps({{"error": df["error"].tolist(), "direct": direct, "steps": df["steps"].tolist(),
+                          "success": df["success"].tolist(), "residual": df["residual_final"].tolist()}}))
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], timeout=300, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert all(out["success"]) and out["steps"] == [50, 50, 100, 100]
+    np.testing.assert_allclose(out["error"], out["direct"], rtol=1e-12)
+    e = dict(zip([(0.02, 1), (0.02, 2), (0.01, 1), (0.01, 2)], out["error"]))
+    assert e[(0.01, 2)] < e[(0.02, 2)] / 2 and e[(0.01, 2)] < 1e-3, e  # lambda H = 1 .. 2: order 2
+    assert all(np.isfinite(out["residual"]))

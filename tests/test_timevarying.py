@@ -138,9 +138,11 @@ def _decay_ratios(p, lam, lam_integral, method):
 
 
 @pytest.mark.parametrize("name, method", [
-    ("example1", "DOP853"), ("example3", "DOP853"), ("stiff_index1", "Radau"), ("rotating3", "DOP853"), ("rotating4", "DOP853"),
+    ("example1", "DOP853"), ("example3", "DOP853"), ("example4", "DOP853"), ("example5", "DOP853"),
+    ("stiff_index1", "Radau"), ("rotating3", "DOP853"), ("rotating4", "DOP853"),
 ])
 def test_alternative_residual_decays_like_exp_minus_integral(name, method):
+    assert name in TV_PROBLEMS
     p = TV_PROBLEMS[name]()
     ratio, expected = _decay_ratios(p, 1.0, lambda s: s, method)
     np.testing.assert_allclose(ratio, expected, rtol=1e-6)
@@ -222,9 +224,9 @@ def test_lam_not_positive_on_interval():
     p = gallery.thesis_example3()
     with pytest.raises(ValueError, match=r"`lam` must be positive .* lam\(2\.0\d*\) = "):
         complete(p.dae, "alternative", lam=1 - t / 2, t_span=(0.0, 3.0))
-    c = complete(p.dae, "alternative", lam=1 - t / 2)  # checked at t = 0 only
-    res = solve_completion(c, (0.0, 3.0), p.x0)
-    assert not res.success and "`lam` must be positive" in res.message
+    c = complete(p.dae, "alternative", lam=1 - t / 2)  # checked at t = 0 only: the interval is not known yet
+    with pytest.raises(ValueError, match=r"`lam` must be positive .* lam\(2\.0\d*\) = "):
+        solve_completion(c, (0.0, 3.0), p.x0)  # refused before the run, which knows its interval
 
 
 def test_evaluations_at_one_time_share_one_factorization(monkeypatch):
@@ -263,3 +265,9 @@ def test_given_k_is_checked_over_the_interval():
     for s in (-0.6, 0.0, 0.9):
         np.testing.assert_allclose(c3.matrices(s)[0], c2.matrices(s)[0], rtol=1e-10, atol=1e-10)
         np.testing.assert_allclose(c3.matrices(s)[1], c2.matrices(s)[1], rtol=1e-10, atol=1e-10)
+
+
+def test_residual_decay_covers_every_time_varying_problem():
+    marks = test_alternative_residual_decays_like_exp_minus_integral.pytestmark
+    names = {args[0] for m in marks if m.name == "parametrize" for args in m.args[1]}
+    assert names == set(TV_PROBLEMS)

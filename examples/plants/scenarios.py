@@ -22,12 +22,13 @@ MP, CP, KP_PLANT = 1.2, 0.3, 2.5
 X0_PLANT = (0.1, 2.5)
 
 
-def build_path_system(dest, method="standard", lam=10.0, name="path"):
-    """``dest/name.ssp`` for scenario 1 (and the FMUs beside it)."""
+def build_path_system(dest, method="standard", lam=10.0, name="path", target="pythonfmu"):
+    """``dest/name.ssp`` for scenario 1 (and the FMUs beside it); ``target`` of the DAE FMU."""
     from fmu_build import build_fmu
 
     dest = Path(dest)
-    dae = build_fmu(SSP_DIR / "path_control.toml", dest / "fmus", method=method, lam=lam)
+    dae = build_fmu(SSP_DIR / "path_control.toml", dest / "fmus", method=method, lam=lam, target=target,
+                    fix_parameters=target == "native")
     plant = plants.build_linear_plant(dest / "fmus", "MSD", [[0.0, 1.0], [-KP_PLANT / MP, -CP / MP]], [0.0, 1.0 / MP],
                                       X0_PLANT, output_names=("x", "v"), input_name="F")
     return plants.write_ssp(dest / f"{name}.ssp", name, {"dae": dae, "plant": plant},
@@ -62,14 +63,16 @@ def path_reference(t, Kp=20.0, Kd=6.0, m=1.0, c=0.5, k=2.0):
 def build_loop_system(dest, g=0.2, plant="pythonfmu", method="alternative", lam=10.0, name=None, dae="lsc"):
     """``dest/name.ssp`` for scenario 2 with the pythonfmu lag or the C lag (output derivatives).
 
-    ``dae="lsc"``: our pythonfmu DAE FMU (values only); ``dae="exact"``: the C follower that
-    receives input derivatives (canInterpolateInputs), standing for a DAE FMU that does.
+    ``dae="lsc"``: our pythonfmu DAE FMU (values only); ``dae="native"``: our native C DAE FMU
+    (``build_fmu(..., target="native")``: receives input derivatives, canInterpolateInputs);
+    ``dae="exact"``: a hand-written C follower x1 = w, x2 = -w' (exact, for comparison).
     """
     from fmu_build import build_fmu
 
     dest = Path(dest)
-    if dae == "lsc":
-        dae = build_fmu(SSP_DIR / "follower.toml", dest / "fmus", method=method, lam=lam)
+    if dae in ("lsc", "native"):
+        dae = build_fmu(SSP_DIR / "follower.toml", dest / "fmus", method=method, lam=lam,
+                        target="native" if dae == "native" else "pythonfmu")
     else:
         dae = plants.build_linear_plant(dest / "fmus", "ExactFollower", [[0.0, 0.0], [0.0, 0.0]], [0.0, 0.0],
                                         (1.0, 1.0 / (1.0 + g)), output_names=("x1", "x2"), input_name="w",
@@ -92,14 +95,15 @@ def loop_reference(t, g):
     return w, w, w / (1.0 + g)
 
 
-def build_damper_loop(dest, plant_x0=(1.0, 0.0), name="damper_loop", method="alternative", lam=10.0):
+def build_damper_loop(dest, plant_x0=(1.0, 0.0), name="damper_loop", method="alternative", lam=10.0,
+                      target="pythonfmu"):
     """A second loop through a differentiated input: a C mass-spring-damper whose position x
     feeds the Follower (x1 = x, x2 = -x'); the flow x2 goes back as the force: m x'' + c x' + k x = x2.
     Here x' does not depend on the force directly (x has relative degree 2), unlike scenario 2."""
     from fmu_build import build_fmu
 
     dest = Path(dest)
-    dae = build_fmu(SSP_DIR / "follower.toml", dest / "fmus", method=method, lam=lam)
+    dae = build_fmu(SSP_DIR / "follower.toml", dest / "fmus", method=method, lam=lam, target=target)
     plant = plants.build_linear_plant(dest / "fmus", "MSD", [[0.0, 1.0], [-KP_PLANT / MP, -CP / MP]], [0.0, 1.0 / MP],
                                       plant_x0, output_names=("x", "v"), input_name="F")
     return plants.write_ssp(dest / f"{name}.ssp", name, {"dae": dae, "plant": plant},

@@ -16,6 +16,7 @@
  *   all phi_j from one exponential of the block matrix [[Gh, I, 0..], [0, 0, I, ..], ..].
  */
 #include <float.h>
+#include <stddef.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -29,11 +30,14 @@
 #include "lsc_linalg.h"
 
 #define NXJ (NX * NJ)            /* columns of W */
-#define MB (NX * (NQ + 2))       /* order of the block matrix */
+#define MB (NX * (NQ + 4))       /* order of the block matrix: phi_0 .. phi_(NQ+3) */
 #define NUD (NF)                 /* length of an input jet: u, u', ..., u^(NF-1) */
 #define HN (UDEG + 1)            /* input history points */
 #define STEP_RTOL 1e-10          /* step sizes this close share one set of step matrices */
-#define STATE_MAGIC 0x4c534331u  /* "LSC1" */
+#define STATE_MAGIC 0x4c534332u  /* "LSC2" */
+#define STEP_TOL 1e-11            /* default bound of a sub-step's error estimate, relative to 1 + |x| */
+#define MAX_LEVEL 20              /* at most 2^20 sub-steps in one communication step */
+#define TIME_ULPS 16.0           /* a communication point may differ from the FMU time by this many ulps */
 
 typedef enum {
     StartAndEnd = 1 << 0, Instantiated = 1 << 1, InitializationMode = 1 << 2, EventMode = 1 << 3,
@@ -62,8 +66,11 @@ typedef struct {
     int hist_n;
     int project_initial;
     int invalid[NR];             /* a value was rejected: steps are discarded until a valid one is set */
-    double t_stop;
+    int type;                    /* fmi2CoSimulation or fmi2ModelExchange: a state belongs to one interface */
+    double tol;                  /* bound of a sub-step's error estimate relative to 1 + |x| */
+    double t_stop;               /* INFINITY unless a stop time was defined */
     int stop_defined;
+    unsigned int check;          /* checksum of a serialized state (0 in memory) */
 } State;
 
 typedef struct {
@@ -76,17 +83,20 @@ typedef struct {
     double lam_gw;               /* lambda at which G, W were formed (NAN: never) */
     double G[NX * NX];
     double W[NX * NXJ];
-    double cache_h, cache_lam;
-    int cache_valid;
-    double Phi[NX * NX];
-    double F[NX * NX * NF];      /* the forcing terms of one step acting on [f; f'; ...; f^(NF-1)] */
+    /* the matrices of a step h / 2^level, one set per level (a step that needs sub-steps does not
+     * recompute those of the master's step, nor the other way round) */
+    double cache_h[MAX_LEVEL + 1], cache_lam[MAX_LEVEL + 1];
+    int cache_valid[MAX_LEVEL + 1];
+    double Phi[(MAX_LEVEL + 1) * NX * NX];
+    double F[(MAX_LEVEL + 1) * NX * NX * NF];   /* the forcing terms of one step acting on [f; f'; ...; f^(NF-1)] */
+    double Fe[(MAX_LEVEL + 1) * NX * NX * NFE]; /* the next two Taylor terms (error estimate) on [f; ...; f^(NFE-1)] */
     /* work space */
-    double Mb[MB * MB], E[MB * MB], w1[MB * MB], w2[MB * MB], w3[MB * MB];
+    double Mb[MB * MB], E[MB * MB], work[6 * MB * MB];
     int piv[MB];
-    double fj[NF * NX];
-    double uj[A1(NU) * NUD];
+    double fj[NFE * NX];
+    double uj[A1(NU) * NFE];
     double xd[(NQ + 2) * NX];
-    double tmp[NX];
+    double tmp[NX], tmp2[NX];
 } Instance;
 
 /* ---- logging ------------------------------------------------------------ */
@@ -112,6 +122,18 @@ static int allowed(Instance *c, const char *f, int phases) {
     return 1;
 }
 
+/* a function of one interface called on an instance of the other */
+static int wrong_type(Instance *c, const char *f, fmi2Type type) {
+    if (c->type == type) return 0;
+    logmsg(c, fmi2Error, "%s: a %s function, this instance was instantiated for %s", f,
+           type == fmi2ModelExchange ? "Model Exchange" : "Co-Simulation",
+           c->type == fmi2ModelExchange ? "Model Exchange" : "Co-Simulation");
+    return 1;
+}
+
+/* before the end of initialization the states are the start values being set */
+static int before_init(const Instance *c) { return (c->s.phase & (Instantiated | InitializationMode)) != 0; }
+
 static int nullarg(Instance *c, const char *f, const void *p, const char *what) {
     if (p == NULL) {
         logmsg(c, fmi2Error, "%s: argument %s is NULL", f, what);
@@ -135,7 +157,7 @@ static void form_gw(Instance *c) {
     for (i = 0; i < NX * NX; i++) c->G[i] = G0[i] + c->s.lam * G1[i];
     for (i = 0; i < NX * NXJ; i++) c->W[i] = W0[i] + c->s.lam * W1[i];
     c->lam_gw = c->s.lam;
-    c->cache_valid = 0;
+    memset(c->cache_valid, 0, sizeof c->cache_valid);
 }
 
 /* Jet [u, u', ...] of every input at t: the master's derivatives when it set
@@ -144,12 +166,23 @@ static void form_gw(Instance *c) {
 static void input_jets(Instance *c, double t) {
     int i, d, k, m, n = c->s.hist_n;
     for (i = 0; i < NU; i++) {
-        double *uj = c->uj + i * NUD;
+        double *uj = c->uj + i * NFE;
         int given = 0;
         for (d = 1; d < NUD; d++) given |= c->s.ud_set[i * NUD + d];
-        for (d = 0; d < NUD; d++) uj[d] = 0.0;
+        for (d = 0; d < NFE; d++) uj[d] = 0.0;
         if (given) {
-            for (d = 1; d < NUD; d++) uj[d] = c->s.ud_set[i * NUD + d] ? c->s.ud[i * NUD + d] : 0.0;
+            /* the master's Taylor polynomial at the FMU time, shifted to t (a sub-step's start) */
+            const double dt = t - c->s.t;
+            for (d = 0; d < NUD; d++) {
+                double v = 0.0, term = 1.0;
+                for (k = d; k < NUD; k++) {
+                    const double coef = k == 0 ? c->s.u[i] : (c->s.ud_set[i * NUD + k] ? c->s.ud[i * NUD + k] : 0.0);
+                    v += coef * term;
+                    term *= dt / (double)(k - d + 1);
+                }
+                uj[d] = v;
+            }
+            continue;
         } else if (n > 1) {
             /* Newton form through the n newest points (newest first), expanded to a
              * Taylor polynomial at t: coefficient a[d] of (tau - t)^d */
@@ -166,10 +199,10 @@ static void input_jets(Instance *c, double t) {
                     basis[0] = -nodes[k] * basis[0];
                 }
             }
-            for (d = 1; d < n && d < NUD; d++) { fact *= d; uj[d] = a[d] * fact; }
+            for (d = 1; d < n && d < NFE; d++) { fact *= d; uj[d] = a[d] * fact; }
             /* Model Exchange with a host that holds the input since the last recorded point (fmpy
              * does, between communication points): the extrapolated value, not the stale one */
-            if (c->type == fmi2ModelExchange && c->s.u[i] == c->s.hist_u[i]) { uj[0] = a[0]; continue; }
+            if ((c->type == fmi2ModelExchange && c->s.u[i] == c->s.hist_u[i]) || t != c->s.t) { uj[0] = a[0]; continue; }
         }
         uj[0] = c->s.u[i];
     }
@@ -195,7 +228,7 @@ static void record_inputs(Instance *c, double t) {
     if (c->s.hist_n < HN) c->s.hist_n++;
 }
 
-/* f and its derivatives 0..NF-1 at t into c->fj */
+/* f and its derivatives 0..NFE-1 at t into c->fj */
 static void eval_f(Instance *c, double t) {
     input_jets(c, t);
     model_f_jet(t, c->s.p, c->uj, c->fj);
@@ -219,7 +252,7 @@ static void state_derivatives(Instance *c) {
     int d, i, j;
     form_gw(c);
     eval_f(c, c->s.t);
-    memcpy(c->xd, c->s.x, sizeof(double) * NX);
+    memcpy(c->xd, before_init(c) ? c->s.x0 : c->s.x, sizeof(double) * NX);
     for (d = 1; d <= NQ + 1; d++) {
         const double *prev = c->xd + (d - 1) * NX;
         double *cur = c->xd + d * NX;
@@ -232,39 +265,52 @@ static void state_derivatives(Instance *c) {
     }
 }
 
-/* Phi and F for step h at the current lambda; 0 or -1 */
-static int step_matrices(Instance *c, double h) {
+/* Phi, F and Fe for step h at the current lambda into the given arrays; 0 or -1 */
+static int form_step(Instance *c, double h, double *Phi, double *F, double *Fe) {
     int i, j, q, r, l;
-    form_gw(c);
-    if (c->cache_valid && c->cache_lam == c->s.lam && fabs(h - c->cache_h) <= STEP_RTOL * fabs(c->cache_h)) return 0;
     memset(c->Mb, 0, sizeof c->Mb);
     for (i = 0; i < NX; i++)
         for (j = 0; j < NX; j++) c->Mb[i * MB + j] = c->G[i * NX + j] * h;
-    for (q = 1; q < NQ + 2; q++)
-        for (i = 0; i < NX; i++) c->Mb[((q - 1) * NX + i) * MB + q * NX + i] = 1.0;
-    if (lsc_expm(c->E, c->Mb, MB, c->w1, c->w2, c->w3, c->piv) != 0) {
-        c->cache_valid = 0;
-        return -1;
-    }
+    /* h I above the diagonal (as lsc's method='expm'): block (0, j) of the exponential is h^j phi_j(G h) */
+    for (q = 1; q < NQ + 4; q++)
+        for (i = 0; i < NX; i++) c->Mb[((q - 1) * NX + i) * MB + q * NX + i] = h;
+    if (lsc_expm(c->E, c->Mb, MB, c->work, c->piv) != 0) return -1;
     for (i = 0; i < NX; i++)
-        for (j = 0; j < NX; j++) c->Phi[i * NX + j] = c->E[i * MB + j];
-    /* F[:, j*NX + col] = sum over Taylor terms q with j = q + r: h^(q+1) phi_(q+1) W[:, r*NX + col] */
-    memset(c->F, 0, sizeof c->F);
-    for (q = 0; q <= NQ; q++) {
-        const double hq = pow(h, q + 1);
+        for (j = 0; j < NX; j++) Phi[i * NX + j] = c->E[i * MB + j];
+    /* F[:, j*NX + col] = sum over Taylor terms q <= NQ with j = q + r: h^(q+1) phi_(q+1) W[:, r*NX + col];
+     * Fe the same for the terms q = NQ + 1, NQ + 2 the step leaves out */
+    memset(F, 0, sizeof(double) * NX * NX * NF);
+    memset(Fe, 0, sizeof(double) * NX * NX * NFE);
+    for (q = 0; q <= NQ + 2; q++) {
         for (i = 0; i < NX; i++) {
             for (r = 0; r < NJ; r++) {
                 for (j = 0; j < NX; j++) {
                     double v = 0.0;
                     for (l = 0; l < NX; l++) v += c->E[i * MB + (q + 1) * NX + l] * c->W[l * NXJ + r * NX + j];
-                    c->F[i * NX * NF + (q + r) * NX + j] += hq * v;
+                    if (q <= NQ) F[i * NX * NF + (q + r) * NX + j] += v;
+                    else Fe[i * NX * NFE + (q + r) * NX + j] += v;
                 }
             }
         }
     }
-    c->cache_h = h;
-    c->cache_lam = c->s.lam;
-    c->cache_valid = 1;
+    return 0;
+}
+
+/* The matrices for the step h of a level (cached per level); 0 or -1 when not finite */
+static int step_matrices(Instance *c, double h, int level, const double **Phi, const double **F, const double **Fe) {
+    double *ph = c->Phi + level * NX * NX, *f = c->F + level * NX * NX * NF, *fe = c->Fe + level * NX * NX * NFE;
+    double *ch = c->cache_h + level, *cl = c->cache_lam + level;
+    int *ok = c->cache_valid + level;
+    form_gw(c);
+    *Phi = ph; *F = f; *Fe = fe;
+    if (*ok && *cl == c->s.lam && fabs(h - *ch) <= STEP_RTOL * fabs(*ch)) return 0;
+    if (form_step(c, h, ph, f, fe) != 0) {
+        *ok = 0;
+        return -1;
+    }
+    *ch = h;
+    *cl = c->s.lam;
+    *ok = 1;
     return 0;
 }
 
@@ -335,7 +381,13 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                                                  fmuGUID ? fmuGUID : "(null)", INSTANTIATION_TOKEN);
         return NULL;
     }
-    if (fmuType != fmi2CoSimulation && fmuType != fmi2ModelExchange) return NULL;
+    if (fmuType != fmi2CoSimulation && fmuType != fmi2ModelExchange) {
+        if (functions->logger) functions->logger(functions->componentEnvironment, instanceName, fmi2Error, "logStatusError",
+                                                 "fmi2Instantiate: fmuType %d is neither fmi2ModelExchange (%d) nor "
+                                                 "fmi2CoSimulation (%d)", (int)fmuType, (int)fmi2ModelExchange,
+                                                 (int)fmi2CoSimulation);
+        return NULL;
+    }
     c = (Instance *)functions->allocateMemory(1, sizeof(Instance));
     if (c == NULL) return NULL;
     memset(c, 0, sizeof(Instance));
@@ -349,11 +401,14 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     c->s.size = (unsigned int)sizeof(State);
     c->s.token = token_hash();
     c->s.phase = Instantiated;
+    c->s.type = (int)fmuType;
     c->s.lam = LAMBDA_START;
     for (i = 0; i < NPAR; i++) c->s.p[i] = PAR_START[i];
     for (i = 0; i < NX; i++) c->s.x0[i] = c->s.x[i] = X_START[i];
     for (i = 0; i < NU; i++) c->s.u[i] = U_START[i];
     c->s.t = START_TIME;
+    c->s.t_stop = INFINITY;
+    c->s.tol = STEP_TOL;
     c->lam_gw = NAN;
     return c;
 }
@@ -386,17 +441,21 @@ fmi2Status fmi2SetDebugLogging(fmi2Component comp, fmi2Boolean loggingOn, size_t
 fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
     Instance *c = (Instance *)comp;
-    (void)toleranceDefined;
-    (void)tolerance;
     if (!allowed(c, "fmi2SetupExperiment", Instantiated)) return fmi2Error;
+    if (toleranceDefined && !(tolerance > 0.0 && tolerance < 1.0)) {
+        logmsg(c, fmi2Error, "fmi2SetupExperiment: tolerance must be in (0, 1) (found %g)", tolerance);
+        return fmi2Error;
+    }
     if (!isfinite(startTime) || (stopTimeDefined && !(stopTime >= startTime))) {
         logmsg(c, fmi2Error, "fmi2SetupExperiment: startTime must be finite and stopTime >= startTime (found %g, %g)",
                startTime, stopTime);
         return fmi2Error;
     }
     c->s.t = startTime;
-    c->s.stop_defined = stopTimeDefined;
-    c->s.t_stop = stopTime;
+    c->s.stop_defined = stopTimeDefined ? 1 : 0;
+    c->s.t_stop = stopTimeDefined ? stopTime : INFINITY;
+    /* the master's relative tolerance bounds the error estimate of a sub-step (never looser than 1e-6) */
+    c->s.tol = toleranceDefined ? fmin(tolerance, 1e-6) : STEP_TOL;
     return fmi2OK;
 }
 
@@ -457,11 +516,14 @@ fmi2Status fmi2Reset(fmi2Component comp) {
     c->s.size = (unsigned int)sizeof(State);
     c->s.token = token_hash();
     c->s.phase = Instantiated;
+    c->s.type = (int)c->type;
     c->s.lam = LAMBDA_START;
     for (i = 0; i < NPAR; i++) c->s.p[i] = PAR_START[i];
     for (i = 0; i < NX; i++) c->s.x0[i] = c->s.x[i] = X_START[i];
     for (i = 0; i < NU; i++) c->s.u[i] = U_START[i];
     c->s.t = START_TIME;
+    c->s.t_stop = INFINITY;
+    c->s.tol = STEP_TOL;
     return fmi2OK;
 }
 
@@ -502,6 +564,11 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
         if (kind == 0 && !LAMBDA_TUNABLE) {
             logmsg(c, fmi2Error, "fmi2SetReal: lambda is a constant of this FMU (the completion is not affine in lambda, "
                    "so its matrices were computed at build time for this value)");
+            return fmi2Error;
+        }
+        if ((kind == 0 || kind == 1) && (c->s.phase & ContinuousTimeMode)) {
+            logmsg(c, fmi2Error, "fmi2SetReal: value reference %u is a tunable parameter: in Model Exchange it can be "
+                   "changed in Event Mode only, not in Continuous-Time Mode (FMI 2.0)", vr[i]);
             return fmi2Error;
         }
         if ((kind == 2 && !initial) || (kind == 1 && !initial && !PAR_TUNABLE[vr[i] - VR_PAR])) {
@@ -597,15 +664,52 @@ fmi2Status fmi2SetString(fmi2Component comp, const fmi2ValueReference vr[], size
 
 /* ---- FMU state ------------------------------------------------------------- */
 
-static int state_valid(const State *s) {
-    int i;
-    if (s->magic != STATE_MAGIC || s->size != (unsigned int)sizeof(State) || s->token != token_hash()) return 0;
-    if (!(s->phase & (ANY_ALIVE)) || !isfinite(s->t) || !(s->lam > 0.0) || !isfinite(s->lam)) return 0;
+/* The header of a state (magic, size, token) is read first, and nothing else
+ * unless it matches: a state of another lsc FMU has the same header, with its own size
+ * and token, and may be smaller than this one's. */
+static int state_header_ok(const State *s) {
+    return s->magic == STATE_MAGIC && s->size == (unsigned int)sizeof(State) && s->token == token_hash();
+}
+
+static int is_flag(int v) { return v == 0 || v == 1; }
+
+/* every field within its domain; the reason of a refusal in *why */
+static int state_valid(const State *s, int type, const char **why) {
+    int i, k, one_phase = 0;
+    if (!state_header_ok(s)) { *why = "magic number, size or GUID hash differ (another FMU's state?)"; return 0; }
+    if (s->type != type) {
+        *why = type == fmi2ModelExchange ? "it is a Co-Simulation state, this is a Model Exchange instance"
+                                         : "it is a Model Exchange state, this is a Co-Simulation instance";
+        return 0;
+    }
+    for (k = 0; k <= 6; k++) one_phase |= s->phase == (1 << k);
+    *why = "a field is out of its range or not finite";
+    if (!one_phase || !isfinite(s->t) || !(s->lam > 0.0) || !isfinite(s->lam) || !(s->tol > 0.0 && s->tol < 1.0)) return 0;
+    if (!is_flag(s->project_initial) || !is_flag(s->stop_defined) || s->check != 0) return 0;
+    if (isnan(s->t_stop) || (s->stop_defined && !isfinite(s->t_stop)) || (!s->stop_defined && s->t_stop != INFINITY)) return 0;
     if (s->hist_n < 0 || s->hist_n > HN) return 0;
     for (i = 0; i < NX; i++) if (!isfinite(s->x[i]) || !isfinite(s->x0[i])) return 0;
     for (i = 0; i < NPAR; i++) if (!isfinite(s->p[i])) return 0;
     for (i = 0; i < NU; i++) if (!isfinite(s->u[i])) return 0;
+    for (i = 0; i < A1(NU) * NUD; i++) if (!is_flag(s->ud_set[i]) || !isfinite(s->ud[i])) return 0;
+    for (k = 0; k < s->hist_n; k++) {
+        if (!isfinite(s->hist_t[k]) || (k > 0 && !(s->hist_t[k] < s->hist_t[k - 1]))) return 0;
+        for (i = 0; i < NU; i++) if (!isfinite(s->hist_u[k * A1(NU) + i])) return 0;
+    }
+    for (i = 0; i < NR; i++) if (!is_flag(s->invalid[i])) return 0;
     return 1;
+}
+
+/* FNV-1a (64 bit) over the bytes of a serialized state, its check field counted as zero */
+static unsigned int state_checksum(const unsigned char *b) {
+    const size_t at = offsetof(State, check);
+    unsigned long long h = 14695981039346656037ull;
+    size_t i;
+    for (i = 0; i < sizeof(State); i++) {
+        h ^= (i >= at && i < at + sizeof(unsigned int)) ? 0u : b[i];
+        h *= 1099511628211ull;
+    }
+    return (unsigned int)(h ^ (h >> 32));
 }
 
 fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
@@ -614,6 +718,10 @@ fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
     if (!allowed(c, "fmi2GetFMUstate", ANY_ALIVE)) return fmi2Error;
     if (nullarg(c, "fmi2GetFMUstate", FMUstate, "FMUstate")) return fmi2Error;
     s = (State *)*FMUstate;
+    if (s != NULL && !state_header_ok(s)) {
+        logmsg(c, fmi2Error, "fmi2GetFMUstate: *FMUstate is not NULL and not a state of this FMU to overwrite");
+        return fmi2Error;
+    }
     if (s == NULL) {
         s = (State *)c->cb.allocateMemory(1, sizeof(State));
         if (s == NULL) {
@@ -626,15 +734,24 @@ fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
     return fmi2OK;
 }
 
+/* the state behind a handle, or NULL with a logged reason */
+static const State *checked_state(Instance *c, const char *f, fmi2FMUstate FMUstate) {
+    const char *why;
+    if (nullarg(c, f, FMUstate, "FMUstate")) return NULL;
+    if (!state_valid((const State *)FMUstate, (int)c->type, &why)) {
+        logmsg(c, fmi2Error, "%s: not a valid state of this FMU: %s", f, why);
+        return NULL;
+    }
+    return (const State *)FMUstate;
+}
+
 fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate FMUstate) {
     Instance *c = (Instance *)comp;
+    const State *s;
     if (!allowed(c, "fmi2SetFMUstate", ANY_ALIVE)) return fmi2Error;
-    if (nullarg(c, "fmi2SetFMUstate", FMUstate, "FMUstate")) return fmi2Error;
-    if (!state_valid((const State *)FMUstate)) {
-        logmsg(c, fmi2Error, "fmi2SetFMUstate: the state is not a valid state of this FMU");
-        return fmi2Error;
-    }
-    memcpy(&c->s, FMUstate, sizeof(State));
+    s = checked_state(c, "fmi2SetFMUstate", FMUstate);
+    if (s == NULL) return fmi2Error;
+    memcpy(&c->s, s, sizeof(State));
     return fmi2OK;
 }
 
@@ -651,28 +768,35 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component comp, fmi2FMUstate FMUstate,
     Instance *c = (Instance *)comp;
     if (!allowed(c, "fmi2SerializedFMUstateSize", ANY_ALIVE)) return fmi2Error;
     if (nullarg(c, "fmi2SerializedFMUstateSize", size, "size")) return fmi2Error;
-    (void)FMUstate;
+    if (checked_state(c, "fmi2SerializedFMUstateSize", FMUstate) == NULL) return fmi2Error;
     *size = sizeof(State);
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size) {
     Instance *c = (Instance *)comp;
+    State tmp;
+    const State *s;
     if (!allowed(c, "fmi2SerializeFMUstate", ANY_ALIVE)) return fmi2Error;
-    if (nullarg(c, "fmi2SerializeFMUstate", FMUstate, "FMUstate")
-        || nullarg(c, "fmi2SerializeFMUstate", serializedState, "serializedState")) return fmi2Error;
+    s = checked_state(c, "fmi2SerializeFMUstate", FMUstate);
+    if (s == NULL || nullarg(c, "fmi2SerializeFMUstate", serializedState, "serializedState")) return fmi2Error;
     if (size < sizeof(State)) {
         logmsg(c, fmi2Error, "fmi2SerializeFMUstate: size %lu is smaller than %lu", (unsigned long)size,
                (unsigned long)sizeof(State));
         return fmi2Error;
     }
-    memcpy(serializedState, FMUstate, sizeof(State));
+    memcpy(&tmp, s, sizeof(State));
+    tmp.check = 0;
+    tmp.check = state_checksum((const unsigned char *)&tmp);
+    memcpy(serializedState, &tmp, sizeof(State));
     return fmi2OK;
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte serializedState[], size_t size, fmi2FMUstate *FMUstate) {
     Instance *c = (Instance *)comp;
     State tmp;
+    const char *why;
+    unsigned int check;
     if (!allowed(c, "fmi2DeSerializeFMUstate", ANY_ALIVE)) return fmi2Error;
     if (nullarg(c, "fmi2DeSerializeFMUstate", serializedState, "serializedState")
         || nullarg(c, "fmi2DeSerializeFMUstate", FMUstate, "FMUstate")) return fmi2Error;
@@ -681,9 +805,20 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte serialized
                (unsigned long)sizeof(State));
         return fmi2Error;
     }
+    if (*FMUstate != NULL && !state_header_ok((const State *)*FMUstate)) {
+        logmsg(c, fmi2Error, "fmi2DeSerializeFMUstate: *FMUstate is not NULL and not a state of this FMU to overwrite");
+        return fmi2Error;
+    }
     memcpy(&tmp, serializedState, sizeof(State));
-    if (!state_valid(&tmp)) {
-        logmsg(c, fmi2Error, "fmi2DeSerializeFMUstate: the bytes are not a valid state of this FMU");
+    check = tmp.check;
+    if (check != state_checksum((const unsigned char *)&tmp)) {
+        logmsg(c, fmi2Error, "fmi2DeSerializeFMUstate: the bytes are not a valid state of this FMU: checksum mismatch "
+               "(changed after serialization, or serialized elsewhere)");
+        return fmi2Error;
+    }
+    tmp.check = 0;
+    if (!state_valid(&tmp, (int)c->type, &why)) {
+        logmsg(c, fmi2Error, "fmi2DeSerializeFMUstate: not a valid state of this FMU: %s", why);
         return fmi2Error;
     }
     if (*FMUstate == NULL) {
@@ -711,14 +846,15 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component comp, const fmi2ValueRefer
 
 fmi2Status fmi2EnterEventMode(fmi2Component comp) {
     Instance *c = (Instance *)comp;
-    if (!allowed(c, "fmi2EnterEventMode", EventMode | ContinuousTimeMode) || c->type != fmi2ModelExchange) return fmi2Error;
+    if (!allowed(c, "fmi2EnterEventMode", EventMode | ContinuousTimeMode) || wrong_type(c, "fmi2EnterEventMode", fmi2ModelExchange))
+        return fmi2Error;
     c->s.phase = EventMode;
     return fmi2OK;
 }
 
 fmi2Status fmi2NewDiscreteStates(fmi2Component comp, fmi2EventInfo *info) {
     Instance *c = (Instance *)comp;
-    if (!allowed(c, "fmi2NewDiscreteStates", EventMode) || nullarg(c, "fmi2NewDiscreteStates", info, "fmi2eventInfo"))
+    if (!allowed(c, "fmi2NewDiscreteStates", EventMode) || wrong_type(c, "fmi2NewDiscreteStates", fmi2ModelExchange) || nullarg(c, "fmi2NewDiscreteStates", info, "fmi2eventInfo"))
         return fmi2Error;
     info->newDiscreteStatesNeeded = fmi2False;
     info->terminateSimulation = fmi2False;
@@ -731,7 +867,7 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component comp, fmi2EventInfo *info) {
 
 fmi2Status fmi2EnterContinuousTimeMode(fmi2Component comp) {
     Instance *c = (Instance *)comp;
-    if (!allowed(c, "fmi2EnterContinuousTimeMode", EventMode)) return fmi2Error;
+    if (!allowed(c, "fmi2EnterContinuousTimeMode", EventMode) || wrong_type(c, "fmi2EnterContinuousTimeMode", fmi2ModelExchange)) return fmi2Error;
     c->s.phase = ContinuousTimeMode;
     return fmi2OK;
 }
@@ -740,7 +876,7 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetFMUS
                                        fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation) {
     Instance *c = (Instance *)comp;
     (void)noSetFMUStatePriorToCurrentPoint;
-    if (!allowed(c, "fmi2CompletedIntegratorStep", ContinuousTimeMode)) return fmi2Error;
+    if (!allowed(c, "fmi2CompletedIntegratorStep", ContinuousTimeMode) || wrong_type(c, "fmi2CompletedIntegratorStep", fmi2ModelExchange)) return fmi2Error;
     if (nullarg(c, "fmi2CompletedIntegratorStep", enterEventMode, "enterEventMode")
         || nullarg(c, "fmi2CompletedIntegratorStep", terminateSimulation, "terminateSimulation")) return fmi2Error;
     /* the input history for the derivative estimates: points at least the default experiment's step
@@ -758,7 +894,7 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetFMUS
 
 fmi2Status fmi2SetTime(fmi2Component comp, fmi2Real time) {
     Instance *c = (Instance *)comp;
-    if (!allowed(c, "fmi2SetTime", EventMode | ContinuousTimeMode)) return fmi2Error;
+    if (!allowed(c, "fmi2SetTime", EventMode | ContinuousTimeMode) || wrong_type(c, "fmi2SetTime", fmi2ModelExchange)) return fmi2Error;
     if (!isfinite(time)) {
         logmsg(c, fmi2Error, "fmi2SetTime: time %g is not finite", time);
         return fmi2Error;
@@ -770,7 +906,7 @@ fmi2Status fmi2SetTime(fmi2Component comp, fmi2Real time) {
 fmi2Status fmi2SetContinuousStates(fmi2Component comp, const fmi2Real x[], size_t nx) {
     Instance *c = (Instance *)comp;
     size_t i;
-    if (!allowed(c, "fmi2SetContinuousStates", EventMode | ContinuousTimeMode)) return fmi2Error;
+    if (!allowed(c, "fmi2SetContinuousStates", EventMode | ContinuousTimeMode) || wrong_type(c, "fmi2SetContinuousStates", fmi2ModelExchange)) return fmi2Error;
     if (nullarg(c, "fmi2SetContinuousStates", x, "x")) return fmi2Error;
     if (nx != NX) {
         logmsg(c, fmi2Error, "fmi2SetContinuousStates: nx = %lu, expected %d", (unsigned long)nx, NX);
@@ -788,8 +924,9 @@ fmi2Status fmi2SetContinuousStates(fmi2Component comp, const fmi2Real x[], size_
 
 fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real derivatives[], size_t nx) {
     Instance *c = (Instance *)comp;
+    const double *x;
     int i, j;
-    if (!allowed(c, "fmi2GetDerivatives", InitializationMode | EventMode | ContinuousTimeMode | Terminated | Error))
+    if (!allowed(c, "fmi2GetDerivatives", InitializationMode | EventMode | ContinuousTimeMode | Terminated | Error) || wrong_type(c, "fmi2GetDerivatives", fmi2ModelExchange))
         return fmi2Error;
     if (nullarg(c, "fmi2GetDerivatives", derivatives, "derivatives")) return fmi2Error;
     if (nx != NX) {
@@ -798,9 +935,10 @@ fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real derivatives[], size_t
     }
     form_gw(c);
     eval_f(c, c->s.t);
+    x = before_init(c) ? c->s.x0 : c->s.x;
     for (i = 0; i < NX; i++) {
         double v = 0.0;
-        for (j = 0; j < NX; j++) v += c->G[i * NX + j] * c->s.x[j];
+        for (j = 0; j < NX; j++) v += c->G[i * NX + j] * x[j];
         for (j = 0; j < NXJ; j++) v += c->W[i * NXJ + j] * c->fj[j];
         if (!isfinite(v)) {
             logmsg(c, fmi2Error, "fmi2GetDerivatives: non-finite derivative at t = %g", c->s.t);
@@ -814,7 +952,7 @@ fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real derivatives[], size_t
 fmi2Status fmi2GetEventIndicators(fmi2Component comp, fmi2Real eventIndicators[], size_t ni) {
     Instance *c = (Instance *)comp;
     (void)eventIndicators;
-    if (!allowed(c, "fmi2GetEventIndicators", ANY_ALIVE)) return fmi2Error;
+    if (!allowed(c, "fmi2GetEventIndicators", ANY_ALIVE) || wrong_type(c, "fmi2GetEventIndicators", fmi2ModelExchange)) return fmi2Error;
     if (ni != 0) {
         logmsg(c, fmi2Error, "fmi2GetEventIndicators: ni = %lu, this FMU has no event indicators", (unsigned long)ni);
         return fmi2Error;
@@ -824,7 +962,7 @@ fmi2Status fmi2GetEventIndicators(fmi2Component comp, fmi2Real eventIndicators[]
 
 fmi2Status fmi2GetContinuousStates(fmi2Component comp, fmi2Real x[], size_t nx) {
     Instance *c = (Instance *)comp;
-    if (!allowed(c, "fmi2GetContinuousStates", ANY_ALIVE)) return fmi2Error;
+    if (!allowed(c, "fmi2GetContinuousStates", ANY_ALIVE) || wrong_type(c, "fmi2GetContinuousStates", fmi2ModelExchange)) return fmi2Error;
     if (nullarg(c, "fmi2GetContinuousStates", x, "x")) return fmi2Error;
     if (nx != NX) {
         logmsg(c, fmi2Error, "fmi2GetContinuousStates: nx = %lu, expected %d", (unsigned long)nx, NX);
@@ -837,7 +975,7 @@ fmi2Status fmi2GetContinuousStates(fmi2Component comp, fmi2Real x[], size_t nx) 
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component comp, fmi2Real x_nominal[], size_t nx) {
     Instance *c = (Instance *)comp;
     size_t i;
-    if (!allowed(c, "fmi2GetNominalsOfContinuousStates", ANY_ALIVE)) return fmi2Error;
+    if (!allowed(c, "fmi2GetNominalsOfContinuousStates", ANY_ALIVE) || wrong_type(c, "fmi2GetNominalsOfContinuousStates", fmi2ModelExchange)) return fmi2Error;
     if (nullarg(c, "fmi2GetNominalsOfContinuousStates", x_nominal, "x_nominal")) return fmi2Error;
     if (nx != NX) {
         logmsg(c, fmi2Error, "fmi2GetNominalsOfContinuousStates: nx = %lu, expected %d", (unsigned long)nx, NX);
@@ -853,7 +991,7 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueRefere
                                        const fmi2Integer order[], const fmi2Real value[]) {
     Instance *c = (Instance *)comp;
     size_t i;
-    if (!allowed(c, "fmi2SetRealInputDerivatives", Instantiated | InitializationMode | StepComplete)) return fmi2Error;
+    if (!allowed(c, "fmi2SetRealInputDerivatives", Instantiated | InitializationMode | StepComplete) || wrong_type(c, "fmi2SetRealInputDerivatives", fmi2CoSimulation)) return fmi2Error;
     if (nvr == 0) return fmi2OK;
     if (nullarg(c, "fmi2SetRealInputDerivatives", vr, "vr") || nullarg(c, "fmi2SetRealInputDerivatives", order, "order")
         || nullarg(c, "fmi2SetRealInputDerivatives", value, "value")) return fmi2Error;
@@ -881,7 +1019,7 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueRefer
     Instance *c = (Instance *)comp;
     size_t i;
     double zero[NX];
-    if (!allowed(c, "fmi2GetRealOutputDerivatives", StepComplete | Terminated | Error)) return fmi2Error;
+    if (!allowed(c, "fmi2GetRealOutputDerivatives", StepComplete | Terminated | Error) || wrong_type(c, "fmi2GetRealOutputDerivatives", fmi2CoSimulation)) return fmi2Error;
     if (nvr == 0) return fmi2OK;
     if (nullarg(c, "fmi2GetRealOutputDerivatives", vr, "vr") || nullarg(c, "fmi2GetRealOutputDerivatives", order, "order")
         || nullarg(c, "fmi2GetRealOutputDerivatives", value, "value")) return fmi2Error;
@@ -913,16 +1051,24 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueRefer
 fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
     Instance *c = (Instance *)comp;
-    int i, j, bad;
+    int i, j, bad, level = 0;
+    long idx = 0;
     const double t = currentCommunicationPoint, h = communicationStepSize;
     (void)noSetFMUStatePriorToCurrentPoint;
-    if (!allowed(c, "fmi2DoStep", StepComplete)) return fmi2Error;
+    if (!allowed(c, "fmi2DoStep", StepComplete) || wrong_type(c, "fmi2DoStep", fmi2CoSimulation)) return fmi2Error;
     if (!isfinite(t) || !isfinite(h) || h < 0.0) {
         logmsg(c, fmi2Error, "fmi2DoStep: rejected step from t = %g with h = %g (the step must be finite and >= 0)", t, h);
         return fmi2Error;
     }
-    if (fabs(t - c->s.t) > 1e-9 * (1.0 + fabs(t))) {
-        logmsg(c, fmi2Error, "fmi2DoStep: currentCommunicationPoint %.17g differs from the FMU time %.17g", t, c->s.t);
+    /* masters form t_(k+1) as t_k + h or t_0 + (k + 1) h: a few units in the last place apart, never more */
+    if (fabs(t - c->s.t) > TIME_ULPS * DBL_EPSILON * fmax(fmax(fabs(t), fabs(c->s.t)), h) + 1e-12 * h) {
+        logmsg(c, fmi2Error, "fmi2DoStep: currentCommunicationPoint %.17g differs from the FMU time %.17g (by %g)", t,
+               c->s.t, t - c->s.t);
+        return fmi2Error;
+    }
+    if (c->s.stop_defined && t + h > c->s.t_stop + TIME_ULPS * DBL_EPSILON * fmax(fabs(c->s.t_stop), h) + 1e-12 * h) {
+        logmsg(c, fmi2Error, "fmi2DoStep: the step from %.17g to %.17g ends after the stop time %.17g set by "
+               "fmi2SetupExperiment", t, t + h, c->s.t_stop);
         return fmi2Error;
     }
     bad = first_invalid(c);
@@ -937,21 +1083,50 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     return fmi2OK;
 #endif
     record_inputs(c, t);
-    if (step_matrices(c, h) != 0) {
-        logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the step matrices for h = %g, lambda = %g are not finite",
-               t, h, c->s.lam);
-        return fmi2Discard;
-    }
-    eval_f(c, t);
-    for (i = 0; i < NX; i++) {
-        double v = 0.0;
-        for (j = 0; j < NX; j++) v += c->Phi[i * NX + j] * c->s.x[j];
-        for (j = 0; j < NX * NF; j++) v += c->F[i * NX * NF + j] * c->fj[j];
-        if (!isfinite(v)) {
-            logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the forcing or the state is not finite", t);
+    /* Sub-steps h / 2^level: the next two Taylor terms of the forcing, h^5 phi_5(G h) g^(4) + h^6 phi_6(G h) g^(5),
+     * estimate a sub-step's error; where it exceeds tol (1 + |x|) the level goes up (error ~ h^5, fast modes ~ h^4) */
+    memcpy(c->tmp, c->s.x, sizeof c->tmp);
+    for (;;) {
+        const double H = ldexp(h, -level);
+        const double *Phi, *F, *Fe;
+        double est = 0.0, size = 0.0;
+        if (idx == (1L << level)) break;
+        if (step_matrices(c, H, level, &Phi, &F, &Fe) != 0) {
+            logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the step matrices for h = %g, lambda = %g are not "
+                   "finite", t, H, c->s.lam);
             return fmi2Discard;
         }
-        c->tmp[i] = v;
+        eval_f(c, t + (double)idx * H);
+        for (i = 0; i < NX; i++) {
+            double e = 0.0;
+            for (j = 0; j < NX * NFE; j++) e += Fe[i * NX * NFE + j] * c->fj[j];
+            est = fmax(est, fabs(e));
+            size = fmax(size, fabs(c->tmp[i]));
+        }
+        if (!(est <= c->s.tol * (1.0 + size))) {
+            int up = isfinite(est) ? (int)ceil(log2(est / (c->s.tol * (1.0 + size))) / 4.0) : 1;
+            if (up < 1) up = 1;
+            if (level + up > MAX_LEVEL) {
+                logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the forcing varies too fast for a step of %g "
+                       "(estimated error %g with 2^%d sub-steps); take smaller communication steps", t, h, est, level);
+                return fmi2Discard;
+            }
+            level += up;
+            idx <<= up;
+            continue;
+        }
+        for (i = 0; i < NX; i++) {
+            double v = 0.0;
+            for (j = 0; j < NX; j++) v += Phi[i * NX + j] * c->tmp[j];
+            for (j = 0; j < NX * NF; j++) v += F[i * NX * NF + j] * c->fj[j];
+            if (!isfinite(v)) {
+                logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the forcing or the state is not finite", t);
+                return fmi2Discard;
+            }
+            c->tmp2[i] = v;
+        }
+        memcpy(c->tmp, c->tmp2, sizeof c->tmp);
+        idx++;
     }
     memcpy(c->s.x, c->tmp, sizeof c->tmp);
     c->s.t = t + h;
@@ -962,7 +1137,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
 
 fmi2Status fmi2CancelStep(fmi2Component comp) {
     Instance *c = (Instance *)comp;
-    if (!allowed(c, "fmi2CancelStep", StepComplete)) return fmi2Error;
+    if (!allowed(c, "fmi2CancelStep", StepComplete) || wrong_type(c, "fmi2CancelStep", fmi2CoSimulation)) return fmi2Error;
     logmsg(c, fmi2Error, "fmi2CancelStep: steps are never asynchronous here (canRunAsynchronuously=false)");
     return fmi2Error;
 }
