@@ -234,7 +234,7 @@ def main():
         "<!-- written by examples/bench_fmu.py: do not edit -->\n"
         f"{STEPS:,} communication steps of the prescribed-path example (alternative completion, lambda = 2) over "
         f"t in [0, {STOP:g}], best of {REPEATS}, all measured side by side in one run on a shared, loaded machine "
-        "(2 cores, 8 users): read the ratios, not the absolute times.\n\n" + table + "\n")
+        "(2 cores, other jobs running): read the ratios, not the absolute times.\n\n" + table + "\n")
 
 
 PYTHONFMU_RUNNER = """
@@ -387,9 +387,9 @@ def pythonfmu_main(reference=None, repeats=REPEATS):
     (gen / "bench_fmu.md").write_text(
         "<!-- written by examples/bench_fmu.py --pythonfmu: do not edit -->\n"
         f"pythonfmu FMUs over t in [0, {STOP:g}] in one fmpy process, best of {repeats}, interleaved, side by side in one "
-        "run on a shared, loaded machine (2 cores, 8 users): read the ratios, not the absolute times. Inputs: "
+        "run on a shared, loaded machine (2 cores): read the ratios, not the absolute times. Inputs: "
         "p = sin t + 0.5 sin 3t, c = 0.5 + 0.2 sin t, set before each step. "
-        + ("The reference builds are of the project's main branch before exact stepping. " if reference else "")
+        + ("The reference builds come from the checkout `--reference` names (FMUs that integrate every model with scipy's solvers). " if reference else "")
         + "\n\n" + table + "\n")
 
 

@@ -571,7 +571,6 @@ def _run(comps, connections, stop_time, H, algorithm, p, iterations, start_value
     value = np.zeros(nslots)
     # derivatives at communication points from FMUs that provide them: deriv[j - 1][slot]
     nder = max(p, 0)
-    has_der = np.array([comps[a].max_derivative for a, _ in sources], dtype=int)
     hist_t, hist_v, hist_d = [], [], []  # communication points, values, exact derivatives (NaN where unknown)
 
     rows = []

@@ -17,7 +17,6 @@ name (a parameter or a start value such as ``y_0``).
 import itertools
 import math
 import os
-import time
 
 import numpy as np
 
@@ -100,12 +99,6 @@ def _target(target, t_span, x0):
                          f"a spec dict or an lsc.LinearDAE; found {path!r}.")
     raise TypeError("`target` must be an FMU path, a spec (path or dict), an SSP scenario or an lsc.LinearDAE; "
                     f"found {type(target).__name__}.")
-
-
-def _cosimulate_available():
-    from ._study_runs import cosimulate_function
-
-    return cosimulate_function() is not None
 
 
 # -- errors against a reference ------------------------------------------------
@@ -292,8 +285,6 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
         if name in METRICS or name in names:
             raise ValueError(f"`metrics` name {name!r} is already a column.")
     kind, payload, exact, t_span = _target(target, t_span, x0)
-    if kind == "ssp" and not _cosimulate_available():
-        raise ImportError("an SSP target runs with fmu_build.cosimulate, which this installation does not have.")
     if kind == "spec":
         payload = _build_spec(payload)
         kind = "fmu"

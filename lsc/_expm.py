@@ -171,7 +171,7 @@ def integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=None, max
     prop = Propagator(completion._G, q)
     n = completion.n
     X = np.empty((n, t_out.size))
-    x, t, nsteps = x0.copy(), t0, 0
+    x, nsteps = x0.copy(), 0
     start = 0
     # Leading output times equal to t0, then (for an equally spaced rest) the one-exponential path.
     while start < t_out.size and t_out[start] == t0:

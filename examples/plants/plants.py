@@ -43,7 +43,7 @@ def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y
         defines = [f"-DPLANT_{key.upper()}={float(v)!r}" for key, v in zip(_NAMES, values)]
         defines.append(f"-DPLANT_FOLLOWER={int(bool(follower))}")
         subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra", "-Werror",
-                        f"-DFMI2_FUNCTION_PREFIX=", f"-I{_fmpy_headers()}", *defines,
+                        "-DFMI2_FUNCTION_PREFIX=", f"-I{_fmpy_headers()}", *defines,
                         str(HERE / "linear_plant.c"), "-o", str(tmp / "binaries" / "linux64" / f"{name}.so"), "-lm"],
                        check=True)
         variables = []
