@@ -368,8 +368,9 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
         (src / "model.h").write_text(header)
         lib = Path(tmp) / f"{ident}{suffix}"
         _compile(src, lib, compiler, extra_cflags)
-        fd, part = tempfile.mkstemp(prefix=f".{ident}.", suffix=".fmu.part", dir=target.parent)
-        os.close(fd)
+        # a unique name created with mode 0666 less the umask (mkstemp's 0600 would make the FMU private)
+        part = target.parent / f".{ident}.{uuid.uuid4().hex}.fmu.part"
+        os.close(os.open(part, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666))
         try:
             with zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as zf:
                 zf.writestr("modelDescription.xml", xml)

@@ -170,6 +170,15 @@ def test_build_is_atomic_and_says_what_is_fixed(tmp_path, capfd):
     assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]  # no temporary file left
 
 
+def test_fmu_file_has_the_mode_of_an_ordinary_file(built, tmp_path):
+    # written through a private temporary file (mode 0600), the FMU must still be readable as any file the
+    # user creates: what the umask allows, like the pythonfmu target's FMUs
+    umask = os.umask(0)
+    os.umask(umask)
+    for fmu in built.values():
+        assert stat.S_IMODE(os.stat(fmu).st_mode) == 0o666 & ~umask, (fmu, oct(os.stat(fmu).st_mode))
+
+
 @pytest.mark.parametrize("spec, fix, message", [
     ({"A": [["1 + t"]], "B": [[1]], "f": [0]}, False, "A depends on time"),
     ({"A": [[1]], "B": [["a"]], "f": [0]}, False, "B depends on the input(s) a"),
