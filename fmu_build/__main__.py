@@ -63,6 +63,20 @@ def _run_build(args):
     return 0
 
 
+def _assignments(items, option, form):
+    """``{name: float}`` from repeated ``NAME=VALUE`` options, or a ValueError naming the option."""
+    values = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise ValueError(f"`{option}` expects {form}; found {item!r}.")
+        try:
+            values[name.strip()] = float(value)
+        except ValueError:
+            raise ValueError(f"`{option}` expects {form} with a number; found {item!r}.") from None
+    return values
+
+
 def _add_simulate(sub):
     p = sub.add_parser(
         "simulate", help="run an FMU in fmpy and write its outputs as CSV (and a PNG)",
@@ -97,12 +111,7 @@ def _run_simulate(args):
     from fmpy.util import write_csv
 
     try:
-        start = {}
-        for item in args.set:
-            name, sep, value = item.partition("=")
-            if not sep:
-                raise ValueError(f"`--set` expects NAME=VALUE, found {item!r}")
-            start[name.strip()] = float(value)
+        start = _assignments(args.set, "--set", "NAME=VALUE")
         signals = _read_input_csv(args.input) if args.input else None
         md = read_model_description(args.fmu)
         outputs = [v.name for v in md.modelVariables if v.causality == "output"]
@@ -303,12 +312,7 @@ def _run_cosim(args):
     from .cosim import cosimulate
 
     try:
-        start = {}
-        for item in args.start:
-            name, eq, value = item.partition("=")
-            if not eq:
-                raise ValueError(f"`--start` must be COMP.VAR=VALUE; found {item!r}.")
-            start[name.strip()] = float(value)
+        start = _assignments(args.start, "--start", "COMP.VAR=VALUE")
         with warnings.catch_warnings():
             warnings.simplefilter("always")
             result = cosimulate(args.system, args.stop_time, args.step_size, algorithm=args.algorithm,

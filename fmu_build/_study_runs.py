@@ -8,6 +8,7 @@ any exception becomes ``success=False`` with the exception as message.
 """
 import math
 import time
+from functools import partial
 
 import numpy as np
 
@@ -36,16 +37,21 @@ def _bad_value(point):
     return None
 
 
-def run_dae(problem, point, settings):
-    """Complete and integrate a LinearDAE at one point of the grid."""
+def _guarded(run, target, point, settings):
+    """``run(target, point, settings, start)`` with bad grid values failed first and nothing raised."""
     start = time.perf_counter()
     try:
         bad = _bad_value(point)
         if bad:
             return _failed(bad, start)
-        return _run_dae(problem, point, settings, start)
+        return run(target, point, settings, start)
     except Exception as exc:  # a run reports, it never raises into the study
         return _failed(f"{type(exc).__name__}: {exc}", start)
+
+
+def run_dae(problem, point, settings):
+    """Complete and integrate a LinearDAE at one point of the grid."""
+    return _guarded(_run_dae, problem, point, settings)
 
 
 def _run_dae(problem, point, settings, start):
@@ -109,14 +115,7 @@ def _extract(fmu):
 
 def run_fmu(fmu, point, settings):
     """Run an FMI 2.0 Co-Simulation FMU (bytes or path) at one point of the grid."""
-    start = time.perf_counter()
-    try:
-        bad = _bad_value(point)
-        if bad:
-            return _failed(bad, start)
-        return _run_fmu(fmu, point, settings, start)
-    except Exception as exc:
-        return _failed(f"{type(exc).__name__}: {exc}", start)
+    return _guarded(_run_fmu, fmu, point, settings)
 
 
 def _run_fmu(fmu, point, settings, start):
@@ -252,16 +251,9 @@ def run_ssp(scenario, point, settings):
     their ``"component.variable"`` names; the residual is the 2-norm of the
     components' ``constraint_residual`` outputs (NaN when none has one).
     """
-    start = time.perf_counter()
-    try:
-        bad = _bad_value(point)
-        if bad:
-            return _failed(bad, start)
-        import fmu_build  # in the worker, where the run happens (the public name, so a test can stand in for it)
+    import fmu_build  # in the worker, where the run happens (the public name, so a test can stand in for it)
 
-        return _run_ssp(fmu_build.cosimulate, scenario, point, settings, start)
-    except Exception as exc:
-        return _failed(f"{type(exc).__name__}: {exc}", start)
+    return _guarded(partial(_run_ssp, fmu_build.cosimulate), scenario, point, settings)
 
 
 def ssp_layout(scenario):

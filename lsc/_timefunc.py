@@ -130,41 +130,26 @@ class CallableFunction(TimeFunction):
     def jet(self, t, order):
         if hasattr(self.fn, "jet"):
             # The callable computes all derivatives at once (e.g. by jets).
-            raw = self.fn.jet(t, order)
-            try:
-                out = np.asarray(raw, dtype=float)
-            except (TypeError, ValueError):
-                raise TypeError(
-                    f"`{self.name}.jet(t, order)` must return real numbers of shape "
-                    f"{_shape_str((order + 1,) + self.shape)}; got {_brief(raw)} at t={float(t)!r}."
-                ) from None
-            if out.shape != (order + 1,) + self.shape:
-                raise DimensionError(
-                    f"`{self.name}.jet(t, order)` must return shape {_shape_str((order + 1,) + self.shape)}: "
-                    f"got {_shape_str(out.shape)} at t={float(t)!r}."
-                )
-            if not np.all(np.isfinite(out)):
-                raise ValueError(f"`{self.name}.jet(t, order)` returned non-finite values at t={float(t)!r}.")
-            return out
+            return self._checked(self.fn.jet(t, order), (order + 1,) + self.shape, "jet(t, order)",
+                                 f"at t={float(t)!r}")
         out = np.empty((order + 1,) + self.shape)
         for d in range(order + 1):
-            raw = self.fn(t, d)
-            try:
-                value = np.asarray(raw, dtype=float)
-            except (TypeError, ValueError):
-                raise TypeError(
-                    f"`{self.name}(t, d)` must return real numbers of shape {_shape_str(self.shape)}; "
-                    f"got {_brief(raw)} at t={float(t)!r}, d={d}."
-                ) from None
-            if value.shape != self.shape:
-                raise DimensionError(
-                    f"`{self.name}(t, d)` must return shape {_shape_str(self.shape)}: "
-                    f"expected {_shape_str(self.shape)}, got {_shape_str(value.shape)} at t={float(t)!r}, d={d}."
-                )
-            if not np.all(np.isfinite(value)):
-                raise ValueError(f"`{self.name}(t, d)` returned non-finite values at t={float(t)!r}, d={d}: {value.tolist()}.")
-            out[d] = value
+            out[d] = self._checked(self.fn(t, d), self.shape, "(t, d)", f"at t={float(t)!r}, d={d}")
         return out
+
+    def _checked(self, raw, shape, call, where):
+        """`raw` as a finite float array of `shape`, or an error naming the call and where it was made."""
+        call = f"`{self.name}{'.' if call.startswith('jet') else ''}{call}`"
+        try:
+            value = np.asarray(raw, dtype=float)
+        except (TypeError, ValueError):
+            raise TypeError(f"{call} must return real numbers of shape {_shape_str(shape)}; got {_brief(raw)} {where}.") from None
+        if value.shape != shape:
+            raise DimensionError(f"{call} must return shape {_shape_str(shape)}: expected {_shape_str(shape)}, "
+                                 f"got {_shape_str(value.shape)} {where}.")
+        if not np.all(np.isfinite(value)):
+            raise ValueError(f"{call} returned non-finite values {where}.")
+        return value
 
 
 class JetCallable:

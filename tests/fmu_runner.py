@@ -11,21 +11,13 @@ process that already imported its modules silently runs the host's copy.
 import json
 import sys
 
-
-class _Blocker:
-    def __init__(self, names):
-        self.names = set(names)
-
-    def find_spec(self, name, path=None, target=None):
-        if any(name == n or name.startswith(n + ".") for n in self.names):
-            raise ImportError(f"import of {name!r} blocked by the test")
-        return None
+from _support import ImportBlocker
 
 
 def main():
     sc = json.load(sys.stdin)
     if sc.get("block"):
-        sys.meta_path.insert(0, _Blocker(sc["block"]))
+        sys.meta_path.insert(0, ImportBlocker(sc["block"]))
     from ctypes import byref
 
     from fmpy import extract, read_model_description

@@ -10,21 +10,13 @@ and prints {"time", "values", "status", "logs", ...}.
 import json
 import sys
 
-
-class _Blocker:
-    def __init__(self, names):
-        self.names = set(names)
-
-    def find_spec(self, name, path=None, target=None):
-        if any(name == n or name.startswith(n + ".") for n in self.names):
-            raise ImportError(f"import of {name!r} blocked by the test")
-        return None
+from _support import ImportBlocker
 
 
 def main():
     sc = json.load(sys.stdin)
     if sc.get("block"):
-        sys.meta_path.insert(0, _Blocker(sc["block"]))
+        sys.meta_path.insert(0, ImportBlocker(sc["block"]))
     blocked = {}
     for name in sc.get("block", []):
         try:

@@ -5,11 +5,9 @@ here from examples/plants/linear_plant.c with gcc. References: the monolithic ls
 scenario 1, the exact solution of the differentiated-input loop, libcosimpy and ecos.
 """
 import json
-import os
 import shutil
 import subprocess
 import sys
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -155,10 +153,12 @@ print(json.dumps({{"rows": np.column_stack([r["time"]] + [r[o] for o in {outs!r}
     diff = np.abs(L[:n] - ours[1:n + 1]).max(axis=0)
     assert np.all(diff[:4] < 1e-10), diff  # time, states of both FMUs
     assert diff[4] < 1e-9, diff  # F = u + Kp (y - ym) + ...: the gains scale the rounding of y
+    from fmu_build import ecos_executable
+
     try:
-        import ecospy  # noqa: F401
-    except ImportError:
-        return
+        ecos_executable()
+    except FileNotFoundError as exc:  # skipped here (libcosim was checked above), a failure under CI=true
+        pytest.skip(f"native host ecos unavailable: {exc}")
     E, _ = other_masters.run_ecos(path_ssp, 0.01, 0.5, outs)
     m = min(len(E), len(ours))
     assert m >= 49

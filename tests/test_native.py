@@ -430,19 +430,13 @@ print(json.dumps(obs.last_real_values(s, [names["y"], names["v"], names["u"]])))
     assert rel_err(values, X[:, -1]) < CS_RTOL
 
 
-def _ecos():
-    try:
-        import ecospy
-    except ImportError:
-        return None
-    src = Path(ecospy.__file__).parent / "binaries" / "ecos"
-    return src if src.exists() else None
-
-
 def test_ecos_runs_it_without_preload(built, tmp_path):
-    src = _ecos()
-    if src is None:
-        pytest.skip("ecospy is not installed")
+    from fmu_build import ecos_executable
+
+    try:  # ecospy's binary, found without importing ecospy (its import fails without libtbb12)
+        src = ecos_executable()
+    except FileNotFoundError as exc:  # skipped here, a failure under CI=true (conftest)
+        pytest.skip(f"native host ecos unavailable: {exc}")
     exe = tmp_path / "ecos"
     shutil.copy(src, exe)
     exe.chmod(exe.stat().st_mode | stat.S_IXUSR)

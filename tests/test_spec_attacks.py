@@ -13,22 +13,11 @@ from pathlib import Path
 
 import pytest
 
-from fmu_build import SpecError, build_fmu, load_spec, parse_spec
+from _support import lag_spec as _spec
+from _support import spec_problems as _problems
+from fmu_build import SpecError, build_fmu, load_spec
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def _spec(**changes):
-    spec = {"model": {"name": "Lag"}, "states": {"x": {}}, "parameters": {"tau": {"value": 2.0}},
-            "equations": {"A": [["tau"]], "B": [[1]], "f": ["sin(t)"]}}
-    spec.update(changes)
-    return spec
-
-
-def _problems(spec):
-    with pytest.raises(SpecError) as info:
-        parse_spec(spec)
-    return info.value.problems
 
 
 def _run(code, timeout):

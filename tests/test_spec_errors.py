@@ -5,12 +5,11 @@ replaced), so every row shows exactly what a user would write. A refusal must be
 whose message holds the fragment; an accepted spec must parse. Every row runs under a deadline
 (SIGALRM) so a hang fails the test instead of stalling the suite.
 """
-import contextlib
-import signal
 import tomllib
 
 import pytest
 
+from _support import deadline
 from fmu_build import SpecError, build_fmu, parse_spec
 
 BASE = """
@@ -132,21 +131,6 @@ def _merge(base, fragment):
         else:
             base[key] = value
     return base
-
-
-@contextlib.contextmanager
-def deadline(seconds):
-    """Fail with TimeoutError after `seconds` (a hang guard, not a speed test)."""
-    def expired(signum, frame):
-        raise TimeoutError(f"still running after {seconds} s")
-
-    previous = signal.signal(signal.SIGALRM, expired)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 def test_base_spec_is_valid():

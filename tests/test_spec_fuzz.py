@@ -16,16 +16,15 @@ The default run draws 100 examples per test. For a longer search set the environ
 ``LSC_FUZZ_EXAMPLES``, e.g. ``LSC_FUZZ_EXAMPLES=20000 python -m pytest tests/test_spec_fuzz.py``.
 """
 import builtins
-import contextlib
 import math
 import os
-import signal
 import time
 
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from _support import deadline
 from fmu_build import SpecError, parse_spec
 from fmu_build._expressions import FUNCTIONS
 
@@ -44,20 +43,6 @@ def sentinel():
     setattr(builtins, SENTINEL, lambda *args: CALLS.append(args) or 0)
     yield
     delattr(builtins, SENTINEL)
-
-
-@contextlib.contextmanager
-def deadline(seconds):
-    def expired(signum, frame):
-        raise TimeoutError(f"a spec case still ran after {seconds} s")
-
-    previous = signal.signal(signal.SIGALRM, expired)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 # --- expressions -------------------------------------------------------------------------------
@@ -109,7 +94,7 @@ def _spec(f_entry):
 def _parse(data):
     """parse_spec under the hang guard: a ModelSpec, or None for a SpecError; anything else fails."""
     start = time.perf_counter()
-    with deadline(HANG_GUARD):
+    with deadline(HANG_GUARD, "a spec case still ran"):
         try:
             spec = parse_spec(data)
         except SpecError as exc:

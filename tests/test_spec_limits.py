@@ -1,21 +1,10 @@
 """Limits of the spec layer: messages name the field and the limit (docs/spec_reference.md)."""
 import pytest
 
+from _support import lag_spec as _spec
+from _support import spec_problems as _problems
 from fmu_build import SpecError, build_fmu, load_spec, parse_spec
 from fmu_build._spec import MAX_DERIVATIVE_SIZE, MAX_LAM, derivative_problems
-
-
-def _spec(**changes):
-    spec = {"model": {"name": "Lag"}, "states": {"x": {}}, "parameters": {"tau": {"value": 2.0}},
-            "equations": {"A": [["tau"]], "B": [[1]], "f": ["sin(t)"]}}
-    spec.update(changes)
-    return spec
-
-
-def _problems(spec):
-    with pytest.raises(SpecError) as info:
-        parse_spec(spec)
-    return info.value.problems
 
 
 @pytest.mark.parametrize("text, char", [("ℯ**t", "U+212F"), ("sin(t) + ｔ", "U+FF54"), ("2*t # é", "U+00E9")])

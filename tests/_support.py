@@ -1,0 +1,53 @@
+"""Helpers shared by the tests and the subprocess runners (plain functions, no fixtures).
+
+The runners (fmu_runner.py, native_runner.py) import this file as scripts run from tests/;
+it imports nothing beyond the standard library at module level for that reason.
+"""
+import contextlib
+import signal
+
+
+class ImportBlocker:
+    """A meta-path finder that makes ``import name`` (and its submodules) fail, as in a host without it."""
+
+    def __init__(self, names):
+        self.names = set(names)
+
+    def find_spec(self, name, path=None, target=None):
+        if any(name == n or name.startswith(n + ".") for n in self.names):
+            raise ImportError(f"import of {name!r} blocked by the test")
+        return None
+
+
+@contextlib.contextmanager
+def deadline(seconds, what="still running"):
+    """Fail with TimeoutError after `seconds` (a hang guard, not a speed test)."""
+    def expired(signum, frame):
+        raise TimeoutError(f"{what} after {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, expired)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def lag_spec(**changes):
+    """A valid one-state spec, ``tau x' + x = sin t``, with top-level tables replaced by `changes`."""
+    spec = {"model": {"name": "Lag"}, "states": {"x": {}}, "parameters": {"tau": {"value": 2.0}},
+            "equations": {"A": [["tau"]], "B": [[1]], "f": ["sin(t)"]}}
+    spec.update(changes)
+    return spec
+
+
+def spec_problems(spec):
+    """The problems `fmu_build.parse_spec` reports for `spec` (it must refuse it)."""
+    import pytest
+
+    from fmu_build import SpecError, parse_spec
+
+    with pytest.raises(SpecError) as info:
+        parse_spec(spec)
+    return info.value.problems
