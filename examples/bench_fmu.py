@@ -131,7 +131,7 @@ def build_noop(dest):
 
 def build_native_pair(out_dir):
     """The native FMU of the example and the same sources compiled as a do-nothing floor."""
-    from fmu_build._native import build_native
+    from fmu_build.targets.native import build_native
     from fmu_build import load_spec
 
     spec = ROOT / "examples" / "specs" / "prescribed_path.toml"

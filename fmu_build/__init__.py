@@ -1,10 +1,8 @@
 """fmu_build: package an lsc completion as an FMI 2.0 Co-Simulation FMU (pythonfmu)."""
-from ._build import build_fmu
 from .cosim import cosimulate
-from ._expressions import ExpressionError
 from ._host import ecos_executable, native_host_env
-from ._native import NativeTargetError
-from ._spec import ModelSpec, SpecError, load_spec, parse_spec
+from .spec import ExpressionError, ModelSpec, SpecError, load_spec, parse_spec
+from .targets import NativeTargetError, build_fmu
 from .study import plot_study, recommend, sweep
 
 __all__ = ["build_fmu", "cosimulate", "load_spec", "parse_spec", "ModelSpec", "SpecError", "ExpressionError",

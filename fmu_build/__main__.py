@@ -50,8 +50,8 @@ def _add_build(sub):
 
 
 def _run_build(args):
-    from ._build import build_fmu
-    from ._spec import SpecError
+    from .spec import SpecError
+    from .targets import build_fmu
 
     try:
         path = build_fmu(args.spec, args.output, method=args.method, lam=args.lam, model_name=args.name, k=args.k,

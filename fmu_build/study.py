@@ -414,7 +414,7 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
 def _build_spec(spec):
     import tempfile
 
-    from ._build import build_fmu
+    from .targets import build_fmu
 
     folder = tempfile.mkdtemp(prefix="lsc_study_spec_")
     return os.fspath(build_fmu(spec, folder))

@@ -274,7 +274,7 @@ def probe_exit_hook(md, unzipped, instances):
     before = atexit._ncallbacks()
     keep = list(_instances(md, unzipped, instances))
     added = atexit._ncallbacks() - before
-    runtime = next(m for name, m in sys.modules.items() if name.endswith("_lsc._fmu_runtime"))
+    runtime = next(m for name, m in sys.modules.items() if name.endswith("_lsc._fmu_runtime._loader"))
     _free(keep)
     keep[0].freeLibrary()
     print(json.dumps({"hooks": sorted(runtime._EXIT_HOOKS), "atexit_added": added}), flush=True)

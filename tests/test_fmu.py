@@ -12,7 +12,7 @@ fmpy_validation = pytest.importorskip("fmpy.validation")
 
 import lsc  # noqa: E402
 from fmu_build import SpecError, build_fmu, load_spec, parse_spec  # noqa: E402
-from fmu_build._runtime import start_name  # noqa: E402
+from fmu_build.targets._runtime import start_name  # noqa: E402
 from lsc import gallery  # noqa: E402
 
 HERE = Path(__file__).parent
@@ -497,7 +497,7 @@ def test_power_form_interpolant_equals_scipys(solver):
     # the FMU reads each communication point from the solver's last step through _Interpolant
     import scipy.integrate
 
-    from fmu_build._runtime import _Interpolant
+    from fmu_build.targets._runtime._interpolant import _Interpolant
 
     def f(t, y):
         return np.array([y[1], -4.0 * y[0] + np.sin(3.0 * t), -0.5 * y[2]])
@@ -747,7 +747,7 @@ def test_killed_build_never_leaves_a_broken_fmu_many_times(tmp_path):
 
 
 def test_failed_build_writes_nothing_and_keeps_the_old_fmu(tmp_path, monkeypatch):
-    import fmu_build._build as build_module
+    import fmu_build.targets.pythonfmu as build_module
 
     good = build_fmu(SPEC, tmp_path)
     old = good.read_bytes()

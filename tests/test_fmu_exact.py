@@ -13,7 +13,8 @@ pytest.importorskip("fmpy")
 
 import lsc  # noqa: E402
 from fmu_build import build_fmu  # noqa: E402
-from fmu_build._runtime import _expm_small, _InputSignal  # noqa: E402
+from fmu_build.targets._runtime._inputs import _InputSignal  # noqa: E402
+from fmu_build.targets._runtime._steppers import _expm_small  # noqa: E402
 from lsc import gallery  # noqa: E402
 
 HERE = Path(__file__).parent

@@ -20,8 +20,8 @@ import pytest
 
 import lsc
 from fmu_build import build_fmu, parse_spec
-from fmu_build._build import _numeric_dae
-from fmu_build._native import NativeTargetError
+from fmu_build import NativeTargetError
+from fmu_build._model import _numeric_dae
 from lsc import gallery
 
 HERE = Path(__file__).parent

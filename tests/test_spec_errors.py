@@ -187,7 +187,7 @@ f = [0, "sqrt(t)"]
 @pytest.mark.parametrize("start, refused", [(0.0, True), (0.25, False)])
 def test_build_refuses_a_completion_not_finite_at_the_start(start, refused, tmp_path):
     # y = sqrt(t), x = -y': f is finite at t = 0, its derivative (which the completion uses) is not
-    from fmu_build._build import _complete_at_start, _numeric_dae
+    from fmu_build._model import _complete_at_start, _numeric_dae
 
     data = tomllib.loads(SQRT_SPEC)
     data["experiment"] = {"start": start, "stop": start + 1.0}

@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 
 from _support import deadline
 from fmu_build import SpecError, parse_spec
-from fmu_build._expressions import FUNCTIONS
+from fmu_build.spec._expressions import FUNCTIONS
 
 EXAMPLES = int(os.environ.get("LSC_FUZZ_EXAMPLES", "100"))
 HANG_GUARD = 10.0  # seconds: a hang guard, not a speed test
@@ -116,7 +116,7 @@ def test_accepted_expressions_have_finite_real_values_at_the_start(text):
     # what the parser accepts, the build can evaluate: A, B, f are finite and real at the start time
     spec, _ = _parse(_spec(text))
     if spec is not None:
-        from fmu_build._expressions import evaluate
+        from fmu_build.spec._expressions import evaluate
 
         values = {spec.t: spec.experiment["start"], spec.symbols["m"]: 2.0, spec.input_symbols["p"]: 0.0}
         assert math.isfinite(evaluate(spec.f[1], values))

@@ -1,4 +1,4 @@
-"""Names the build generates never collide with the spec's names (fmu_build._build)."""
+"""Names the build generates never collide with the spec's names (fmu_build.targets._pythonfmu_source)."""
 import json
 import subprocess
 import sys
@@ -10,7 +10,7 @@ import sympy
 
 import lsc  # noqa: F401  (the build needs it)
 from fmu_build import SpecError, build_fmu, parse_spec
-from fmu_build._build import _jet_source, _outputs_source
+from fmu_build.targets._pythonfmu_source import _jet_source, _outputs_source
 
 HERE = Path(__file__).parent
 

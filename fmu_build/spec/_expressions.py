@@ -64,7 +64,7 @@ def parse_expression(text, names, field):
     >>> parse_expression("__import__('os')", {"t": t}, "f[0]")
     Traceback (most recent call last):
     ...
-    fmu_build._expressions.ExpressionError: f[0]: call of '__import__' is not allowed (allowed functions: abs, acos, asin, atan, atan2, cos, cosh, exp, log, sin, sinh, sqrt, tan, tanh)
+    fmu_build.spec._expressions.ExpressionError: f[0]: call of '__import__' is not allowed (allowed functions: abs, acos, asin, atan, atan2, cos, cosh, exp, log, sin, sinh, sqrt, tan, tanh)
     """
     import sympy
 

@@ -389,7 +389,7 @@ def parse_spec(data, source="spec"):
     ...             "equations": {"A": [["x.real"]], "B": [[1]]}, "completion": {"lamda": 5.0}})
     Traceback (most recent call last):
     ...
-    fmu_build._spec.SpecError: spec has 2 problem(s):
+    fmu_build.spec._spec.SpecError: spec has 2 problem(s):
       - completion.lamda: unknown key 'lamda' in [completion]; did you mean 'lam'?
       - equations.A[0][0]: attribute access not allowed in 'x.real'
     """
@@ -431,7 +431,7 @@ def parse_spec(data, source="spec"):
         states.append({"name": sname, "unit": unit, "description": desc, "start": start, "ok": ok})
     for s in states:
         if s.pop("ok"):
-            # the FMU's start-value parameter of each state (fmu_build._runtime.start_name)
+            # the FMU's start-value parameter of each state (fmu_build.targets._runtime.start_name)
             claim(f"{s['name']}_0", f"states.{s['name']}", f"the start value of the state {s['name']!r}")
     if not states:
         problems.append("states: at least one state is needed")

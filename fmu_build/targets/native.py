@@ -29,9 +29,9 @@ import numpy as np
 
 import lsc
 
-from ._description import model_description
+from .._description import model_description
 from ._runtime import start_name
-from ._build import _mangled
+from .._model import _mangled
 
 __all__ = ["build_native", "NativeTargetError", "C_FLAGS"]
 
@@ -136,7 +136,7 @@ def _derivatives_with_inputs(f, t, input_symbols, orders):
     """f^(d) for d < orders, inputs u as functions of t whose j-th derivative is the symbol ``_mangled("u", u, j)``."""
     import sympy
 
-    from ._build import _input_derivatives
+    from .._model import _input_derivatives
 
     if input_symbols:
         return _input_derivatives(f, t, input_symbols, orders - 1)
@@ -316,7 +316,7 @@ def _compile(src_dir, out_path, compiler, extra_flags=()):
 
 def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=False):
     """Build the native FMU of a resolved `ModelSpec` (see `fmu_build.build_fmu`, ``target='native'``)."""
-    from ._build import _numeric_dae
+    from .._model import _numeric_dae
 
     kpars = _check_expressible(spec, fix_parameters)
     compiler = find_compiler()
