@@ -59,7 +59,7 @@ def _spec_from_dae(dae):
                      k=None, experiment={"start": 0.0, "stop": 1.0, "step": 0.01})
 
 
-# Generated names start with "_lsc" and spec names never do (fmu_build._spec refuses them),
+# Generated names start with "_lsc" and spec names never do (fmu_build.spec refuses them),
 # so the generated code can name spec parameters, inputs, states and its own locals apart.
 def _mangled(kind, name, j=None):
     """The generated-code name of a parameter (kind 'p'), state ('x') or input derivative ('u', order j)."""
@@ -162,7 +162,7 @@ def _exact_degree(spec, input_orders):
 
     Constant coefficients only (0 otherwise, and for a constant forcing). An
     input enters as its extrapolation polynomial, of degree ``order + 2``
-    (`_runtime._InputSignal`): with ``q`` at least that degree, a forcing
+    (`fmu_build.targets._runtime._inputs._InputSignal`): with ``q`` at least that degree, a forcing
     polynomial in the inputs' values is stepped exactly. A forcing that
     depends on t gets ``q >= 5``.
     """
