@@ -101,8 +101,19 @@ def model_description(*, model_name, guid, description, model_identifier, variab
             v["_element"].set("derivative", str(index[v["derivative"]]))
             # attribute order: derivative first reads better, but XML does not care
 
-    structure = ET.SubElement(root, "ModelStructure")
+    _model_structure(ET.SubElement(root, "ModelStructure"), variables, index, model_exchange is not None)
+    for v in variables:
+        v.pop("_element", None)
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
+
+def _model_structure(structure, variables, index, model_exchange):
+    """Fill ``<ModelStructure>``: outputs and derivatives with their dependencies, and the initial unknowns.
+
+    `index` maps a variable's name to its 1-based index; `model_exchange` says whether the
+    FMU has that interface (only then are derivatives listed).
+    """
     def unknown(parent, v):
         attrs = {"index": str(index[v["name"]])}
         deps = v.get("dependencies")
@@ -116,23 +127,19 @@ def model_description(*, model_name, guid, description, model_identifier, variab
         for v in outputs:
             unknown(el, v)
     derivatives = [v for v in variables if v.get("derivative")]
-    if derivatives and model_exchange is not None:
+    if derivatives and model_exchange:
         el = ET.SubElement(structure, "Derivatives")
         for v in derivatives:
             unknown(el, v)
-    states = {v["derivative"] for v in derivatives} if model_exchange is not None else set()
+    states = {v["derivative"] for v in derivatives} if model_exchange else set()
     initial = []
     for v in variables:
         calculated = v.get("initial", "calculated" if v["causality"] in ("output", "local", "calculatedParameter")
                            and v["variability"] not in ("constant", "fixed", "tunable") else None) in ("approx", "calculated")
         if (v["causality"] in ("output", "calculatedParameter") and calculated) or \
-                ((v["name"] in states or (v.get("derivative") and model_exchange is not None)) and calculated):
+                ((v["name"] in states or (v.get("derivative") and model_exchange)) and calculated):
             initial.append(v)
     if initial:
         el = ET.SubElement(structure, "InitialUnknowns")
         for v in initial:
             ET.SubElement(el, "Unknown", index=str(index[v["name"]]))
-    for v in variables:
-        v.pop("_element", None)
-    ET.indent(root)
-    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)

@@ -4,7 +4,7 @@ import pytest
 from _support import lag_spec as _spec
 from _support import spec_problems as _problems
 from fmu_build import SpecError, build_fmu, load_spec, parse_spec
-from fmu_build.spec._spec import MAX_DERIVATIVE_SIZE, MAX_LAM, derivative_problems
+from fmu_build.spec._limits import MAX_DERIVATIVE_SIZE, MAX_LAM, derivative_problems
 
 
 @pytest.mark.parametrize("text, char", [("ℯ**t", "U+212F"), ("sin(t) + ｔ", "U+FF54"), ("2*t # é", "U+00E9")])

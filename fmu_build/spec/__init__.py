@@ -6,7 +6,8 @@ ask (sizes, rates, derivatives) so that a build cannot run away.
 """
 
 from ._expressions import ExpressionError
-from ._spec import METHODS, MAX_K, ModelSpec, SpecError, derivative_problems, lam_problem, load_spec, model_name_problems, parse_spec
+from ._limits import MAX_K, derivative_problems, lam_problem
+from ._spec import METHODS, ModelSpec, SpecError, load_spec, model_name_problems, parse_spec
 
 __all__ = ["ExpressionError", "METHODS", "MAX_K", "ModelSpec", "SpecError", "derivative_problems", "lam_problem",
            "load_spec", "model_name_problems", "parse_spec"]

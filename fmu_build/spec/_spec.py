@@ -52,6 +52,7 @@ import tomllib
 import unicodedata
 
 from ._expressions import ExpressionError, evaluate, parse_expression
+from ._limits import MAX_K, MAX_MODEL_NAME, MAX_NAME, MAX_TEXT, MIN_RELATIVE_STEP, lam_problem
 
 __all__ = ["SpecError", "ModelSpec", "load_spec", "parse_spec", "model_name_problems"]
 
@@ -70,20 +71,6 @@ KEYS = {
     "completion": ("method", "lam", "k"),
     "experiment": ("start", "stop", "step"),
 }
-MAX_NAME = 100  # characters of a state, parameter, input or output name
-MAX_MODEL_NAME = 64  # characters of the model name (it names files and a class)
-MAX_TEXT = 10_000  # characters of a description or unit
-MAX_K = 20  # differentiations: a bound against runaway builds, not a statement of accuracy
-# completion.lam: powers of lam up to lam**(k+1) enter the completion's coefficients; beyond this
-# they overflow a double or swamp the model's own coefficients (a decay of exp(-1e12 t) is
-# already complete within any step a double can tell from zero time).
-MAX_LAM = 1e12
-# Nodes of each derivative of an entry of A, B, f up to the order the completion needs: a bound
-# that keeps every build short (derivatives of some short texts grow exponentially).
-MAX_DERIVATIVE_SIZE = 2000
-# experiment.step relative to the largest |time|: a smaller step is lost in the rounding of the
-# time (1e20 + 0.01 == 1e20); a double carries about 16 significant digits.
-MIN_RELATIVE_STEP = 1e-12
 # Names the generated slave module defines next to the class named after the model.
 # Matched with fullmatch: ``$`` would also match before a final newline ("x\n").
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -241,67 +228,6 @@ def model_name_problems(name, field="model.name"):
     return [] if problem is None else [f"{field}: {problem}"]
 
 
-def lam_problem(lam):
-    """Why the rate `lam` (a positive finite float) cannot be used, or None.
-
-    Examples
-    --------
-    >>> lam_problem(2.0) is None
-    True
-    >>> lam_problem(1e308)
-    'must be at most 1e+12, got 1e+308: powers of lam up to lam**(k+1) enter the completion and would overflow or swamp the model in double arithmetic'
-    """
-    if lam > MAX_LAM:
-        return (f"must be at most {MAX_LAM:g}, got {lam!r}: powers of lam up to lam**(k+1) enter the completion "
-                f"and would overflow or swamp the model in double arithmetic")
-    return None
-
-
-def _size(expr, limit):
-    """Number of nodes of a sympy expression tree, counted up to just past `limit` (no recursion)."""
-    count, stack = 0, [expr]
-    while stack and count <= limit:
-        node = stack.pop()
-        count += 1
-        stack.extend(node.args)
-    return count
-
-
-def derivative_problems(spec, order):
-    """Entries of A, B, f whose derivatives up to `order` grow beyond `MAX_DERIVATIVE_SIZE` nodes.
-
-    The completion differentiates every coefficient up to order k + 2 symbolically; some short
-    texts have derivatives that grow exponentially with the order (a product of 40 factors,
-    nested functions). Each entry is differentiated one order at a time and abandoned as soon
-    as a derivative is too large, so the check itself stays short. Inputs count as functions of
-    ``t`` (their derivatives enter by the chain rule), parameters as symbols.
-
-    Returns a list of messages naming the field and the order, empty when every entry is fine.
-    """
-    import sympy
-
-    t = spec.t
-    as_functions = {u: sympy.Function(f"_lsc_fn_{name}")(t) for name, u in spec.input_symbols.items()}
-    problems = []
-    for label, M, vector in (("A", spec.A, False), ("B", spec.B, False), ("f", spec.f, True)):
-        for i in range(M.rows):
-            for j in range(M.cols):
-                expr = M[i, j].subs(as_functions) if as_functions else M[i, j]
-                for d in range(1, order + 1):
-                    if not expr.has(t):
-                        break
-                    expr = expr.diff(t)
-                    size = _size(expr, MAX_DERIVATIVE_SIZE)
-                    if size > MAX_DERIVATIVE_SIZE:
-                        where = f"equations.{label}[{i}]" if vector else f"equations.{label}[{i}][{j}]"
-                        problems.append(f"{where}: its derivative of order {d} has more than {MAX_DERIVATIVE_SIZE} "
-                                        f"terms and operations (the completion needs derivatives up to order {order}; "
-                                        f"a product of many factors or deeply nested functions grows exponentially "
-                                        f"when differentiated): simplify it, or lower completion.k")
-                        break
-    return problems
-
-
 def _text(info, key, field, problems, default=""):
     """A description or unit: text without control characters (it goes into XML).
 
@@ -421,20 +347,7 @@ def parse_spec(data, source="spec"):
         taken[vname] = what
         return True
 
-    states = []
-    for sname, field, info in _entries(data, "states", problems):
-        ok = _identifier(sname, field, problems) and claim(sname, field, "a state of that name")
-        start = _number(info.get("start", 0.0), f"{field}.start", problems, default=0.0)
-        unit = _text(info, "unit", field, problems)
-        desc = _text(info, "description", field, problems, default=f"state {sname}")
-        # a state with a bad name still counts: A and B are checked against the number of states
-        states.append({"name": sname, "unit": unit, "description": desc, "start": start, "ok": ok})
-    for s in states:
-        if s.pop("ok"):
-            # the FMU's start-value parameter of each state (fmu_build.targets._runtime.start_name)
-            claim(f"{s['name']}_0", f"states.{s['name']}", f"the start value of the state {s['name']!r}")
-    if not states:
-        problems.append("states: at least one state is needed")
+    states = _states(data, claim, problems)
 
     t = sympy.Symbol("t")
     parameters, symbols = [], {}
@@ -468,6 +381,44 @@ def parse_spec(data, source="spec"):
 
     outputs = _outputs(data, states, names, claim, problems)
 
+    method, lam, k = _completion(data, problems)
+
+    start, stop, step = _experiment(data, problems)
+
+    if start is not None and all(M is not None for M in (A, B, f)):
+        values = {t: start, **{symbols[p["name"]]: p["value"] for p in parameters},
+                  **{input_symbols[u["name"]]: u["start"] for u in inputs}}
+        _check_at_start(A, B, f, values, start, problems)
+
+    if problems:
+        raise SpecError(problems, source=source)
+    return ModelSpec(name=name, description=description, states=states, parameters=parameters, A=A, B=B, f=f, t=t,
+                     symbols=symbols, inputs=inputs, input_symbols=input_symbols, outputs=outputs, method=method, lam=lam, k=k,
+                     experiment={"start": start, "stop": stop, "step": step})
+
+
+
+def _states(data, claim, problems):
+    """The [states] entries; each state's name and the name of its start-value parameter are claimed."""
+    states = []
+    for sname, field, info in _entries(data, "states", problems):
+        ok = _identifier(sname, field, problems) and claim(sname, field, "a state of that name")
+        start = _number(info.get("start", 0.0), f"{field}.start", problems, default=0.0)
+        unit = _text(info, "unit", field, problems)
+        desc = _text(info, "description", field, problems, default=f"state {sname}")
+        # a state with a bad name still counts: A and B are checked against the number of states
+        states.append({"name": sname, "unit": unit, "description": desc, "start": start, "ok": ok})
+    for s in states:
+        if s.pop("ok"):
+            # the FMU's start-value parameter of each state (fmu_build.targets._runtime.start_name)
+            claim(f"{s['name']}_0", f"states.{s['name']}", f"the start value of the state {s['name']!r}")
+    if not states:
+        problems.append("states: at least one state is needed")
+    return states
+
+
+def _completion(data, problems):
+    """``(method, lam, k)`` of the [completion] table."""
     comp = _table(data.get("completion"), "completion", problems)
     method = comp.get("method", "alternative")
     if method not in METHODS:
@@ -479,7 +430,11 @@ def parse_spec(data, source="spec"):
     k = comp.get("k")
     if k is not None and (isinstance(k, bool) or not isinstance(k, int) or not 0 <= k <= MAX_K):
         problems.append(f"completion.k: must be an integer from 0 to {MAX_K}; got {_show(k)}")
+    return method, lam, k
 
+
+def _experiment(data, problems):
+    """``(start, stop, step)`` of the [experiment] table: a span a double can step through."""
     exp = _table(data.get("experiment"), "experiment", problems)
     start = _number(exp.get("start", 0.0), "experiment.start", problems)
     stop = _number(exp.get("stop", 1.0), "experiment.stop", problems)
@@ -495,17 +450,7 @@ def parse_spec(data, source="spec"):
             problems.append(f"experiment.step: {step!r} is lost in the rounding of times of magnitude {scale:g} "
                             f"({scale:g} + {step!r} = {scale + step!r} in double arithmetic); the step must be at "
                             f"least {MIN_RELATIVE_STEP:g} times the largest |time|, here {MIN_RELATIVE_STEP * scale:g}")
-
-    if start is not None and all(M is not None for M in (A, B, f)):
-        values = {t: start, **{symbols[p["name"]]: p["value"] for p in parameters},
-                  **{input_symbols[u["name"]]: u["start"] for u in inputs}}
-        _check_at_start(A, B, f, values, start, problems)
-
-    if problems:
-        raise SpecError(problems, source=source)
-    return ModelSpec(name=name, description=description, states=states, parameters=parameters, A=A, B=B, f=f, t=t,
-                     symbols=symbols, inputs=inputs, input_symbols=input_symbols, outputs=outputs, method=method, lam=lam, k=k,
-                     experiment={"start": start, "stop": stop, "step": step})
+    return start, stop, step
 
 
 def _check_at_start(A, B, f, values, start, problems):
