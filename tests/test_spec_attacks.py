@@ -1,6 +1,6 @@
 """Hostile inputs to fmu_build's spec parser and build that are not handled as promised.
 
-Every test asserts what SHOULD happen (docs/spec_reference.md, fmu_build/_spec.py): a
+Every test asserts what SHOULD happen (docs/spec_reference.md, fmu_build/spec/_spec.py): a
 clear SpecError naming the field, a bounded build, an FMU that works or is refused, and
 no broken file left at the destination. They fail today.
 """
