@@ -35,7 +35,7 @@ from .._model import _mangled
 
 __all__ = ["build_native", "NativeTargetError", "C_FLAGS"]
 
-_TEMPLATES = Path(__file__).parent / "templates"
+_TEMPLATES = Path(__file__).parent.parent / "templates"  # fmu_build/templates
 _FIXED_SOURCES = ("fmi2Functions.c", "lsc_linalg.h", "fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 TAYLOR_DEGREE = 3  # the forcing over a step is its Taylor polynomial of this degree (as lsc's method='expm')
 C_FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra")
