@@ -183,8 +183,29 @@ def _layers(rows):
     return depth
 
 
+def _collapsed(rows, keep="fmu_build"):
+    """The rows with every module outside `keep` folded into its top-level package (one node: ``lsc``)."""
+    def node(name):
+        return name if name.split(".")[0] == keep else name.split(".")[0]
+
+    out = {}
+    for r in rows:
+        row = out.setdefault(node(r["module"]), {"module": node(r["module"]), "lines": 0, "imports": {},
+                                                 "package": r["package"] and node(r["module"]) == r["module"]})
+        row["lines"] += r["lines"]
+        for target, lazy in r["imports"].items():
+            if node(target) != row["module"]:
+                row["imports"][node(target)] = row["imports"].get(node(target), True) and lazy
+    return list(out.values())
+
+
 def picture(rows, path, title):
-    """Draw the graph with matplotlib (one column per depth); False when matplotlib is missing."""
+    """Draw the fmu_build graph (lsc as one node) with matplotlib, one column per import depth.
+
+    Returns False when matplotlib is missing.
+    """
+    cyclic = {m for c in cycles(rows) for m in c}
+    rows = _collapsed(rows)
     try:
         import matplotlib
 
@@ -199,7 +220,6 @@ def picture(rows, path, title):
     position = {m: (d, -i) for d, ms in columns.items() for i, m in enumerate(ms)}
     tall = max(len(ms) for ms in columns.values())
     fig, ax = plt.subplots(figsize=(3.2 * len(columns) + 1, 0.42 * tall + 1))
-    cyclic = {m for c in cycles(rows) for m in c}
     for r in rows:
         x0, y0 = position[r["module"]]
         for target, lazy in r["imports"].items():
@@ -215,7 +235,7 @@ def picture(rows, path, title):
     ax.set_xlim(-0.3, len(columns) * 1.0 + 0.3)
     ax.set_ylim(-tall, 1)
     ax.axis("off")
-    ax.set_title(f"{title}: import depth left to right (red: in a cycle, orange: over 600 lines, dotted: lazy)")
+    ax.set_title(f"fmu_build, {title}: import depth left to right (red: in a cycle, orange: over 600 lines, dotted: lazy)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
