@@ -201,7 +201,7 @@ def release_loader_state_at_exit(resources, model_identifier):
         atexit.register(release)
     else:  # pythonfmu's Py_Initialize leaves orig_argv empty: a native host
         try:
-            cxa_atexit = ctypes.CDLL(None).__cxa_atexit
+            cxa_atexit = getattr(ctypes.CDLL(None), "__cxa_atexit")  # getattr: no name mangling if moved into a class
         except AttributeError:  # not glibc's ABI: leave pythonfmu's own teardown
             return
         cxa_atexit.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
