@@ -155,7 +155,7 @@ _EXIT_HOOKS = set()  # libraries whose loader state is already released at inter
 
 
 def release_loader_state_at_exit(resources, model_identifier):
-    """Make a Python host exit cleanly after loading this FMU's library.
+    """Make the host, Python or native, exit cleanly after loading this FMU's library.
 
     pythonfmu 0.7.0 keeps its interpreter guard in a static
     ``std::shared_ptr<PyState>`` and also resets it from an
