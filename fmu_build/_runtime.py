@@ -169,7 +169,7 @@ def release_loader_state_at_exit(resources, model_identifier):
     ``finalizePythonInterpreter`` from a Python ``atexit`` handler, which runs
     before both, leaves an empty pointer for them to release (0 of 100).
 
-    In a native host (a C or C++ program: ecos, the FMU Compliance Checker)
+    In a native host (a C or C++ program such as ecos or a C master)
     pythonfmu started the interpreter, and Python's ``atexit`` runs only inside
     the ``Py_Finalize`` that the first release triggers: too late. There the
     same function is registered with the C library's ``__cxa_atexit``: the
@@ -206,7 +206,8 @@ def release_loader_state_at_exit(resources, model_identifier):
             return
         cxa_atexit.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
         cxa_atexit.restype = ctypes.c_int
-        # finalizePythonInterpreter(void) ignores the argument; no DSO handle: it runs at exit only
+        # finalizePythonInterpreter(void) ignores the argument (x86-64 and aarch64 C ABIs);
+        # no DSO handle: it runs at exit only
         if cxa_atexit(ctypes.cast(release, ctypes.c_void_p), None, None) != 0:
             return
     _EXIT_HOOKS.add(path)
