@@ -38,7 +38,8 @@ __all__ = ["build_native", "NativeTargetError", "C_FLAGS"]
 _TEMPLATES = Path(__file__).parent / "templates"
 _FIXED_SOURCES = ("fmi2Functions.c", "lsc_linalg.h", "fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 TAYLOR_DEGREE = 3  # the forcing over a step is its Taylor polynomial of this degree (as lsc's method='expm')
-C_FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra")
+# any warning is an error: a C compiler that truncates a constant or converts a value only warns
+C_FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror")
 _AFFINE_RTOL = 1e-10
 
 
@@ -119,16 +120,28 @@ def _affine_maps(dae, method, lam, k):
     return G0, G1, W0, W1, c1, True
 
 
+def _ccode(expr):
+    """C of a sympy expression whose integers are doubles where a C int could not hold them."""
+    from sympy.printing.c import C99CodePrinter
+
+    class Printer(C99CodePrinter):
+        def _print_Integer(self, e, **kwargs):
+            # an integer constant beyond the C types is truncated by the compiler (a warning, not an error);
+            # the library computes in doubles, so the FMU does too
+            return repr(float(e.p)) if abs(e.p) > 2 ** 31 - 1 else super()._print_Integer(e, **kwargs)
+
+    return Printer().doprint(expr)
+
+
 def _ccode_block(exprs, targets, symbol_names):
     """C statements assigning `exprs` to `targets`, with common subexpressions as local constants."""
     import sympy
-    from sympy.printing.c import ccode
 
     subs = {sym: sympy.Symbol(name, real=True) for sym, name in symbol_names.items()}
     exprs = [sympy.sympify(e).xreplace(subs) for e in exprs]
     replacements, reduced = sympy.cse(exprs, symbols=sympy.numbered_symbols("w"))
-    lines = [f"    const double {s} = {ccode(e, standard='c99')};" for s, e in replacements]
-    lines += [f"    {tgt} = {ccode(e, standard='c99')};" for tgt, e in zip(targets, reduced)]
+    lines = [f"    const double {s} = {_ccode(e)};" for s, e in replacements]
+    lines += [f"    {tgt} = {_ccode(e)};" for tgt, e in zip(targets, reduced)]
     return lines
 
 

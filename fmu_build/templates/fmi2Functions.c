@@ -234,13 +234,13 @@ static void eval_f(Instance *c, double t) {
     model_f_jet(t, c->s.p, c->uj, c->fj);
 }
 
-static double residual_norm(Instance *c) {
+static double residual_norm(Instance *c, const double *x) {
     double s = 0.0;
     int i, j;
     eval_f(c, c->s.t);
     for (i = 0; i < NC; i++) {
         double r = 0.0;
-        for (j = 0; j < NX; j++) r += CC[i * NX + j] * c->s.x[j];
+        for (j = 0; j < NX; j++) r += CC[i * NX + j] * x[j];
         for (j = 0; j < NX * NJC; j++) r -= WC[i * NX * NJC + j] * c->fj[j];
         s += r * r;
     }
@@ -341,13 +341,7 @@ static double get_one(Instance *c, fmi2ValueReference vr) {
         const double *x = (c->s.phase & (Instantiated | InitializationMode)) ? c->s.x0 : c->s.x;
         return model_output((int)(vr - VR_Y), c->s.t, x, c->s.p, c->s.u);
     }
-    case 6: {
-        double keep[NX], r;
-        if (c->s.phase & (Instantiated | InitializationMode)) { memcpy(keep, c->s.x, sizeof keep); memcpy(c->s.x, c->s.x0, sizeof keep); }
-        r = residual_norm(c);
-        if (c->s.phase & (Instantiated | InitializationMode)) memcpy(c->s.x, keep, sizeof keep);
-        return r;
-    }
+    case 6: return residual_norm(c, before_init(c) ? c->s.x0 : c->s.x);
     case 7:
         i = (int)(vr - VR_DX);
         state_derivatives(c);
