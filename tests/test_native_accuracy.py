@@ -48,3 +48,19 @@ def test_integer_literals_beyond_64_bits_are_doubles(tmp_path):
     X, _ = library(parse_spec(d), np.array(r["time"]))
     assert abs(r["values"][-1][0] - 1e20 * (1 - np.cos(1.0))) < 1e-9 * 1e20  # x1(1) = 4.6e19
     assert rel_err(np.array(r["values"]).T, X) < CS_RTOL
+
+
+# -- lambda far from 1 at build time ----------------------------------------------------------
+
+PATH_A, PATH_B = [[1, 0, 0], [0, 1, 0], [0, 0, 0]], [[0, -1, 0], [2, 0.5, -1], [1, 0, 0]]
+
+
+@pytest.mark.parametrize("lam_built", [1e-12, 1.0, 1e12])
+def test_lambda_tunable_whatever_rate_it_was_built_at(tmp_path, lam_built):
+    # G(lambda) = G0 + lambda G1: parts taken from two rates near lam_built cancel (G(2 lam) - G(lam)) / lam
+    d = spec_dict("PathLam", PATH_A, PATH_B, [0, 0, "sin(t) + 0.5*sin(3*t)"], [0.01, 2.5, 1.25], lam=lam_built)
+    fmu = build_fmu(d, tmp_path, target="native")
+    r = run({"fmu": str(fmu), "dt": 0.01, "steps": 200, "outputs": ["x1", "x2", "x3"], "start_values": {"lambda": 2.0}})
+    assert set(r["status"]) == {"ok"}
+    X, _ = library(parse_spec(d), np.array(r["time"]), lam=2.0)
+    assert rel_err(np.array(r["values"]).T, X) < CS_RTOL
