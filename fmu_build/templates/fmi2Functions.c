@@ -59,8 +59,10 @@ typedef struct {
     double p[A1(NPAR)];
     double x0[NX];
     double u[A1(NU)];
-    double ud[A1(NU) * NUD];     /* derivatives set by the master for the next step */
+    double ud[A1(NU) * NUD];     /* derivatives set by the master for the step from ud_t */
     int ud_set[A1(NU) * NUD];
+    double ud_t;                 /* the time the master's derivatives are for */
+    int u_fresh[A1(NU)];         /* the input was set since the last step (Co-Simulation) */
     double hist_t[HN];
     double hist_u[HN * A1(NU)];
     int hist_n;
@@ -160,51 +162,63 @@ static void form_gw(Instance *c) {
     memset(c->cache_valid, 0, sizeof c->cache_valid);
 }
 
-/* Jet [u, u', ...] of every input at t: the master's derivatives when it set
- * any for this step, otherwise the polynomial through the last received
- * values (history), with the current value in place of its value. */
+/* Taylor coefficients a[k] (k-th derivative / k!) at tb of the polynomial through the input's history
+ * (Newton form through the newest points, newest first); the number of coefficients */
+static int history_taylor(const Instance *c, int i, double tb, double *a) {
+    double dd[HN], nodes[HN], basis[HN];
+    int k, m, n = c->s.hist_n;
+    for (k = 0; k < n; k++) { nodes[k] = c->s.hist_t[k] - tb; dd[k] = c->s.hist_u[k * A1(NU) + i]; a[k] = basis[k] = 0.0; }
+    for (k = 1; k < n; k++)
+        for (m = n - 1; m >= k; m--) dd[m] = (dd[m] - dd[m - 1]) / (nodes[m] - nodes[m - k]);
+    if (n > 0) basis[0] = 1.0;
+    for (k = 0; k < n; k++) {
+        for (m = 0; m <= k; m++) a[m] += dd[k] * basis[m];
+        if (k + 1 < n) { /* basis *= (s - nodes[k]) */
+            for (m = k + 1; m > 0; m--) basis[m] = basis[m - 1] - nodes[k] * basis[m];
+            basis[0] = -nodes[k] * basis[0];
+        }
+    }
+    return n;
+}
+
+/* Jet [u, u', ...] of every input at t.
+ * Co-Simulation: the input's Taylor polynomial at a base time tb, shifted to t (a sub-step's start, or the
+ * step end). tb is the FMU time, with the value last set; after a step, until the master sets a new value,
+ * it is the step's start (the FMU holds that step's polynomial: the residual at the step end reads it). Each
+ * order is the master's where it sent that order for tb (fmi2SetRealInputDerivatives), otherwise the
+ * derivative of the polynomial through the values received (history) at tb.
+ * Model Exchange: the history polynomial at t, the value as set (or its extrapolation while the host holds
+ * the value of the last recorded point). */
 static void input_jets(Instance *c, double t) {
-    int i, d, k, m, n = c->s.hist_n;
+    int i, d, k, n = c->s.hist_n;
     for (i = 0; i < NU; i++) {
-        double *uj = c->uj + i * NFE;
-        int given = 0;
-        for (d = 1; d < NUD; d++) given |= c->s.ud_set[i * NUD + d];
-        for (d = 0; d < NFE; d++) uj[d] = 0.0;
-        if (given) {
-            /* the master's Taylor polynomial at the FMU time, shifted to t (a sub-step's start) */
-            const double dt = t - c->s.t;
-            for (d = 0; d < NUD; d++) {
+        double *uj = c->uj + i * NFE, a[HN], coef[NFE], fact = 1.0;
+        for (d = 0; d < NFE; d++) uj[d] = coef[d] = 0.0;
+        if (c->type == fmi2ModelExchange) {
+            const int m = n > 1 ? history_taylor(c, i, t, a) : 0;
+            for (d = 1; d < m && d < NFE; d++) { fact *= d; uj[d] = a[d] * fact; }
+            uj[0] = (m > 1 && c->s.u[i] == c->s.hist_u[i]) ? a[0] : c->s.u[i];
+            continue;
+        } else {
+            const int held = n > 0 && c->s.hist_t[0] < c->s.t && !c->s.u_fresh[i];
+            const double tb = held ? c->s.hist_t[0] : c->s.t, dt = t - tb;
+            const int m = n > 1 ? history_taylor(c, i, tb, a) : 0;
+            const int sent = c->s.ud_t == tb;
+            coef[0] = held ? c->s.hist_u[i] : c->s.u[i];
+            for (d = 1; d < NFE; d++) {
+                fact *= d;
+                if (sent && d < NUD && c->s.ud_set[i * NUD + d]) coef[d] = c->s.ud[i * NUD + d];
+                else if (d < m) coef[d] = a[d] * fact;
+            }
+            for (d = 0; d < NFE; d++) {
                 double v = 0.0, term = 1.0;
-                for (k = d; k < NUD; k++) {
-                    const double coef = k == 0 ? c->s.u[i] : (c->s.ud_set[i * NUD + k] ? c->s.ud[i * NUD + k] : 0.0);
-                    v += coef * term;
+                for (k = d; k < NFE; k++) {
+                    v += coef[k] * term;
                     term *= dt / (double)(k - d + 1);
                 }
                 uj[d] = v;
             }
-            continue;
-        } else if (n > 1) {
-            /* Newton form through the n newest points (newest first), expanded to a
-             * Taylor polynomial at t: coefficient a[d] of (tau - t)^d */
-            double dd[HN], nodes[HN], a[HN], basis[HN], fact = 1.0;
-            for (k = 0; k < n; k++) { nodes[k] = c->s.hist_t[k] - t; dd[k] = c->s.hist_u[k * A1(NU) + i]; }
-            for (k = 1; k < n; k++)
-                for (m = n - 1; m >= k; m--) dd[m] = (dd[m] - dd[m - 1]) / (nodes[m] - nodes[m - k]);
-            for (k = 0; k < n; k++) { a[k] = 0.0; basis[k] = 0.0; }
-            basis[0] = 1.0;
-            for (k = 0; k < n; k++) {
-                for (m = 0; m <= k; m++) a[m] += dd[k] * basis[m];
-                if (k + 1 < n) { /* basis *= (s - nodes[k]) */
-                    for (m = k + 1; m > 0; m--) basis[m] = basis[m - 1] - nodes[k] * basis[m];
-                    basis[0] = -nodes[k] * basis[0];
-                }
-            }
-            for (d = 1; d < n && d < NFE; d++) { fact *= d; uj[d] = a[d] * fact; }
-            /* Model Exchange with a host that holds the input since the last recorded point (fmpy
-             * does, between communication points): the extrapolated value, not the stale one */
-            if ((c->type == fmi2ModelExchange && c->s.u[i] == c->s.hist_u[i]) || t != c->s.t) { uj[0] = a[0]; continue; }
         }
-        uj[0] = c->s.u[i];
     }
 }
 
@@ -446,6 +460,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined,
         return fmi2Error;
     }
     c->s.t = startTime;
+    c->s.ud_t = startTime; /* derivatives set before this call are for the first step */
     c->s.stop_defined = stopTimeDefined ? 1 : 0;
     c->s.t_stop = stopTimeDefined ? stopTime : INFINITY;
     /* the master's relative tolerance bounds the error estimate of a sub-step (never looser than 1e-6) */
@@ -582,7 +597,7 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
         case 0: c->s.lam = v; break;
         case 1: c->s.p[vr[i] - VR_PAR] = v; break;
         case 2: c->s.x0[vr[i] - VR_X0] = v; break;
-        default: c->s.u[vr[i] - VR_U] = v; break;
+        default: c->s.u[vr[i] - VR_U] = v; c->s.u_fresh[vr[i] - VR_U] = 1; break;
         }
     }
     return status;
@@ -686,6 +701,8 @@ static int state_valid(const State *s, int type, const char **why) {
     for (i = 0; i < NPAR; i++) if (!isfinite(s->p[i])) return 0;
     for (i = 0; i < NU; i++) if (!isfinite(s->u[i])) return 0;
     for (i = 0; i < A1(NU) * NUD; i++) if (!is_flag(s->ud_set[i]) || !isfinite(s->ud[i])) return 0;
+    for (i = 0; i < A1(NU); i++) if (!is_flag(s->u_fresh[i])) return 0;
+    if (!isfinite(s->ud_t)) return 0;
     for (k = 0; k < s->hist_n; k++) {
         if (!isfinite(s->hist_t[k]) || (k > 0 && !(s->hist_t[k] < s->hist_t[k - 1]))) return 0;
         for (i = 0; i < NU; i++) if (!isfinite(s->hist_u[k * A1(NU) + i])) return 0;
@@ -1002,6 +1019,10 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueRefere
             logmsg(c, fmi2Error, "fmi2SetRealInputDerivatives: value %g is not finite", value[i]);
             return fmi2Error;
         }
+        if (c->s.ud_t != c->s.t) { /* derivatives for a new time: those sent for an earlier step no longer hold */
+            memset(c->s.ud_set, 0, sizeof c->s.ud_set);
+            c->s.ud_t = c->s.t;
+        }
         c->s.ud[(vr[i] - VR_U) * NUD + order[i]] = value[i];
         c->s.ud_set[(vr[i] - VR_U) * NUD + order[i]] = 1;
     }
@@ -1076,6 +1097,10 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     c->s.t = t + h;
     return fmi2OK;
 #endif
+    /* from here the FMU time is the master's communication point (a few ulps from it, checked above), and so is
+     * the time of the derivatives the master sent for this step */
+    if (c->s.ud_t == c->s.t) c->s.ud_t = t;
+    c->s.t = t;
     record_inputs(c, t);
     /* Sub-steps h / 2^level: the next two Taylor terms of the forcing, h^5 phi_5(G h) g^(4) + h^6 phi_6(G h) g^(5),
      * estimate a sub-step's error; where it exceeds tol (1 + |x|) the level goes up (error ~ h^5, fast modes ~ h^4) */
@@ -1124,8 +1149,8 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     }
     memcpy(c->s.x, c->tmp, sizeof c->tmp);
     c->s.t = t + h;
-    /* input derivatives set by the master hold for one step */
-    memset(c->s.ud_set, 0, sizeof c->s.ud_set);
+    /* the master's derivatives hold for the step they were sent for (ud_t); the value was the step start's */
+    memset(c->s.u_fresh, 0, sizeof c->s.u_fresh);
     return fmi2OK;
 }
 
