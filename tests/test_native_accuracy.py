@@ -103,3 +103,23 @@ def test_constraint_residual_uses_the_input_at_the_step_end(path_input, send):
     # the pythonfmu FMU reads 1.4e-7 for the same states (values only); the step start's input gives h |p'| ~ 1e-2
     tol = 1e-10 if send else 1e-6
     assert np.abs(found[100:] - expected[100:]).max() < tol, np.abs(found[100:] - expected[100:]).max()
+
+
+def _u_error_with_order_one_sent(fmu, H):
+    """|u(2) - exact| on the path p = sin t, the master sending p and p' only (p'' and p''' are needed)."""
+    steps = int(round(2.0 / H))
+    jets = [[float(np.sin(i * H)), float(np.cos(i * H))] for i in range(steps)]
+    r = run({"fmu": str(fmu), "dt": H, "steps": steps, "outputs": ["y", "v", "u"], "inputs": {"p": jets},
+             "send_derivatives": True, "start_values": {"y_0": 0.0, "v_0": 1.0, "u_0": 0.5}})
+    assert set(r["status"]) == {"ok"} and abs(r["time"][-1] - 2.0) < 1e-12
+    # y = p, v = p', u = m p'' + c p' + k p = sin t + 0.5 cos t
+    return abs(r["values"][-1][2] - (np.sin(2.0) + 0.5 * np.cos(2.0)))
+
+
+def test_input_derivatives_not_sent_are_estimated(path_input):
+    # orders the master does not send come from the FMU's history of values, not zeros (then u(2) is ~0.1 off
+    # whatever the step)
+    H = [0.1, 0.05, 0.025]
+    err = [_u_error_with_order_one_sent(path_input, h) for h in H]
+    orders = np.log2(np.array(err[:-1]) / np.array(err[1:]))
+    assert err[-1] < 1e-3 and (orders >= 1.0).all(), (err, orders)
