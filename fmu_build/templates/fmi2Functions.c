@@ -63,6 +63,8 @@ typedef struct {
     int ud_set[A1(NU) * NUD];
     double ud_t;                 /* the time the master's derivatives are for */
     int u_fresh[A1(NU)];         /* the input was set since the last step (Co-Simulation) */
+    double discard_h;            /* the size of the step last discarded from t (0: none since a change) */
+    int terminal;                /* no step from t can succeed as things are: fmi2Terminated is true */
     double hist_t[HN];
     double hist_u[HN * A1(NU)];
     int hist_n;
@@ -326,6 +328,27 @@ static int step_matrices(Instance *c, double h, int level, const double **Phi, c
     *cl = c->s.lam;
     *ok = 1;
     return 0;
+}
+
+/* a value the next step depends on changed: a step discarded before may succeed now */
+static void changed(Instance *c) {
+    c->s.terminal = 0;
+    c->s.discard_h = 0.0;
+}
+
+/* A discarded step. fmi2Terminated becomes true when no retry can succeed as things are: `for_good` (the
+ * forcing or the state at the step start is not finite), or the same step, or a longer one, is discarded
+ * again with nothing changed in between (masters that cannot shorten a step, fmpy's among them, ask
+ * fmi2Terminated and otherwise retry the step for ever). */
+static fmi2Status discard(Instance *c, double h, int for_good) {
+    if (for_good || (c->s.discard_h > 0.0 && h >= c->s.discard_h)) {
+        if (!c->s.terminal)
+            logmsg(c, fmi2Warning, "fmi2DoStep at t = %g: no step from here can succeed unless a value changes; "
+                   "fmi2Terminated is now true", c->s.t);
+        c->s.terminal = 1;
+    }
+    c->s.discard_h = h;
+    return fmi2Discard;
 }
 
 /* ---- value references ----------------------------------------------------- */
@@ -592,6 +615,7 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
             status = fmi2Error;
             continue;
         }
+        if (c->s.invalid[vr[i]] || get_one(c, vr[i]) != v) changed(c);
         c->s.invalid[vr[i]] = 0;
         switch (kind) {
         case 0: c->s.lam = v; break;
@@ -702,6 +726,7 @@ static int state_valid(const State *s, int type, const char **why) {
     for (i = 0; i < NU; i++) if (!isfinite(s->u[i])) return 0;
     for (i = 0; i < A1(NU) * NUD; i++) if (!is_flag(s->ud_set[i]) || !isfinite(s->ud[i])) return 0;
     for (i = 0; i < A1(NU); i++) if (!is_flag(s->u_fresh[i])) return 0;
+    if (!is_flag(s->terminal) || !(s->discard_h >= 0.0) || !isfinite(s->discard_h)) return 0;
     if (!isfinite(s->ud_t)) return 0;
     for (k = 0; k < s->hist_n; k++) {
         if (!isfinite(s->hist_t[k]) || (k > 0 && !(s->hist_t[k] < s->hist_t[k - 1]))) return 0;
@@ -1023,6 +1048,7 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueRefere
             memset(c->s.ud_set, 0, sizeof c->s.ud_set);
             c->s.ud_t = c->s.t;
         }
+        if (c->s.ud[(vr[i] - VR_U) * NUD + order[i]] != value[i] || !c->s.ud_set[(vr[i] - VR_U) * NUD + order[i]]) changed(c);
         c->s.ud[(vr[i] - VR_U) * NUD + order[i]] = value[i];
         c->s.ud_set[(vr[i] - VR_U) * NUD + order[i]] = 1;
     }
@@ -1089,7 +1115,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     bad = first_invalid(c);
     if (bad >= 0) {
         logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: value reference %d was set to an invalid value", t, bad);
-        return fmi2Discard;
+        return discard(c, h, 0);
     }
     if (h == 0.0) return fmi2OK;
 #ifdef LSC_DO_NOTHING
@@ -1102,6 +1128,14 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     if (c->s.ud_t == c->s.t) c->s.ud_t = t;
     c->s.t = t;
     record_inputs(c, t);
+    eval_f(c, t);
+    for (j = 0; j < NX * NFE; j++) {
+        if (!isfinite(c->fj[j])) {
+            logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the forcing (derivative %d of f_%d) is not finite "
+                   "at the step start", t, j / NX, j % NX + 1);
+            return discard(c, h, 1);
+        }
+    }
     /* Sub-steps h / 2^level: the next two Taylor terms of the forcing, h^5 phi_5(G h) g^(4) + h^6 phi_6(G h) g^(5),
      * estimate a sub-step's error; where it exceeds tol (1 + |x|) the level goes up (error ~ h^5, fast modes ~ h^4) */
     memcpy(c->tmp, c->s.x, sizeof c->tmp);
@@ -1113,7 +1147,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
         if (step_matrices(c, H, level, &Phi, &F, &Fe) != 0) {
             logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the step matrices for h = %g, lambda = %g are not "
                    "finite", t, H, c->s.lam);
-            return fmi2Discard;
+            return discard(c, h, 0);
         }
         eval_f(c, t + (double)idx * H);
         for (i = 0; i < NX; i++) {
@@ -1128,7 +1162,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
             if (level + up > MAX_LEVEL) {
                 logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the forcing varies too fast for a step of %g "
                        "(estimated error %g with 2^%d sub-steps); take smaller communication steps", t, h, est, level);
-                return fmi2Discard;
+                return discard(c, h, 0);
             }
             level += up;
             idx <<= up;
@@ -1140,7 +1174,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
             for (j = 0; j < NX * NF; j++) v += F[i * NX * NF + j] * c->fj[j];
             if (!isfinite(v)) {
                 logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the forcing or the state is not finite", t);
-                return fmi2Discard;
+                return discard(c, h, 0);
             }
             c->tmp2[i] = v;
         }
@@ -1149,6 +1183,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     }
     memcpy(c->s.x, c->tmp, sizeof c->tmp);
     c->s.t = t + h;
+    changed(c);
     /* the master's derivatives hold for the step they were sent for (ud_t); the value was the step start's */
     memset(c->s.u_fresh, 0, sizeof c->s.u_fresh);
     return fmi2OK;
@@ -1194,7 +1229,7 @@ fmi2Status fmi2GetBooleanStatus(fmi2Component comp, const fmi2StatusKind s, fmi2
     if (!allowed(c, "fmi2GetBooleanStatus", StepComplete | Terminated | Error) || nullarg(c, "fmi2GetBooleanStatus", value, "value"))
         return fmi2Error;
     if (s == fmi2Terminated) {
-        *value = fmi2False;
+        *value = c->s.terminal ? fmi2True : fmi2False;
         return fmi2OK;
     }
     return fmi2Discard;
