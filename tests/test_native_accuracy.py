@@ -123,3 +123,35 @@ def test_input_derivatives_not_sent_are_estimated(path_input):
     err = [_u_error_with_order_one_sent(path_input, h) for h in H]
     orders = np.log2(np.array(err[:-1]) / np.array(err[1:]))
     assert err[-1] < 1e-3 and (orders >= 1.0).all(), (err, orders)
+
+
+# -- a native FMU and a pythonfmu FMU of one model in one process ------------------------------
+
+_STUDY_RUNS = """
+import json, sys
+import numpy as np
+from fmu_build._study_runs import run_fmu
+out = {}
+for key, fmu in json.loads(sys.argv[1]):
+    r = run_fmu(fmu, {"lam": 2.0}, {"t_span": (0.0, 0.5), "step": 0.01})
+    out[key] = {"success": bool(r["success"]), "message": r["message"],
+                "x_end": None if r["x"] is None else np.asarray(r["x"], dtype=float)[:, -1].tolist()}
+print(json.dumps(out))
+"""
+
+
+def test_study_worker_runs_native_and_pythonfmu_fmus_of_one_model(tmp_path):
+    # a native FMU's library shares no Python modules with anything: loading it first must not make a worker
+    # refuse the pythonfmu FMU of the same model identifier; two pythonfmu FMUs of one identifier still clash
+    spec = ROOT / "examples" / "specs" / "prescribed_path.toml"
+    native = build_fmu(spec, tmp_path / "native", target="native", fix_parameters=True)
+    python = build_fmu(spec, tmp_path / "python")
+    other = build_fmu(spec, tmp_path / "other", lam=3.0)  # same identifier, another GUID
+    runs = [["native", str(native)], ["python", str(python)], ["other", str(other)]]
+    proc = subprocess.run([sys.executable, "-c", _STUDY_RUNS, json.dumps(runs)], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    r = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert r["native"]["success"] and r["python"]["success"], r
+    assert np.abs(np.array(r["native"]["x_end"]) - r["python"]["x_end"]).max() < 1e-6, r
+    assert not r["other"]["success"] and "another FMU with model identifier" in r["other"]["message"], r
