@@ -36,7 +36,8 @@ from ._build import _mangled
 __all__ = ["build_native", "NativeTargetError", "C_FLAGS"]
 
 _TEMPLATES = Path(__file__).parent / "templates"
-_FIXED_SOURCES = ("fmi2Functions.c", "lsc_linalg.h", "fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+_FIXED_SOURCES = ("fmi2Functions.c", "lsc_fmu.h", "lsc_model.c", "fmu_state.c", "model_exchange.c", "cosimulation.c", "lsc_linalg.h",
+                  "fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 TAYLOR_DEGREE = 3  # the forcing over a step is its Taylor polynomial of this degree (as lsc's method='expm')
 # any warning is an error: a C compiler that truncates a constant or converts a value only warns
 C_FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror")
