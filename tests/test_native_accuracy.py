@@ -155,3 +155,23 @@ def test_study_worker_runs_native_and_pythonfmu_fmus_of_one_model(tmp_path):
     assert r["native"]["success"] and r["python"]["success"], r
     assert np.abs(np.array(r["native"]["x_end"]) - r["python"]["x_end"]).max() < 1e-6, r
     assert not r["other"]["success"] and "another FMU with model identifier" in r["other"]["message"], r
+
+
+# -- the C runtime's shape -----------------------------------------------------------------------
+
+
+def test_c_runtime_is_one_small_file_per_responsibility(path_input):
+    from fmu_build._native import _FIXED_SOURCES, _TEMPLATES
+
+    with zipfile.ZipFile(path_input) as zf:
+        shipped = {n.split("/", 1)[1] for n in zf.namelist() if n.startswith("sources/")}
+    assert shipped == set(_FIXED_SOURCES) | {"model.h"}
+    ours = [name for name in _FIXED_SOURCES if not name.startswith("fmi2Function") or name == "fmi2Functions.c"]
+    for name in ours:
+        lines = (_TEMPLATES / name).read_text().count("\n")
+        assert lines <= 700, (name, lines)
+    # one translation unit: fmi2Functions.c includes every other C file
+    main = (_TEMPLATES / "fmi2Functions.c").read_text()
+    for name in ours:
+        if name.endswith(".c") and name != "fmi2Functions.c":
+            assert f'#include "{name}"' in main, name

@@ -1,3 +1,9 @@
+/* Co-Simulation: exact stepping of x' = G x + g(t) over a communication step
+ * (the forcing's Taylor polynomial of degree NQ, the phi functions from one
+ * matrix exponential, sub-steps where the error estimate asks for them),
+ * discards and fmi2Terminated, input and output derivatives, the status
+ * functions. Part of the one translation unit of fmi2Functions.c. */
+
 /* Phi, F and Fe for step h at the current lambda into the given arrays; 0 or -1 */
 static int form_step(Instance *c, double h, double *Phi, double *F, double *Fe) {
     int i, j, q, r, l;
@@ -61,8 +67,6 @@ static fmi2Status discard(Instance *c, double h, int for_good) {
     c->s.discard_h = h;
     return fmi2Discard;
 }
-
-/* ---- Co-Simulation -------------------------------------------------------- */
 
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[]) {

@@ -1,11 +1,22 @@
 /* FMI 2.0 Co-Simulation and Model Exchange for an lsc completion x' = G x + g(t).
  *
- * The fixed, hand-written part of a native lsc FMU: the FMI call sequence,
- * argument checks, logging, exact stepping, state snapshots. Everything that
- * belongs to one model (sizes, value references, the matrices, the C code of
- * the forcing f and its derivatives, the custom outputs) is in the generated
- * "model.h". One struct per instance, allocated once at fmi2Instantiate: no
- * global mutable state, no allocation per step.
+ * The fixed, hand-written part of a native lsc FMU, one file per responsibility
+ * (as the Modelica Reference-FMUs split theirs):
+ *   fmi2Functions.c   the FMI API common to both interfaces: instantiation, the
+ *                     call sequence, get and set (this file);
+ *   lsc_fmu.h         the instance and its state, the checks and logging;
+ *   lsc_model.c       the model between calls: inputs, forcing, residual;
+ *   cosimulation.c    stepping (fmi2DoStep), input and output derivatives;
+ *   model_exchange.c  derivatives for the host's integrator;
+ *   fmu_state.c       FMU states and their serialization;
+ *   lsc_linalg.h      products, LU, the matrix exponential.
+ * Everything that belongs to one model (sizes, value references, the matrices,
+ * the C code of the forcing f and its derivatives, the custom outputs) is in
+ * the generated "model.h". The files form one translation unit through
+ * #include (every function but the FMI API static: no other symbol leaves the
+ * library, and `cc fmi2Functions.c` or fmpy's compile builds it). One struct per
+ * instance, allocated once at fmi2Instantiate: no global mutable state, no
+ * allocation per step.
  *
  * Maths (lsc, constant coefficients):
  *   x' = G x + g(t),  G = G0 + lambda G1,  g^(j) = W [f^(j); ...; f^(j+NP_F)],  W = W0 + lambda W1

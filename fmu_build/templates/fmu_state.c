@@ -1,4 +1,7 @@
-/* ---- FMU state ------------------------------------------------------------- */
+/* FMU states: fmi2Get/Set/FreeFMUstate and serialization. A state handed to
+ * the FMU is checked (header, interface, every field, a checksum when
+ * serialized) before anything else is read from it. Part of the one translation
+ * unit of fmi2Functions.c. */
 
 /* The header of a state (magic, size, token) is read first, and nothing else
  * unless it matches: a state of another lsc FMU has the same header, with its own size

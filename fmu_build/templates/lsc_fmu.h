@@ -1,3 +1,11 @@
+/* The native lsc FMU's instance: sizes derived from the generated "model.h", the
+ * state (everything the next step depends on; a snapshot is a copy of it), the
+ * instance (the state, the host's callbacks, caches and work space), and the
+ * checks every FMI function starts with: the call sequence, the interface, NULL
+ * arguments, logging through the host. Included once, by fmi2Functions.c. */
+#ifndef LSC_FMU_H
+#define LSC_FMU_H
+
 #include <float.h>
 #include <stddef.h>
 #include <math.h>
@@ -136,3 +144,4 @@ static unsigned int token_hash(void) {
     return h;
 }
 
+#endif

@@ -1,4 +1,8 @@
-/* ---- the model ------------------------------------------------------------ */
+/* The model between FMI calls: G and W at the current lambda, the inputs' jets
+ * (the master's derivatives, the history estimate), the forcing and its
+ * derivatives, the constraint residual, the state derivatives, value references.
+ * Reads and writes one instance only; no FMI function here. Part of the one
+ * translation unit of fmi2Functions.c (every function static). */
 
 static void form_gw(Instance *c) {
     int i;

@@ -1,4 +1,6 @@
-/* ---- Model Exchange ------------------------------------------------------- */
+/* Model Exchange: x' = G x + g(t) for the host's integrator; no events, a step
+ * event where the input history (the derivative estimates) changes. Part of the
+ * one translation unit of fmi2Functions.c. */
 
 fmi2Status fmi2EnterEventMode(fmi2Component comp) {
     Instance *c = (Instance *)comp;
