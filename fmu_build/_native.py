@@ -130,7 +130,7 @@ def _affine_maps(dae, method, lam, k):
 
 
 def _ccode(expr):
-    """C of a sympy expression whose integers are doubles where a C int could not hold them."""
+    """C99 of a sympy expression: integers beyond a C int and constants such as pi printed as doubles."""
     from sympy.printing.c import C99CodePrinter
 
     class Printer(C99CodePrinter):
@@ -139,7 +139,12 @@ def _ccode(expr):
             # the library computes in doubles, so the FMU does too
             return repr(float(e.p)) if abs(e.p) > 2 ** 31 - 1 else super()._print_Integer(e, **kwargs)
 
-    return Printer().doprint(expr)
+        def _print_NumberSymbol(self, e, **kwargs):
+            return repr(float(e))  # M_PI, M_E, ... are not C99: math.h declares them only as an extension
+
+        _print_Pi = _print_Exp1 = _print_NumberSymbol
+
+    return Printer(settings={"math_macros": {}}).doprint(expr)
 
 
 def _ccode_block(exprs, targets, symbol_names):

@@ -50,6 +50,17 @@ def test_integer_literals_beyond_64_bits_are_doubles(tmp_path):
     assert rel_err(np.array(r["values"]).T, X) < CS_RTOL
 
 
+def test_constants_like_pi_are_doubles(tmp_path):
+    # sympy prints pi, exp(1), sqrt(2), log(2) as M_PI, M_E, M_SQRT2, M_LN2, which C99's math.h does not declare
+    d = spec_dict("Consts", [[1, 0], [0, 0]], [[0, 0], [-1, 1]], ["sin(pi*t) + sqrt(2) + log(2)*t", "exp(1)*t + pi"],
+                  [0.0, 0.0])
+    fmu = build_fmu(d, tmp_path, target="native")
+    r = run({"fmu": str(fmu), "dt": 0.01, "steps": 100, "outputs": ["x1", "x2"]})
+    assert set(r["status"]) == {"ok"}
+    X, _ = library(parse_spec(d), np.array(r["time"]))
+    assert rel_err(np.array(r["values"]).T, X) < CS_RTOL
+
+
 # -- lambda far from 1 at build time ----------------------------------------------------------
 
 PATH_A, PATH_B = [[1, 0, 0], [0, 1, 0], [0, 0, 0]], [[0, -1, 0], [2, 0.5, -1], [1, 0, 0]]
