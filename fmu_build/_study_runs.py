@@ -132,11 +132,13 @@ def _run_fmu(fmu, point, settings, start):
     if md is None:
         md = _DESCRIPTIONS[folder] = read_model_description(unzipped)
     ident = md.coSimulation.modelIdentifier
-    if _LOADED.get(ident, md.guid) != md.guid:
-        return _failed(f"another FMU with model identifier {ident!r} (a different GUID) was loaded by this worker "
-                       "process; a pythonfmu FMU would silently run that one's code: give the model another name",
-                       start)
-    _LOADED[ident] = md.guid
+    # only pythonfmu FMUs clash by identifier (a native FMU's library shares nothing with the others)
+    if os.path.exists(os.path.join(unzipped, "resources", "slavemodule.txt")):
+        if _LOADED.get(ident, md.guid) != md.guid:
+            return _failed(f"another FMU with model identifier {ident!r} (a different GUID) was loaded by this worker "
+                           "process; a pythonfmu FMU would silently run that one's code: give the model another name",
+                           start)
+        _LOADED[ident] = md.guid
     var = {v.name: v for v in md.modelVariables}
     states = [v.name for v in md.modelVariables if v.causality == "output" and _start_name(v.name) in var]
     residual_var = var.get("constraint_residual")

@@ -301,3 +301,36 @@ def test_bit_flipped_serialized_state_is_refused(fmus):
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert json.loads(proc.stdout.strip().splitlines()[-1]) != "accepted"
+
+
+_FMPY_UNTIL_THE_END = """
+import json, sys, time
+from fmpy import simulate_fmu
+lines = []
+def logger(component, instance, status, category, message):
+    lines.append(message)
+start = time.perf_counter()
+res = simulate_fmu(sys.argv[1], stop_time=2.0, output_interval=0.01, output=["x1"], logger=logger, timeout=float(sys.argv[2]),
+                   start_values=json.loads(sys.argv[3]))
+print(json.dumps({"end": float(res["time"][-1]), "seconds": time.perf_counter() - start, "log_lines": len(lines),
+                  "logs": [line.decode("utf-8", "replace") for line in lines[:20]]}))
+"""
+
+
+@pytest.mark.parametrize("forcing, start, end", [("log(1 - t)", {}, 0.99), ("1/(1 - t)**2", {}, 0.99),
+                                                ("log(a + t)", {"a": -1.0}, 0.0)])
+def test_discard_for_good_reports_terminated(tmp_path, forcing, start, end):
+    # the forcing is not finite from t = 1 on (with a = -1 from the start): the step to t = 1 cannot succeed (nor
+    # the first). fmpy retries a discarded step until fmi2GetBooleanStatus(fmi2Terminated) says true
+    # (710k log lines in 20 s when it never did)
+    d = {"model": {"name": "Doomed"}, "states": {"x1": {"start": 0.0}}, "parameters": {"a": {"value": 1.0}},
+         "equations": {"A": [[1]], "B": [[0]], "f": [forcing]}, "experiment": {"start": 0.0, "stop": 2.0, "step": 0.01}}
+    fmu = build_fmu(d, tmp_path, target="native")
+    budget = 20.0  # fmpy's own timeout: a run that reaches it did not stop by itself
+    proc = subprocess.run([sys.executable, "-c", _FMPY_UNTIL_THE_END, str(fmu), str(budget), json.dumps(start)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    r = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert r["seconds"] < budget / 2 and r["log_lines"] < 20, r
+    assert abs(r["end"] - end) < 1e-12, r
+    assert "discarded" in r["logs"][0] and "fmi2Terminated is now true" in r["logs"][-1], r

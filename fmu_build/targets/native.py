@@ -36,9 +36,11 @@ from .._model import _mangled
 __all__ = ["build_native", "NativeTargetError", "C_FLAGS"]
 
 _TEMPLATES = Path(__file__).parent.parent / "templates"  # fmu_build/templates
-_FIXED_SOURCES = ("fmi2Functions.c", "lsc_linalg.h", "fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+_FIXED_SOURCES = ("fmi2Functions.c", "lsc_fmu.h", "lsc_model.c", "fmu_state.c", "model_exchange.c", "cosimulation.c", "lsc_linalg.h",
+                  "fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 TAYLOR_DEGREE = 3  # the forcing over a step is its Taylor polynomial of this degree (as lsc's method='expm')
-C_FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra")
+# any warning is an error: a C compiler that truncates a constant or converts a value only warns
+C_FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror")
 _AFFINE_RTOL = 1e-10
 
 
@@ -97,38 +99,63 @@ def _check_expressible(spec, fix_parameters):
     return sorted(in_ab)
 
 
+# The affine parts are fitted at rates of order one, whatever the spec's rate: taken at rates lam and 2 lam,
+# (G(2 lam) - G(lam)) / lam cancels all digits for lam near 1e-12 and amplifies G0's rounding for lam near 1e12.
+_FIT_RATES = (1.0, 2.0)
+_CHECK_RATES = (0.3, 7.0)
+
+
 def _affine_maps(dae, method, lam, k):
-    """G0, G1, W0, W1 with G(lam) = G0 + lam G1 (same for W); checked at a third rate."""
+    """G0, G1, W0, W1 with G(lam) = G0 + lam G1 (same for W), fitted at rates 1 and 2; checked at 0.3, 7 and lam."""
     if method == "standard":
         c = lsc.complete(dae, "standard", k=k)
         return c._G, np.zeros_like(c._G), c._W, np.zeros_like(c._W), c, False
-    c1 = lsc.complete(dae, method, lam=lam, k=k)
+    c_spec = lsc.complete(dae, method, lam=lam, k=k)
     if method == "stabilized":
         # G(lam) is not affine (nor polynomial) in lam: the rate is fixed in the native FMU
-        return c1._G, np.zeros_like(c1._G), c1._W, np.zeros_like(c1._W), c1, False
-    c2 = lsc.complete(dae, method, lam=2.0 * lam, k=k)
-    G1, W1 = (c2._G - c1._G) / lam, (c2._W - c1._W) / lam
-    G0, W0 = c1._G - lam * G1, c1._W - lam * W1
-    c3 = lsc.complete(dae, method, lam=0.3 * lam, k=k)
-    for name, M0, M1, M3 in (("G", G0, G1, c3._G), ("W", W0, W1, c3._W)):
-        scale = max(np.abs(M3).max(), 1.0)
-        err = np.abs(M0 + 0.3 * lam * M1 - M3).max() / scale
-        if err > _AFFINE_RTOL:
-            raise NativeTargetError(f"{name}(lambda) of the alternative completion is not affine in lambda here "
-                                    f"(relative misfit {err:.1e}); build with target='pythonfmu'")
-    return G0, G1, W0, W1, c1, True
+        return c_spec._G, np.zeros_like(c_spec._G), c_spec._W, np.zeros_like(c_spec._W), c_spec, False
+    (a, ca), (b, cb) = [(r, lsc.complete(dae, method, lam=r, k=k)) for r in _FIT_RATES]
+    G1, W1 = (cb._G - ca._G) / (b - a), (cb._W - ca._W) / (b - a)
+    G0, W0 = ca._G - a * G1, ca._W - a * W1
+    for rate, c in [(r, lsc.complete(dae, method, lam=r, k=k)) for r in _CHECK_RATES] + [(lam, c_spec)]:
+        for name, M0, M1, M in (("G", G0, G1, c._G), ("W", W0, W1, c._W)):
+            # relative to the size of the terms at that rate: at lam = 1e12 the lam G1 part is all of G
+            scale = max(np.abs(M).max(), np.abs(M0).max() + rate * np.abs(M1).max(), 1.0)
+            err = np.abs(M0 + rate * M1 - M).max() / scale
+            if not err <= _AFFINE_RTOL:
+                raise NativeTargetError(f"{name}(lambda) of the alternative completion is not affine in lambda here "
+                                        f"(relative misfit {err:.1e} at lambda = {rate:g}); build with "
+                                        "target='pythonfmu'")
+    return G0, G1, W0, W1, c_spec, True
+
+
+def _ccode(expr):
+    """C99 of a sympy expression: integers beyond a C int and constants such as pi printed as doubles."""
+    from sympy.printing.c import C99CodePrinter
+
+    class Printer(C99CodePrinter):
+        def _print_Integer(self, e, **kwargs):
+            # an integer constant beyond the C types is truncated by the compiler (a warning, not an error);
+            # the library computes in doubles, so the FMU does too
+            return repr(float(e.p)) if abs(e.p) > 2 ** 31 - 1 else super()._print_Integer(e, **kwargs)
+
+        def _print_NumberSymbol(self, e, **kwargs):
+            return repr(float(e))  # M_PI, M_E, ... are not C99: math.h declares them only as an extension
+
+        _print_Pi = _print_Exp1 = _print_NumberSymbol
+
+    return Printer(settings={"math_macros": {}}).doprint(expr)
 
 
 def _ccode_block(exprs, targets, symbol_names):
     """C statements assigning `exprs` to `targets`, with common subexpressions as local constants."""
     import sympy
-    from sympy.printing.c import ccode
 
     subs = {sym: sympy.Symbol(name, real=True) for sym, name in symbol_names.items()}
     exprs = [sympy.sympify(e).xreplace(subs) for e in exprs]
     replacements, reduced = sympy.cse(exprs, symbols=sympy.numbered_symbols("w"))
-    lines = [f"    const double {s} = {ccode(e, standard='c99')};" for s, e in replacements]
-    lines += [f"    {tgt} = {ccode(e, standard='c99')};" for tgt, e in zip(targets, reduced)]
+    lines = [f"    const double {s} = {_ccode(e)};" for s, e in replacements]
+    lines += [f"    {tgt} = {_ccode(e)};" for tgt, e in zip(targets, reduced)]
     return lines
 
 

@@ -1,0 +1,147 @@
+/* The native lsc FMU's instance: sizes derived from the generated "model.h", the
+ * state (everything the next step depends on; a snapshot is a copy of it), the
+ * instance (the state, the host's callbacks, caches and work space), and the
+ * checks every FMI function starts with: the call sequence, the interface, NULL
+ * arguments, logging through the host. Included once, by fmi2Functions.c. */
+#ifndef LSC_FMU_H
+#define LSC_FMU_H
+
+#include <float.h>
+#include <stddef.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define A1(n) ((n) > 0 ? (n) : 1) /* C has no zero-length arrays */
+
+#include "fmi2Functions.h"
+#include "model.h"
+#include "lsc_linalg.h"
+
+#define NXJ (NX * NJ)            /* columns of W */
+#define MB (NX * (NQ + 4))       /* order of the block matrix: phi_0 .. phi_(NQ+3) */
+#define NUD (NF)                 /* length of an input jet: u, u', ..., u^(NF-1) */
+#define HN (UDEG + 1)            /* input history points */
+#define STEP_RTOL 1e-10          /* step sizes this close share one set of step matrices */
+#define STATE_MAGIC 0x4c534332u  /* "LSC2" */
+#define STEP_TOL 1e-11            /* default bound of a sub-step's error estimate, relative to 1 + |x| */
+#define MAX_LEVEL 20              /* at most 2^20 sub-steps in one communication step */
+#define TIME_ULPS 16.0           /* a communication point may differ from the FMU time by this many ulps */
+
+typedef enum {
+    StartAndEnd = 1 << 0, Instantiated = 1 << 1, InitializationMode = 1 << 2, EventMode = 1 << 3,
+    ContinuousTimeMode = 1 << 4, StepComplete = 1 << 5, Terminated = 1 << 6, Error = 1 << 7, Fatal = 1 << 8
+} ModelPhase;
+
+#define ANY_ALIVE (Instantiated | InitializationMode | EventMode | ContinuousTimeMode | StepComplete | Terminated | Error)
+#define INITIALIZED (EventMode | ContinuousTimeMode | StepComplete)
+
+/* Everything the next step depends on: a snapshot is a copy of this struct. */
+typedef struct {
+    unsigned int magic;
+    unsigned int size;
+    unsigned int token;          /* hash of the instantiation token */
+    int phase;
+    double t;
+    double x[NX];
+    double lam;
+    double p[A1(NPAR)];
+    double x0[NX];
+    double u[A1(NU)];
+    double ud[A1(NU) * NUD];     /* derivatives set by the master for the step from ud_t */
+    int ud_set[A1(NU) * NUD];
+    double ud_t;                 /* the time the master's derivatives are for */
+    int u_fresh[A1(NU)];         /* the input was set since the last step (Co-Simulation) */
+    double discard_h;            /* the size of the step last discarded from t (0: none since a change) */
+    int terminal;                /* no step from t can succeed as things are: fmi2Terminated is true */
+    double hist_t[HN];
+    double hist_u[HN * A1(NU)];
+    int hist_n;
+    int project_initial;
+    int invalid[NR];             /* a value was rejected: steps are discarded until a valid one is set */
+    int type;                    /* fmi2CoSimulation or fmi2ModelExchange: a state belongs to one interface */
+    double tol;                  /* bound of a sub-step's error estimate relative to 1 + |x| */
+    double t_stop;               /* INFINITY unless a stop time was defined */
+    int stop_defined;
+    unsigned int check;          /* checksum of a serialized state (0 in memory) */
+} State;
+
+typedef struct {
+    State s;
+    fmi2CallbackFunctions cb;
+    char *instanceName;
+    fmi2Type type;
+    int logging;
+    /* caches, functions of lambda and h only */
+    double lam_gw;               /* lambda at which G, W were formed (NAN: never) */
+    double G[NX * NX];
+    double W[NX * NXJ];
+    /* the matrices of a step h / 2^level, one set per level (a step that needs sub-steps does not
+     * recompute those of the master's step, nor the other way round) */
+    double cache_h[MAX_LEVEL + 1], cache_lam[MAX_LEVEL + 1];
+    int cache_valid[MAX_LEVEL + 1];
+    double Phi[(MAX_LEVEL + 1) * NX * NX];
+    double F[(MAX_LEVEL + 1) * NX * NX * NF];   /* the forcing terms of one step acting on [f; f'; ...; f^(NF-1)] */
+    double Fe[(MAX_LEVEL + 1) * NX * NX * NFE]; /* the next two Taylor terms (error estimate) on [f; ...; f^(NFE-1)] */
+    /* work space */
+    double Mb[MB * MB], E[MB * MB], work[6 * MB * MB];
+    int piv[MB];
+    double fj[NFE * NX];
+    double uj[A1(NU) * NFE];
+    double xd[(NQ + 2) * NX];
+    double tmp[NX], tmp2[NX];
+} Instance;
+
+/* ---- logging ------------------------------------------------------------ */
+
+static void logmsg(Instance *c, fmi2Status status, const char *fmt, ...) {
+    char buf[512];
+    va_list ap;
+    if (c == NULL || c->cb.logger == NULL) return;
+    if (!c->logging && status == fmi2OK) return;
+    va_start(ap, fmt);
+    vsnprintf(buf, sizeof buf, fmt, ap);
+    va_end(ap);
+    c->cb.logger(c->cb.componentEnvironment, c->instanceName, status,
+                 status == fmi2OK ? "logAll" : (status == fmi2Warning ? "logStatusWarning" : "logStatusError"), "%s", buf);
+}
+
+static int allowed(Instance *c, const char *f, int phases) {
+    if (c == NULL) return 0;
+    if (!(c->s.phase & phases)) {
+        logmsg(c, fmi2Error, "%s: not allowed in the current state of the instance (FMI 2.0 call sequence)", f);
+        return 0;
+    }
+    return 1;
+}
+
+/* a function of one interface called on an instance of the other */
+static int wrong_type(Instance *c, const char *f, fmi2Type type) {
+    if (c->type == type) return 0;
+    logmsg(c, fmi2Error, "%s: a %s function, this instance was instantiated for %s", f,
+           type == fmi2ModelExchange ? "Model Exchange" : "Co-Simulation",
+           c->type == fmi2ModelExchange ? "Model Exchange" : "Co-Simulation");
+    return 1;
+}
+
+/* before the end of initialization the states are the start values being set */
+static int before_init(const Instance *c) { return (c->s.phase & (Instantiated | InitializationMode)) != 0; }
+
+static int nullarg(Instance *c, const char *f, const void *p, const char *what) {
+    if (p == NULL) {
+        logmsg(c, fmi2Error, "%s: argument %s is NULL", f, what);
+        return 1;
+    }
+    return 0;
+}
+
+static unsigned int token_hash(void) {
+    const char *p = INSTANTIATION_TOKEN;
+    unsigned int h = 2166136261u;
+    while (*p) { h ^= (unsigned char)*p++; h *= 16777619u; }
+    return h;
+}
+
+#endif
