@@ -9,6 +9,7 @@ SSP archive (SystemStructure.ssd and both FMUs) to out/path_control.ssp.
 
 Run:  python examples/make_ssp.py [DEST]   (DEST: folder of the .ssp, default out)
 """
+import os
 import sys
 from pathlib import Path
 
@@ -19,7 +20,7 @@ import scenarios  # noqa: E402  (examples/plants: the scenarios the co-simulatio
 
 def main(dest=HERE.parent / "out"):
     ssp = scenarios.build_path_system(Path(dest), name="path_control")
-    print(f"wrote {ssp}")
+    print(f"wrote {os.path.relpath(ssp)}")
 
 
 if __name__ == "__main__":
