@@ -3,9 +3,11 @@
 The clone is ``git clone`` of this checkout's HEAD; the virtual environment
 starts empty (pip's download cache is reused). The lines of every ```bash block
 run in one bash process, in the README's order, so ``eval "$(lsc-fmu env)"``
-reaches the next line as it does for a reader; each line's time is printed.
-Afterwards ``git status --porcelain`` must be empty: nothing a line writes may
-land outside ``out/`` (ignored by git).
+reaches the next line as it does for a reader; then every ```python block of
+the README runs from the clone's root (tests/test_readme.py checks what they
+print). Each line's and block's time is printed. Afterwards ``git status
+--porcelain`` must be empty: nothing a line writes may land outside ``out/``
+(ignored by git).
 
 Two stated exceptions:
 
@@ -59,6 +61,10 @@ def test_readme_lines_write_under_out():
             assert path.startswith("out/"), line
 
 
+def python_blocks(text):
+    return re.findall(r"^```python\n(.*?)^```", text, re.S | re.M)
+
+
 def _libtbb():
     found = subprocess.run(["ldconfig", "-p"], capture_output=True, text=True).stdout if shutil.which("ldconfig") else ""
     return "libtbb.so.12" in found
@@ -98,6 +104,10 @@ def test_every_readme_shell_line_on_a_fresh_clone(tmp_path):
             print(f"skipped (libtbb.so.12 missing: apt-get install libtbb12): {line}")
             continue
         lines.append(line)
+    for i, code in enumerate(python_blocks((clone / "README.md").read_text())):
+        (tmp_path / f"block{i}.py").write_text(code)
+        notes[len(lines)] = f"the README's python block {i + 1}"
+        lines.append(f"python {tmp_path / f'block{i}.py'}")
 
     times = tmp_path / "times.txt"
     (tmp_path / "readme.sh").write_text(_script(lines, times))
