@@ -104,10 +104,12 @@ def test_every_readme_shell_line_on_a_fresh_clone(tmp_path):
             print(f"skipped (libtbb.so.12 missing: apt-get install libtbb12): {line}")
             continue
         lines.append(line)
+    blocks = tmp_path / "blocks"  # a folder of its own: the script's folder is first on sys.path
+    blocks.mkdir()
     for i, code in enumerate(python_blocks((clone / "README.md").read_text())):
-        (tmp_path / f"block{i}.py").write_text(code)
+        (blocks / f"block{i}.py").write_text(code)
         notes[len(lines)] = f"the README's python block {i + 1}"
-        lines.append(f"python {tmp_path / f'block{i}.py'}")
+        lines.append(f"python {blocks / f'block{i}.py'}")
 
     times = tmp_path / "times.txt"
     (tmp_path / "readme.sh").write_text(_script(lines, times))
@@ -123,8 +125,8 @@ def test_every_readme_shell_line_on_a_fresh_clone(tmp_path):
         print(f"{float(end) - float(start):7.1f} s  rc={rc}  {lines[i]}" + (f"   [{notes[i]}]" if i in notes else ""))
     print(f"{total:7.1f} s  in all")
     stdout, stderr = (tmp_path / "stdout.txt").read_text(), (tmp_path / "stderr.txt").read_text()
-    assert proc.returncode == 0 and len(records) == len(lines), (
-        f"line {len(records) - 1}: {lines[len(records) - 1] if records else lines[0]}", stdout[-3000:], stderr[-3000:])
+    failed = lines[len(records) - 1] if records else lines[0]  # a failing line is recorded, then the script stops
+    assert proc.returncode == 0 and len(records) == len(lines), (failed, stdout[-3000:], stderr[-3000:])
 
     status = subprocess.run(["git", "status", "--porcelain"], cwd=clone, capture_output=True, text=True, check=True)
     assert status.stdout == "", f"the README's lines changed the checkout:\n{status.stdout}"
