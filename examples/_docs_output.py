@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parent.parent
 GENERATED = ROOT / "docs" / "_generated"
 OUT = ROOT / "out"
 FLAG = "--docs"
-HELP = "also regenerate the tracked docs/_generated files (default: write under out/ only)"
+HELP = "write the reports and figures the docs include to the tracked docs/_generated (default: out/ only)"
 
 
 def docs_requested(argv=None):

@@ -3,9 +3,10 @@
 The clone is ``git clone`` of this checkout's HEAD; the virtual environment
 starts empty (pip's download cache is reused). The lines of every ```bash block
 run in one bash process, in the README's order, so ``eval "$(lsc-fmu env)"``
-reaches the next line as it does for a reader; then every ```python block of
-the README runs from the clone's root (tests/test_readme.py checks what they
-print). Each line's and block's time is printed. Afterwards ``git status
+reaches the next line as it does for a reader; every ```python block runs where
+it stands on the page, as ``python block.py`` from the clone's root
+(tests/test_readme.py checks what they print). Each line's and block's time is
+printed. Afterwards ``git status
 --porcelain`` must be empty: nothing a line writes may land outside ``out/``
 (ignored by git).
 
@@ -61,8 +62,24 @@ def test_readme_lines_write_under_out():
             assert path.startswith("out/"), line
 
 
-def python_blocks(text):
-    return re.findall(r"^```python\n(.*?)^```", text, re.S | re.M)
+def page_lines(text, blocks):
+    """Every shell line and python block of the page, in order: [(bash line, note)], python blocks as files in `blocks`."""
+    lines = []
+    for i, (kind, body) in enumerate(re.findall(r"^```(bash|python)\n(.*?)^```", text, re.S | re.M)):
+        if kind == "python":
+            (blocks / f"block{i}.py").write_text(body)
+            lines.append((f"python {blocks / f'block{i}.py'}", "a python block of the README"))
+            continue
+        for line in [line for line in body.splitlines() if line.strip() and not line.lstrip().startswith("#")]:
+            if line.endswith(f"&& {SUITE}") and not os.environ.get("LSC_README_FULL_SUITE"):
+                lines.append((f"{line} --collect-only -q", "suite: collected only (.ci/run runs it)"))
+            elif NATIVE_HOST.search(line) and not _libtbb():
+                if os.environ.get("CI"):
+                    pytest.fail(f"libtbb.so.12 is missing (apt-get install libtbb12): cannot run {line!r}")
+                print(f"skipped (libtbb.so.12 missing: apt-get install libtbb12): {line}")
+            else:
+                lines.append((line, ""))
+    return lines
 
 
 def _libtbb():
@@ -93,23 +110,9 @@ def test_every_readme_shell_line_on_a_fresh_clone(tmp_path):
     env.update(VIRTUAL_ENV=str(env_dir), PATH=os.pathsep.join([str(bindir), env.get("PATH", "")]), MPLBACKEND="Agg",
                PIP_DISABLE_PIP_VERSION_CHECK="1")
 
-    lines, notes = [], {}
-    for line in [line for block in bash_blocks((clone / "README.md").read_text()) for line in block]:
-        if line.endswith(f"&& {SUITE}") and not os.environ.get("LSC_README_FULL_SUITE"):
-            notes[len(lines)] = "suite: collected only (.ci/run runs it)"
-            line = f"{line} --collect-only -q"
-        if NATIVE_HOST.search(line) and not _libtbb():
-            if os.environ.get("CI"):
-                pytest.fail(f"libtbb.so.12 is missing (apt-get install libtbb12): cannot run {line!r}")
-            print(f"skipped (libtbb.so.12 missing: apt-get install libtbb12): {line}")
-            continue
-        lines.append(line)
     blocks = tmp_path / "blocks"  # a folder of its own: the script's folder is first on sys.path
     blocks.mkdir()
-    for i, code in enumerate(python_blocks((clone / "README.md").read_text())):
-        (blocks / f"block{i}.py").write_text(code)
-        notes[len(lines)] = f"the README's python block {i + 1}"
-        lines.append(f"python {blocks / f'block{i}.py'}")
+    lines, notes = zip(*page_lines((clone / "README.md").read_text(), blocks))
 
     times = tmp_path / "times.txt"
     (tmp_path / "readme.sh").write_text(_script(lines, times))
@@ -122,7 +125,7 @@ def test_every_readme_shell_line_on_a_fresh_clone(tmp_path):
     print(f"\nREADME shell lines on a fresh clone ({len(records)} of {len(lines)} ran):")
     for i, rc, start, end in records:
         i = int(i)
-        print(f"{float(end) - float(start):7.1f} s  rc={rc}  {lines[i]}" + (f"   [{notes[i]}]" if i in notes else ""))
+        print(f"{float(end) - float(start):7.1f} s  rc={rc}  {lines[i]}" + (f"   [{notes[i]}]" if notes[i] else ""))
     print(f"{total:7.1f} s  in all")
     stdout, stderr = (tmp_path / "stdout.txt").read_text(), (tmp_path / "stderr.txt").read_text()
     failed = lines[len(records) - 1] if records else lines[0]  # a failing line is recorded, then the script stops
