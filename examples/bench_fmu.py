@@ -28,15 +28,15 @@ exact stepping) is measured side by side in the same run:
 Targets: C master per step <= the library's cost per output point; in fmpy
 <= 1.2x the do-nothing native FMU. The machine is shared and noisy: the
 ratios, measured side by side in one run, are what counts. The native numbers
-are written to docs/_generated/bench_native.md.
+are written to out/bench_native.md (with ``--docs``: docs/_generated/bench_native.md).
 
-Run:  python examples/bench_fmu.py
+Run:  python examples/bench_fmu.py [--docs]
 
 ``--pythonfmu [--reference CHECKOUT]`` measures only the pythonfmu FMUs' stepping
 (exact stepping against the do-nothing FMU, inputs in f, the damper with an
 input in B, RK45 and Magnus4), optionally side by side with the same specs
 built by another checkout of the project, in one fmpy process, and writes
-docs/_generated/bench_fmu.md.
+out/bench_fmu.md (with ``--docs``: docs/_generated/bench_fmu.md).
 """
 
 import json
@@ -51,6 +51,8 @@ import numpy as np
 import lsc
 from fmu_build import build_fmu
 from lsc import gallery
+
+from _docs_output import HELP, output_path  # examples/ is on sys.path when run as a script
 
 ROOT = Path(__file__).resolve().parent.parent
 STEPS, STOP, REPEATS = 10_000, 10.0, 5
@@ -229,9 +231,7 @@ def main():
     table = "\n".join(lines)
     print("\nnative FMU (prescribed path, alternative completion, lambda = 2, step 1e-3), best of "
           f"{REPEATS}, side by side in one run:\n{table}")
-    gen = ROOT / "docs" / "_generated"
-    gen.mkdir(parents=True, exist_ok=True)
-    (gen / "bench_native.md").write_text(
+    output_path("bench_native.md").write_text(
         "<!-- written by examples/bench_fmu.py: do not edit -->\n"
         f"{STEPS:,} communication steps of the prescribed-path example (alternative completion, lambda = 2) over "
         f"t in [0, {STOP:g}], best of {REPEATS}, all measured side by side in one run on a shared, loaded machine "
@@ -383,9 +383,7 @@ def pythonfmu_main(reference=None, repeats=REPEATS):
         ]
     table = "\n".join(lines + [""] + ratios)
     print(table)
-    gen = ROOT / "docs" / "_generated"
-    gen.mkdir(parents=True, exist_ok=True)
-    (gen / "bench_fmu.md").write_text(
+    output_path("bench_fmu.md").write_text(
         "<!-- written by examples/bench_fmu.py --pythonfmu: do not edit -->\n"
         f"pythonfmu FMUs over t in [0, {STOP:g}] in one fmpy process, best of {repeats}, interleaved, side by side in one "
         "run on a shared, loaded machine (2 cores): read the ratios, not the absolute times. Inputs: "
@@ -401,6 +399,7 @@ if __name__ == "__main__":
     parser.add_argument("--pythonfmu", action="store_true", help="only the pythonfmu FMU's exact stepping and inputs")
     parser.add_argument("--reference", help="another checkout of the project, built and run side by side")
     parser.add_argument("--repeats", type=int, default=REPEATS)
+    parser.add_argument("--docs", action="store_true", help=HELP)
     args = parser.parse_args()
     if args.pythonfmu:
         pythonfmu_main(args.reference, args.repeats)

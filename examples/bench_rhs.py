@@ -9,10 +9,10 @@ these machines are shared and noisy:
 2. the set-up time of each completion for a random pencil with n = 200 and
    index 4 (chains 4, 3, 3), including the index determination.
 
-Run:  python examples/bench_rhs.py [n]
+Run:  python examples/bench_rhs.py [n] [--docs]  (writes out/bench_rhs.md; with --docs
+docs/_generated/bench_rhs.md, which the benchmarks page includes)
 """
 
-import sys
 import time
 import timeit
 
@@ -69,7 +69,8 @@ def main(n=200):
 
 
 if __name__ == "__main__":
-    from _docs_output import printed_to_docs
+    from _docs_output import other_args, printed_to_docs
 
     with printed_to_docs("bench_rhs", "One rhs call against hand-written code"):
-        main(int(sys.argv[1]) if len(sys.argv) > 1 else 200)
+        args = other_args()
+        main(int(args[0]) if args else 200)

@@ -8,7 +8,8 @@ a new time divided by the cost of one ``numpy.linalg.svd`` of the same J
 also reports the share of the coefficient evaluation (A, B, f and their
 derivatives), which is the problem's cost, not the completion's.
 
-Run:  python examples/bench_timevarying.py
+Run:  python examples/bench_timevarying.py [--docs]  (writes out/bench_timevarying.md; with --docs
+docs/_generated/bench_timevarying.md, which the benchmarks page includes)
 """
 
 import itertools

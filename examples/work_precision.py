@@ -30,15 +30,16 @@ method missed its tolerance). Also ``nfev`` and the constraint residual
 ``setup`` is the one-off time of ``lsc.complete`` (not in ``time``).
 
 Writes ``out/work_precision.csv`` (after every problem), and the targets as ratios measured in
-this run to ``docs/_generated/work_precision.md`` with the plot ``docs/_generated/work_precision.png``
-(with ``--only X``: ``work_precision_X.*``), which docs/performance.md includes.
+this run to ``out/work_precision.md`` with the plot ``out/work_precision.png`` (with ``--only X``:
+``work_precision_X.*``); with ``--docs`` the report and plot go to ``docs/_generated/``, which
+docs/performance.md includes.
 
 ``--only dense`` runs two problems defined here with non-polynomial sympy forcing (an index-3
 chain and an oscillator driven through an index-2 constraint, both over 20 time units), each
 with 51 and 2,001 output points: the completion's forcing is then compiled (lsc._forcing) and
 'expm' reads the dense output from the exact propagator. BLAS runs single-threaded.
 
-Run: ``python examples/work_precision.py [--quick] [--repeats R] [--only constant|time-varying|dense]``.
+Run: ``python examples/work_precision.py [--quick] [--repeats R] [--only constant|time-varying|dense] [--docs]``.
 """
 
 import os
@@ -61,6 +62,8 @@ import lsc  # noqa: E402
 from lsc import gallery  # noqa: E402
 from lsc.gallery import Problem, StateSpace  # noqa: E402
 
+from _docs_output import HELP, output_path  # noqa: E402  (examples/ is on sys.path when run as a script)
+
 try:
     from sksundae.ida import IDA
 except ImportError:  # the IDA and CVODE rows are skipped, and said so
@@ -68,7 +71,6 @@ except ImportError:  # the IDA and CVODE rows are skipped, and said so
 CVODE_OK = IDA is not None
 
 OUT = Path(__file__).resolve().parent.parent / "out"  # like main_job.py: gitignored
-GENERATED = Path(__file__).resolve().parent.parent / "docs" / "_generated"  # included by docs/performance.md
 N_OUT = 51
 T = sympy.Symbol("t")
 
@@ -426,6 +428,7 @@ def main():
     parser.add_argument("--only", choices=["constant", "time-varying", "dense"],
                         help="one part of the problems (parts can run side by side on two cores); 'dense': two "
                              "problems with sympy forcing, 51 and 2,001 output points")
+    parser.add_argument("--docs", action="store_true", help=HELP)
     parser.add_argument("--report-only", action="store_true",
                         help="re-render the Markdown report from the CSV of an earlier run (no measuring)")
     args = parser.parse_args()
@@ -457,7 +460,6 @@ def main():
     print()
     text = report(rows, rhs_rows)
     print(text)
-    GENERATED.mkdir(parents=True, exist_ok=True)
     what = {"dense": "two problems with sympy forcing, 51 and 2,001 output points",
             "constant": "constant-coefficient gallery problems", "time-varying": "time-varying gallery problems",
             None: "gallery problems"}[args.only]
@@ -465,9 +467,10 @@ def main():
               f"`examples/work_precision.py{' --only ' + args.only if args.only else ''}"
               f"{' --quick' if args.quick else ''}` (single-threaded BLAS, minimum of {args.repeats} repeats "
               f"after a warm-up). Errors are max |x - x*| / (1 + |x*|) over the output grid.\n\n")
-    (GENERATED / f"{stem}.md").write_text(header + text + "\n")  # the figure is included next to it by the docs pages
-    if plot(rows, GENERATED / f"{stem}.png"):
-        print(f"\nwrote {OUT / f'{stem}.csv'}, {GENERATED / f'{stem}.md'} and {GENERATED / f'{stem}.png'}")
+    report_md, figure = output_path(f"{stem}.md", args.docs), output_path(f"{stem}.png", args.docs)
+    report_md.write_text(header + text + "\n")  # the figure is included next to it by the docs pages
+    if plot(rows, figure):
+        print(f"\nwrote {OUT / f'{stem}.csv'}, {report_md} and {figure}")
 
 
 if __name__ == "__main__":

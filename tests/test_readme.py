@@ -2,10 +2,11 @@
 
 A block runs in a fresh subprocess whose working folder holds a copy of
 ``examples/`` (the snippets use paths relative to the repository). When a
-```text block follows under "prints", the output must match it: the same words,
-numbers to 1e-3 relative (numbers below 1e-6 in magnitude only have to stay
-below 1e-6: they are rounding-level residuals). Blocks not meant to run are
-written as ```text or ```bash.
+```text block follows under "prints", the output must match it exactly, line by
+line and character by character, with one stated tolerance: a number below
+``ROUNDING`` (1e-9) in magnitude on both sides only has to stay below it, since
+such values are rounding-level residuals whose digits depend on the BLAS and
+the CPU. Blocks not meant to run are written as ```text or ```bash.
 """
 import os
 import re
@@ -29,19 +30,30 @@ def snippets():
             yield pytest.param(m.group(1), m.group(2), id=f"{page.relative_to(ROOT)}-{i}")
 
 
+ROUNDING = 1e-9
+
+
 def same_output(found, expected):
+    """The printed text equals the page's, apart from numbers below ROUNDING on both sides."""
     f_lines, e_lines = found.strip().splitlines(), expected.strip().splitlines()
     if len(f_lines) != len(e_lines):
         return False
     for fl, el in zip(f_lines, e_lines):
-        if NUMBER.sub("#", fl).split() != NUMBER.sub("#", el).split():
+        if NUMBER.sub("#", fl.rstrip()) != NUMBER.sub("#", el.rstrip()):
             return False
-        for a, b in zip(map(float, NUMBER.findall(fl)), map(float, NUMBER.findall(el))):
-            if max(abs(a), abs(b)) < 1e-6:
-                continue
-            if abs(a - b) > 1e-3 * abs(b):
+        for a, b in zip(NUMBER.findall(fl), NUMBER.findall(el)):
+            if a != b and not max(abs(float(a)), abs(float(b))) < ROUNDING:
                 return False
     return True
+
+
+def test_same_output_is_exact_above_rounding_level():
+    assert same_output("err: 4.8e-07, u = -0.9636\n", "err: 4.8e-07, u = -0.9636")
+    assert not same_output("err: 4.8e-07", "err: 4.7e-07")  # a wrong digit fails
+    assert not same_output("u = -0.9636", "u = -0.9637")
+    assert not same_output("u = -0.9636", "u  = -0.9636")  # the words and spacing too
+    assert same_output("residual 2.0e-12", "residual 3.1e-13")  # both at rounding level
+    assert not same_output("residual 2.0e-08", "residual 3.1e-13")
 
 
 def test_there_are_snippets():
