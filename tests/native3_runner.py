@@ -5,11 +5,12 @@ Reads a scenario from stdin, {"kind": ..., ...}:
             -> {"results": [{"time": [...], name: [...]}, ...]} (fmpy's simulate_fmu on each FMU)
   rollback: {"fmu", "dt", "steps", "at", "serialize", "outputs"}
             -> {"first": [...], "again": [...]} (values as float.hex after each step past `at`)
-  bad:      {"fmu", "outputs"} -> {"calls": {name: status}, "logs": [...]} (hostile calls on one instance each)
+  bad:      {"fmu", "outputs"} -> {"calls": {name: status}, "logs": [...]} (hostile calls, Co-Simulation)
+  bad_me:   {"fmu"} -> the same on a Model Exchange instance
 """
 import json
 import sys
-from ctypes import byref, c_double, c_size_t, c_uint32
+from ctypes import byref, c_bool, c_double, c_size_t, c_uint32
 
 import numpy as np
 
@@ -120,6 +121,51 @@ def bad(sc):
     return {"calls": calls, "logs": logs}
 
 
+def bad_me(sc):
+    """Hostile calls on a Model Exchange instance; their status (0 OK .. 4 Fatal)."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi1 import FMICallException
+    from fmpy.fmi3 import FMU3Model
+
+    logs, calls = [], {}
+
+    def status(name, f):
+        try:
+            f()
+            calls[name] = 0
+        except FMICallException as exc:
+            calls[name] = exc.status
+
+    md = read_model_description(sc["fmu"])
+    fmu = FMU3Model(guid=md.guid, unzipDirectory=extract(sc["fmu"]), modelIdentifier=md.modelExchange.modelIdentifier,
+                    instanceName="lsc3me")
+    fmu.instantiate(logMessage=lambda env, status, category, message: logs.append(message.decode()))
+    n = len(md.derivatives)
+    status("completedIntegratorStep_before_init", lambda: fmu.completedIntegratorStep())
+    fmu.enterInitializationMode(startTime=0.0)
+    fmu.exitInitializationMode()
+    status("updateDiscreteStates", lambda: fmu.updateDiscreteStates())
+    flags, last = [c_bool() for _ in range(3)], c_double()
+    status("doStep_on_me", lambda: fmu.fmi3DoStep(fmu.component, 0.0, 0.1, False, *map(byref, flags), byref(last)))
+    fmu.enterContinuousTimeMode()
+    status("setContinuousStates_nan", lambda: fmu.setContinuousStates((c_double * n)(*([float("nan")] * n)), n))
+    status("setContinuousStates_wrong_n", lambda: fmu.setContinuousStates((c_double * (n + 1))(), n + 1))
+    status("getEventIndicators_one", lambda: fmu.fmi3GetEventIndicators(fmu.component, (c_double * 1)(), 1))
+    status("getEventIndicators_none", lambda: fmu.fmi3GetEventIndicators(fmu.component, None, 0))
+    status("setTime_nan", lambda: fmu.setTime(float("nan")))
+    status("set_lambda_in_continuous_time", lambda: fmu.setFloat64([0], [3.0]))
+    nx = c_size_t()
+    status("getNumberOfContinuousStates", lambda: fmu.fmi3GetNumberOfContinuousStates(fmu.component, byref(nx)))
+    calls["nx"] = nx.value
+    fmu.setTime(0.5)
+    der = (c_double * n)()
+    status("getDerivatives", lambda: fmu.fmi3GetContinuousStateDerivatives(fmu.component, der, n))
+    calls["derivatives_finite"] = all(np.isfinite(list(der)))
+    fmu.terminate()
+    fmu.freeInstance()
+    return {"calls": calls, "logs": logs}
+
+
 if __name__ == "__main__":
     scenario = json.load(sys.stdin)
-    print(json.dumps({"simulate": simulate, "rollback": rollback, "bad": bad}[scenario["kind"]](scenario)))
+    print(json.dumps({"simulate": simulate, "rollback": rollback, "bad": bad, "bad_me": bad_me}[scenario["kind"]](scenario)))

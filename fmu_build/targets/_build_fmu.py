@@ -89,7 +89,7 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
         spec.k = k
     if target not in ("pythonfmu", "native"):
         raise ValueError(f"`target` must be one of ('pythonfmu', 'native'); found {target!r}.")
-    if isinstance(fmi_version, bool) or fmi_version not in (2, 3):
+    if type(fmi_version) is not int or fmi_version not in (2, 3):  # not True, not 3.0
         raise ValueError(f"`fmi_version` must be 2 or 3; found {fmi_version!r}.")
     if fmi_version == 3 and target != "native":
         raise ValueError("`fmi_version` 3 needs target='native' (the pythonfmu target writes FMI 2.0 only).")

@@ -360,7 +360,7 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     """Build the native FMU of a resolved `ModelSpec` (see `fmu_build.build_fmu`, ``target='native'``)."""
     from .._model import _numeric_dae
 
-    if fmi_version not in (2, 3) or isinstance(fmi_version, bool):
+    if type(fmi_version) is not int or fmi_version not in (2, 3):
         raise ValueError(f"`fmi_version` must be 2 or 3; found {fmi_version!r}.")
     sources = _FIXED_SOURCES + (_FMI3_SOURCES if fmi_version == 3 else ())
     kpars = _check_expressible(spec, fix_parameters)
