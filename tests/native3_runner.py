@@ -7,6 +7,8 @@ Reads a scenario from stdin, {"kind": ..., ...}:
             -> {"first": [...], "again": [...]} (values as float.hex after each step past `at`)
   bad:      {"fmu", "outputs"} -> {"calls": {name: status}, "logs": [...]} (hostile calls, Co-Simulation)
   bad_me:   {"fmu"} -> the same on a Model Exchange instance
+  couple:   {"plant", "fmu", "fmu2", "dt", "steps"}: the plant's output x drives our input p; the same x
+            sequence drives the FMI 2.0 build -> {"t", "x", "y3", "y2", "res3"}
 """
 import json
 import sys
@@ -166,6 +168,47 @@ def bad_me(sc):
     return {"calls": calls, "logs": logs}
 
 
+def couple(sc):
+    """A plain fmpy master: plant (the Reference FMUs' Dahlquist, FMI 3.0) -> our FMI 3.0 FMU, and the FMI 2.0 build."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    logs = []
+    plant, pvr = _slave(sc["plant"], logs)
+    ours, vr = _slave(sc["fmu"], logs)
+    md2 = read_model_description(sc["fmu2"])
+    vr2 = {v.name: v.valueReference for v in md2.modelVariables}
+    ours2 = FMU2Slave(guid=md2.guid, unzipDirectory=extract(sc["fmu2"]), modelIdentifier=md2.coSimulation.modelIdentifier,
+                      instanceName="lsc2")
+    ours2.instantiate()
+    ours2.setupExperiment(startTime=0.0)
+    for fmu in (plant, ours):
+        fmu.enterInitializationMode(startTime=0.0)
+        fmu.exitInitializationMode()
+    ours2.enterInitializationMode()
+    ours2.exitInitializationMode()
+    out = {"t": [], "x": [], "y3": [], "y2": [], "res3": [], "logs": logs}
+    t, dt = 0.0, sc["dt"]
+    for _ in range(sc["steps"]):
+        x = plant.getFloat64([pvr["x"]])[0]
+        ours.setFloat64([vr["p"]], [x])
+        ours2.setReal([vr2["p"]], [x])
+        for fmu in (plant, ours):
+            fmu.doStep(t, dt)
+        ours2.doStep(t, dt)
+        t += dt
+        out["t"].append(t)
+        out["x"].append(plant.getFloat64([pvr["x"]])[0])
+        y, res = ours.getFloat64([vr["y"], vr["constraint_residual"]])
+        out["y3"].append(y)
+        out["res3"].append(res)
+        out["y2"].append(ours2.getReal([vr2["y"]])[0])
+    for fmu in (plant, ours, ours2):
+        fmu.terminate()
+        fmu.freeInstance()
+    return out
+
+
 if __name__ == "__main__":
     scenario = json.load(sys.stdin)
-    print(json.dumps({"simulate": simulate, "rollback": rollback, "bad": bad, "bad_me": bad_me}[scenario["kind"]](scenario)))
+    print(json.dumps({"simulate": simulate, "rollback": rollback, "bad": bad, "bad_me": bad_me, "couple": couple}[scenario["kind"]](scenario)))
