@@ -7,6 +7,7 @@ Reads a scenario from stdin, {"kind": ..., ...}:
             -> {"first": [...], "again": [...]} (values as float.hex after each step past `at`)
   bad:      {"fmu", "outputs"} -> {"calls": {name: status}, "logs": [...]} (hostile calls, Co-Simulation)
   bad_me:   {"fmu"} -> the same on a Model Exchange instance
+  discard:  {"fmu", "dt", "steps"} -> fmi3DoStep's status and output flags at each step (raw calls)
   couple:   {"plant", "fmu", "fmu2", "dt", "steps"}: the plant's output x drives our input p; the same x
             sequence drives the FMI 2.0 build -> {"t", "x", "y3", "y2", "res3"}
 """
@@ -168,6 +169,26 @@ def bad_me(sc):
     return {"calls": calls, "logs": logs}
 
 
+def discard(sc):
+    """Raw fmi3DoStep calls (fmpy's wrapper raises on a discard before the flags can be read)."""
+    logs = []
+    fmu, _ = _slave(sc["fmu"], logs)
+    fmu.enterInitializationMode(startTime=0.0)
+    fmu.exitInitializationMode()
+    step = fmu._functions["fmi3DoStep"]
+    t, steps = 0.0, []
+    for _ in range(sc["steps"]):
+        flags, last = [c_bool(True) for _ in range(3)], c_double(-1.0)
+        status = step(fmu.component, t, sc["dt"], False, *map(byref, flags), byref(last))
+        steps.append({"t": t, "status": status, "eventHandlingNeeded": flags[0].value,
+                      "terminateSimulation": flags[1].value, "earlyReturn": flags[2].value,
+                      "lastSuccessfulTime": last.value})
+        t = last.value
+    fmu.terminate()
+    fmu.freeInstance()
+    return {"steps": steps, "logs": logs}
+
+
 def couple(sc):
     """A plain fmpy master: plant (the Reference FMUs' Dahlquist, FMI 3.0) -> our FMI 3.0 FMU, and the FMI 2.0 build."""
     from fmpy import extract, read_model_description
@@ -211,4 +232,4 @@ def couple(sc):
 
 if __name__ == "__main__":
     scenario = json.load(sys.stdin)
-    print(json.dumps({"simulate": simulate, "rollback": rollback, "bad": bad, "bad_me": bad_me, "couple": couple}[scenario["kind"]](scenario)))
+    print(json.dumps({"simulate": simulate, "rollback": rollback, "bad": bad, "bad_me": bad_me, "couple": couple, "discard": discard}[scenario["kind"]](scenario)))

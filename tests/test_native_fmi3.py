@@ -69,6 +69,26 @@ def test_library_exports_fmi3_functions_only(built, tmp_path):
     assert all(s.startswith("fmi3") for s in symbols)
 
 
+def test_fmpy_compile_rebuilds_from_sources(built, tmp_path):
+    """sources/buildDescription.xml names the one file to compile: `fmpy compile` rebuilds the binary."""
+    fmpy_cli = shutil.which("fmpy")
+    if fmpy_cli is None or shutil.which("cmake") is None:
+        pytest.skip("needs the fmpy command and cmake")
+    fmu = tmp_path / "PrescribedPath.fmu"
+    with zipfile.ZipFile(built["prescribed_path", 3]) as src, zipfile.ZipFile(fmu, "w") as dst:
+        for item in src.infolist():
+            if not item.filename.startswith("binaries/"):
+                dst.writestr(item, src.read(item))
+    proc = subprocess.run([fmpy_cli, "compile", str(fmu)], capture_output=True,
+                          text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    with zipfile.ZipFile(fmu) as zf:
+        assert "binaries/x86_64-linux/PrescribedPath.so" in zf.namelist()
+    original, rebuilt = run({"kind": "simulate", "fmus": [str(built["prescribed_path", 3]), str(fmu)],
+                             "fmi_type": "CoSimulation", "stop": 1.0, "dt": 0.01, "outputs": ["y"]})["results"]
+    assert np.abs(np.array(original["y"]) - rebuilt["y"]).max() <= 1e-12
+
+
 def _table(t):
     return {"time": t.tolist(), "p": (0.5 * np.sin(2 * t) + 0.1 * t).tolist()}
 
@@ -141,6 +161,21 @@ def test_bad_model_exchange_calls_are_refused(built):
     for reason in ("x[0] = nan is not finite", "nx = 4, expected 3", "no event indicators", "time nan is not finite",
                    "in Event Mode only"):
         assert reason in logs, reason
+
+
+def test_do_step_contract_on_a_forcing_that_turns_infinite(tmp_path):
+    """f = 1 / (1 - t) in steps of 0.25: the step from 0.75 to the pole is discarded, lastSuccessfulTime stays
+    0.75, and terminateSimulation turns true when the same step is discarded again (no retry can succeed)."""
+    spec = {"model": {"name": "Blowup"}, "states": {"x": {}},
+            "equations": {"A": [[1]], "B": [[1]], "f": ["1/(1 - t)"]}, "experiment": {"stop": 2.0, "step": 0.25}}
+    fmu = build_fmu(spec, tmp_path, target="native", fmi_version=3)
+    out = run({"kind": "discard", "fmu": str(fmu), "dt": 0.25, "steps": 5})
+    steps = out["steps"]
+    assert [s["status"] for s in steps] == [0, 0, 0, 2, 2]
+    assert [s["lastSuccessfulTime"] for s in steps] == [0.25, 0.5, 0.75, 0.75, 0.75]
+    assert [s["terminateSimulation"] for s in steps] == [False, False, False, False, True]
+    assert not any(s["eventHandlingNeeded"] or s["earlyReturn"] for s in steps)
+    assert any("terminateSimulation is now true" in line for line in out["logs"]), out["logs"]
 
 
 def test_fmi_version_is_checked(tmp_path):

@@ -71,6 +71,8 @@ static void forward_log(fmi2ComponentEnvironment env, fmi2String instanceName, f
     snprintf(text, sizeof text, "%s%s", name, rest);
     if (name[0] == '\0' && strncmp(text, "fmi2", 4) == 0) text[3] = '3'; /* fmi2DoStep -> fmi3DoStep, ... */
     for (p = strstr(text, "FMI 2.0"); p != NULL; p = strstr(p, "FMI 2.0")) p[4] = '3';
+    p = strstr(text, "fmi2Terminated is now true"); /* FMI 3.0 says it through fmi3DoStep's terminateSimulation */
+    if (p != NULL) snprintf(p, sizeof text - (size_t)(p - text), "terminateSimulation is now true");
     host->log(host->env, (fmi3Status)status, category, text);
 }
 
