@@ -13,7 +13,7 @@ Reads a scenario from stdin, {"kind": ..., ...}:
 """
 import json
 import sys
-from ctypes import byref, c_bool, c_double, c_size_t, c_uint32
+from ctypes import byref, c_bool, c_double, c_int32, c_size_t, c_uint32
 
 import numpy as np
 
@@ -119,6 +119,12 @@ def bad(sc):
     status("getNumberOfContinuousStates_on_cs", lambda: fmu.fmi3GetNumberOfContinuousStates(fmu.component, byref(n)))
     status("good_step", lambda: fmu.doStep(0.0, 0.1))
     calls["time_after_good_step"] = fmu.getFloat64([vr["time"]])[0]
+    first = (c_double * 1)()
+    status("outputDerivative_order1", lambda: fmu.fmi3GetOutputDerivatives(fmu.component, (c_uint32 * 1)(x), 1,
+                                                                           (c_int32 * 1)(1), first, 1))
+    calls["outputDerivative_minus_der"] = first[0] - fmu.getFloat64([vr["der(" + sc["outputs"][0] + ")"]])[0]
+    status("outputDerivative_order5", lambda: fmu.fmi3GetOutputDerivatives(fmu.component, (c_uint32 * 1)(x), 1,
+                                                                           (c_int32 * 1)(5), first, 1))
     fmu.terminate()
     fmu.freeInstance()
     return {"calls": calls, "logs": logs}

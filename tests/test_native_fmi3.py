@@ -140,12 +140,14 @@ def test_bad_calls_are_refused_with_a_reason(built):
                      "step_after_nan": discard, "negative_step": error, "wrong_communication_point": error,
                      "enterStepMode": error, "set_time_variable": error, "getInt32": error,
                      "getDirectionalDerivative": error, "setFMUState_null": error,
-                     "getNumberOfContinuousStates_on_cs": error, "good_step": ok, "time_after_good_step": 0.1}
+                     "getNumberOfContinuousStates_on_cs": error, "good_step": ok, "time_after_good_step": 0.1,
+                     "outputDerivative_order1": ok, "outputDerivative_minus_der": 0.0, "outputDerivative_order5": error}
     logs = "\n".join(out["logs"])
     for reason in ("fmi3DoStep: not allowed", "unknown value reference 100000", "nValues = 2",
                    "rejected value nan for value reference 0", "h = -0.1", "differs from the FMU time",
                    "hasEventMode=false", "is time, the independent variable", "no Int32 variables",
-                   "providesDirectionalDerivatives=false", "FMUstate is NULL", "a Model Exchange function"):
+                   "providesDirectionalDerivatives=false", "FMUstate is NULL", "a Model Exchange function",
+                   "fmi3GetOutputDerivatives: order 5 must be 1..4"):
         assert reason in logs, reason
     assert "fmi2" not in logs  # the core's messages name the FMI 3.0 functions
 
