@@ -7,7 +7,7 @@
  * halfway) and one Model Exchange instance (explicit Euler on the FMU's derivatives
  * with the same step). Prints "t x..." of the first instance after each step, then
  * "me x..." at the end. Also makes calls a host must not make (NULL instance, wrong
- * sizes, wrong order) and checks they are refused. Exit status 0 only if every call
+ * sizes, wrong order, an interface it does not offer) and checks they are refused. Exit status 0 only if every call
  * returned what it must. */
 #include <dlfcn.h>
 #include <stdio.h>
@@ -50,12 +50,17 @@ int main(int argc, char **argv) {
         LOAD(fmi3UpdateDiscreteStates) LOAD(fmi3EnterContinuousTimeMode) LOAD(fmi3SetTime)
         LOAD(fmi3SetContinuousStates) LOAD(fmi3GetContinuousStates) LOAD(fmi3GetContinuousStateDerivatives)
         LOAD(fmi3CompletedIntegratorStep) LOAD(fmi3GetOutputDerivatives) LOAD(fmi3GetClock)
+        LOAD(fmi3InstantiateScheduledExecution)
         const double dt = atof(argv[4]);
         fmi3Int32 order = 1;
         /* refused without a crash */
         EXPECT(fmi3DoStep(NULL, 0.0, dt, fmi3False, &event, &stop, &early, &last), fmi3Error);
         if (fmi3InstantiateCoSimulation("x", "{wrong}", NULL, fmi3False, fmi3False, fmi3False, fmi3False, NULL, 0,
                                         NULL, logger, NULL) != NULL) return 4;
+        if (fmi3InstantiateCoSimulation("e", argv[2], NULL, fmi3False, fmi3False, fmi3True, fmi3False, NULL, 0, NULL,
+                                        logger, NULL) != NULL) return 4; /* eventModeUsed: hasEventMode is false */
+        if (fmi3InstantiateScheduledExecution("s", argv[2], NULL, fmi3False, fmi3False, NULL, logger, NULL, NULL,
+                                              NULL) != NULL) return 4;
         a = fmi3InstantiateCoSimulation("a", argv[2], NULL, fmi3False, fmi3False, fmi3False, fmi3False, NULL, 0, NULL,
                                         logger, NULL);
         b = fmi3InstantiateCoSimulation("b", argv[2], NULL, fmi3False, fmi3False, fmi3False, fmi3False, NULL, 0, NULL,
