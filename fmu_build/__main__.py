@@ -205,12 +205,16 @@ def _add_native_flags(build):
                        help="build a native C FMU (Co-Simulation and Model Exchange; constant A and B only)")
     build.add_argument("--fix-parameters", action="store_true",
                        help="with --native: fix tunable parameters that enter A or B at their spec values")
+    build.add_argument("--fmi-version", type=int, choices=[2, 3], default=2,
+                       help="with --native: FMI 2.0 (default) or FMI 3.0")
 
 
 def _native_options(args):
     if args.fix_parameters and not args.native:
         raise ValueError("`--fix-parameters` applies to --native builds only.")
-    return {"target": "native", "fix_parameters": args.fix_parameters} if args.native else {}
+    if args.fmi_version != 2 and not args.native:
+        raise ValueError("`--fmi-version 3` applies to --native builds only.")
+    return {"target": "native", "fix_parameters": args.fix_parameters, "fmi_version": args.fmi_version} if args.native else {}
 
 
 def _add_sweep(sub):

@@ -9,7 +9,7 @@ __all__ = ["build_fmu"]
 
 
 def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, k=None, target="pythonfmu",
-              fix_parameters=False):
+              fix_parameters=False, fmi_version=2):
     """Build an FMI 2.0 Co-Simulation FMU of a linear DAE's completion.
 
     Parameters
@@ -29,6 +29,9 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
     fix_parameters : bool, optional
         Native target: fix tunable parameters that enter ``A`` or ``B`` at
         their spec values instead of refusing the spec.
+    fmi_version : {2, 3}, optional
+        Native target: FMI 2.0 (default) or FMI 3.0 (Co-Simulation and Model
+        Exchange over the same C core; see docs/native_fmu.md).
 
     Returns
     -------
@@ -40,7 +43,7 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
     SpecError
         Listing every problem of the spec.
     ValueError
-        When `k` or `target` is out of range (a bad `model_name` is a `SpecError`, itself a ValueError).
+        When `k`, `target` or `fmi_version` is out of range (a bad `model_name` is a `SpecError`, itself a ValueError).
     lsc.IndexDeterminationError
         When the DAE is not solvable: no FMU is written.
 
@@ -86,6 +89,10 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
         spec.k = k
     if target not in ("pythonfmu", "native"):
         raise ValueError(f"`target` must be one of ('pythonfmu', 'native'); found {target!r}.")
+    if type(fmi_version) is not int or fmi_version not in (2, 3):  # not True, not 3.0
+        raise ValueError(f"`fmi_version` must be 2 or 3; found {fmi_version!r}.")
+    if fmi_version == 3 and target != "native":
+        raise ValueError("`fmi_version` 3 needs target='native' (the pythonfmu target writes FMI 2.0 only).")
     # k + 2 derivatives are taken symbolically; without completion.k, k is at most the index (<= n, <= 10)
     problems = derivative_problems(spec, (spec.k if spec.k is not None else min(spec.n, 10)) + 2)
     if problems:
@@ -93,7 +100,7 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
     if target == "native":
         from .native import build_native
 
-        return build_native(spec, dest, fix_parameters=fix_parameters)
+        return build_native(spec, dest, fix_parameters=fix_parameters, fmi_version=fmi_version)
     from .pythonfmu import build_pythonfmu
 
     return build_pythonfmu(spec, dest)

@@ -30,6 +30,7 @@ import numpy as np
 import lsc
 
 from .._description import model_description
+from .._description3 import build_description3, model_description3
 from ._runtime import start_name
 from .._model import _mangled
 
@@ -38,6 +39,8 @@ __all__ = ["build_native", "NativeTargetError", "C_FLAGS"]
 _TEMPLATES = Path(__file__).parent.parent / "templates"  # fmu_build/templates
 _FIXED_SOURCES = ("fmi2Functions.c", "lsc_fmu.h", "lsc_model.c", "fmu_state.c", "model_exchange.c", "cosimulation.c", "lsc_linalg.h",
                   "fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+# FMI 3.0: a thin API layer over the same core (fmi3Functions.c includes fmi2Functions.c) and its headers
+_FMI3_SOURCES = ("fmi3Functions.c", "fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
 TAYLOR_DEGREE = 3  # the forcing over a step is its Taylor polynomial of this degree (as lsc's method='expm')
 # any warning is an error: a C compiler that truncates a constant or converts a value only warns
 C_FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror")
@@ -56,6 +59,18 @@ def _platform():
     if sys.platform == "win32":
         return "win64", ".dll"
     raise NativeTargetError(f"the native target does not know the FMI platform name of {sys.platform!r}")
+
+
+def _platform3():
+    """The FMI 3.0 platform tuple (``x86_64-linux``, ...) and the library suffix."""
+    import platform
+
+    machine = {"amd64": "x86_64", "x86_64": "x86_64", "arm64": "aarch64", "aarch64": "aarch64"}.get(
+        platform.machine().lower())
+    system = {"linux64": "linux", "darwin64": "darwin", "win64": "windows"}[_platform()[0]]
+    if machine is None:
+        raise NativeTargetError(f"the native target does not know the FMI 3.0 name of the machine {platform.machine()!r}")
+    return f"{machine}-{system}", _platform()[1]
 
 
 def find_compiler():
@@ -333,18 +348,21 @@ def _variables(spec, *, fpars, kpars, vr, lam_tunable, method, linear):
     return variables
 
 
-def _compile(src_dir, out_path, compiler, extra_flags=()):
-    cmd = [*compiler, *C_FLAGS, *extra_flags, "-I", str(src_dir), "-o", str(out_path), str(src_dir / "fmi2Functions.c"), "-lm"]
+def _compile(src_dir, out_path, compiler, extra_flags=(), main="fmi2Functions.c"):
+    cmd = [*compiler, *C_FLAGS, *extra_flags, "-I", str(src_dir), "-o", str(out_path), str(src_dir / main), "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling the native FMU failed ({' '.join(cmd)}):\n{proc.stderr}")
     return cmd
 
 
-def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=False):
+def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=False, fmi_version=2):
     """Build the native FMU of a resolved `ModelSpec` (see `fmu_build.build_fmu`, ``target='native'``)."""
     from .._model import _numeric_dae
 
+    if type(fmi_version) is not int or fmi_version not in (2, 3):
+        raise ValueError(f"`fmi_version` must be 2 or 3; found {fmi_version!r}.")
+    sources = _FIXED_SOURCES + (_FMI3_SOURCES if fmi_version == 3 else ())
     kpars = _check_expressible(spec, fix_parameters)
     compiler = find_compiler()
     platform, suffix = _platform()
@@ -364,18 +382,21 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     lam_note = {"alternative": "lambda tunable (G and the forcing map are affine in lambda, checked at build time)",
                 "stabilized": "lambda fixed at build time (the stabilized completion is not affine in lambda)",
                 "standard": "no lambda (standard completion)"}[spec.method]
-    note = f"native C, constant A and B; {spec.method} completion, {lam_note}.{fixed_note}"
+    note = f"native C{', FMI 3.0' if fmi_version == 3 else ''}, constant A and B; {spec.method} completion, {lam_note}.{fixed_note}"
     variables = _variables(spec, fpars=fpars, kpars=kpars, vr=info["vr"], lam_tunable=lam_tunable,
                            method=spec.method, linear=info["linear"])
     digest = hashlib.sha256()
-    for part in (header, *((_TEMPLATES / name).read_text() for name in _FIXED_SOURCES), repr(variables),
+    if fmi_version == 3:  # value references unique over all types; time is a variable
+        variables = _variables3(variables, info["nr"])
+    for part in (header, *((_TEMPLATES / name).read_text() for name in sources), repr(variables),
                  repr(sorted(spec.experiment.items()))):
         digest.update(part.encode())
     guid = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
     header = header.replace(placeholder, guid)
     flags_common = dict(needsExecutionTool=False, canBeInstantiatedOnlyOncePerProcess=False, canNotUseMemoryManagementFunctions=False,
                         canGetAndSetFMUstate=True, canSerializeFMUstate=True, providesDirectionalDerivative=False)
-    xml = model_description(
+    describe = _describe3 if fmi_version == 3 else model_description
+    xml = describe(
         model_name=ident, guid=guid, description=f"{spec.description or ident} [{note}]", model_identifier=ident,
         variables=variables, source_files=["fmi2Functions.c"],
         model_exchange=dict(flags_common, completedIntegratorStepNotNeeded=False),
@@ -390,11 +411,14 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     with tempfile.TemporaryDirectory(prefix="lsc_native_") as tmp:
         src = Path(tmp) / "sources"
         src.mkdir()
-        for name in _FIXED_SOURCES:
+        for name in sources:
             shutil.copy(_TEMPLATES / name, src / name)
         (src / "model.h").write_text(header)
+        if fmi_version == 3:
+            platform, suffix = _platform3()
+            (src / "buildDescription.xml").write_bytes(build_description3(ident, "fmi3Functions.c"))
         lib = Path(tmp) / f"{ident}{suffix}"
-        _compile(src, lib, compiler, extra_cflags)
+        _compile(src, lib, compiler, extra_cflags, main="fmi3Functions.c" if fmi_version == 3 else "fmi2Functions.c")
         # a unique name created with mode 0666 less the umask (mkstemp's 0600 would make the FMU private)
         part = target.parent / f".{ident}.{uuid.uuid4().hex}.fmu.part"
         os.close(os.open(part, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666))
@@ -411,3 +435,26 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     if not quiet:
         print(f"lsc-fmu: {target.name}: {note}", file=sys.stderr)
     return target
+
+
+def _variables3(variables, nr):
+    """The FMI 2.0 variable list for FMI 3.0: project_initial (a Boolean) at value reference `nr`, time at `nr` + 1."""
+    out = [{"name": "time", "type": "Real", "vr": nr + 1, "causality": "independent", "variability": "continuous",
+            "unit": "s", "description": "simulation time"}]
+    for v in variables:
+        out.append(dict(v, vr=nr) if v["type"] == "Boolean" else dict(v))
+    return out
+
+
+def _describe3(*, model_name, guid, description, model_identifier, variables, source_files, model_exchange,
+               co_simulation, experiment, log_categories):
+    """`model_description3` with the FMI 3.0 names of the interfaces' capability flags."""
+    del source_files  # FMI 3.0 lists them in sources/buildDescription.xml
+    common = dict(canGetAndSetFMUState=True, canSerializeFMUState=True, needsExecutionTool=False,
+                  canBeInstantiatedOnlyOncePerProcess=False, providesDirectionalDerivatives=False)
+    return model_description3(
+        model_name=model_name, token=guid, description=description, model_identifier=model_identifier,
+        variables=variables, experiment=experiment, log_categories=log_categories,
+        model_exchange=dict(common, needsCompletedIntegratorStep=not model_exchange["completedIntegratorStepNotNeeded"]),
+        co_simulation=dict(common, canHandleVariableCommunicationStepSize=True,
+                           maxOutputDerivativeOrder=co_simulation["maxOutputDerivativeOrder"], hasEventMode=False))
