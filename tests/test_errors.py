@@ -232,3 +232,76 @@ def test_a_constant_sympy_rate_is_a_constant():
 def test_exceptions_subclass_builtins():
     assert issubclass(DimensionError, ValueError)
     assert issubclass(IndexDeterminationError, ValueError)
+
+
+# -- a callable coefficient that misbehaves ---------------------------------------------------------
+def raises_after(t_bad, exc):
+    """f = (sin t, 0) until `t_bad`, then raises `exc` (any exception, not only ValueError)."""
+    def f(s, d):
+        if s > t_bad:
+            raise exc
+        return [np.sin(s + d * np.pi / 2), 0.0]
+    return f
+
+
+@pytest.mark.parametrize("exc", [ZeroDivisionError("division by zero"), KeyError("table"), RuntimeError("lookup")])
+@pytest.mark.parametrize("solver", ["RK45", "Radau", "CVODE"])
+def test_a_callable_raising_anything_mid_run_keeps_the_trajectory(exc, solver):
+    dae = LinearDAE(N2, I2, raises_after(0.3, exc))
+    res = solve_dae(dae, (0.0, 1.0), [0.0, 0.0], lam=1.0, method=solver, rtol=1e-10, atol=1e-12)
+    assert not res.success and res.status == -2
+    assert "`f(t, d)` raised " + type(exc).__name__ in res.message and "at t=" in res.message, res.message
+    assert res.t.size >= 2 and res.t[0] == 0.0 and res.t[-1] <= 0.3 + 1e-12
+    assert chain_error(res) < 1e-8
+
+
+@pytest.mark.parametrize("name, make", [
+    ("f", lambda h: LinearDAE(N2, I2, h)),
+    ("B", lambda h: LinearDAE(N2, lambda s, d: np.eye(2) * (1 + 1j) if d == 0 else np.zeros((2, 2)))),
+])
+def test_complex_values_from_a_callable_are_refused(name, make):
+    h = lambda s, d: np.array([np.sin(s + d * np.pi / 2) + 1j, 0.0])  # noqa: E731
+    with pytest.raises(TypeError, match=rf"`{name}\(t, d\)` must return real numbers.*complex"):
+        complete(make(h), "alternative", lam=1.0).rhs(0.0, np.zeros(2))
+
+
+def test_complex_values_from_a_vectorized_callable_forcing_are_refused():
+    """The forcing of a constant completion calls f on an array of times when it can: complex is refused there too."""
+    def f(s, d):
+        value = np.sin(s + d * np.pi / 2) + (1j if np.ndim(s) else 0)  # complex only when vectorized
+        return np.array([value, 0.0 * s])
+    c = complete(LinearDAE(N2, I2, f), "alternative", lam=1.0)
+    with pytest.raises(TypeError, match=r"`f\(t, d\)` must return real numbers.*complex"):
+        solve_completion(c, (0.0, 1.0), [0.0, 0.0], method="expm", max_step=0.05)
+
+
+def test_a_complex_constant_array_is_refused():
+    with pytest.raises(TypeError, match="`A` must be real"):
+        LinearDAE(np.array([[1 + 0.5j, 0], [0, 1]]), I2)
+
+
+@pytest.mark.parametrize("name, make", [
+    ("f", lambda: LinearDAE(N2, I2, lambda s, d: [np.sin(s), 0.0])),            # f' given as f
+    ("f", lambda: LinearDAE(N2, I2, lambda s, d: [1.0 + s, 2.0])),              # f' given as f (a line)
+    ("f", lambda: LinearDAE(N2, I2, lambda s, d: [3.0, 0.0])),                  # a constant, d ignored: f' = 3?
+    ("B", lambda: LinearDAE(N2, lambda s, d: np.array([[1.0, 0], [0, 1 + s]]), [0.0, 1.0])),
+])
+@pytest.mark.parametrize("solver", ["RK45", "expm", "CVODE"])
+def test_a_callable_that_ignores_d_is_refused_at_set_up(name, make, solver):
+    """Before the run (at `complete` for time-varying coefficients, before the first step for a forcing)."""
+    with pytest.raises(ValueError, match=rf"`{name}\(t, d\)` must honour its derivative order `d`"):
+        solve_dae(make(), (0.0, 1.0), [0.0, 0.0], lam=1.0, method=solver)
+
+
+@pytest.mark.parametrize("f", [
+    lambda s, d: [np.sin(1e3 * s + d * np.pi / 2) * 1e3 ** d, 0.0],         # fast
+    lambda s, d: [1e-9 * np.exp(s), 0.0],                                    # tiny, and every derivative is f
+    lambda s, d: [1e9 * np.cos(s + d * np.pi / 2), 0.0],                      # large
+    lambda s, d: [np.exp(2 * s) * 2.0 ** d, 0.0],                             # steep
+    lambda s, d: [s ** 3 if d == 0 else 3 * s ** 2 if d == 1 else 6 * s if d == 2 else 6.0 if d == 3 else 0.0, 0.0],
+])
+def test_a_callable_that_honours_d_is_accepted(f):
+    for t0 in (0.0, 0.5, -3.0, 7.0, 300.0):
+        dae = LinearDAE(N2, I2, f)
+        dae.f.jet(t0, 2)  # the check runs on the first jet with derivatives
+        assert dae.f._d_checked
