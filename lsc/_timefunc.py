@@ -263,7 +263,20 @@ def _sympy_matrix(name, obj, shape):
             "use one Symbol('t') (with the same assumptions) everywhere in it."
         )
     t_symbol = next(iter(symbols)) if symbols else sympy.Symbol("t")
+    kinks = sorted({type(a).__name__ for a in mat.atoms(*_without_derivative(sympy)) if a.has(t_symbol)})
+    if kinks:
+        raise ValueError(
+            f"`{name}` contains {', '.join(kinks)}, which has no derivative where its argument is zero or jumps "
+            f"(abs, sign, Heaviside, floor, ceiling, Max, Min): the completion differentiates `{name}` in time, so "
+            "use a smooth alternative (e.g. sqrt(u**2 + eps**2) for Abs(u)) or split the interval at the kink."
+        )
     return mat, t_symbol
+
+
+def _without_derivative(sympy):
+    """Sympy functions of t whose time derivative is missing at some t (a jump or a Dirac delta)."""
+    return (sympy.Abs, sympy.sign, sympy.Heaviside, sympy.DiracDelta, sympy.floor, sympy.ceiling, sympy.Max,
+            sympy.Min, sympy.frac)
 
 
 def _contains_sympy(obj):

@@ -7,6 +7,7 @@ CompletionResult with success=False whose message holds the fragment) or ``SOLVE
 success=True and, with the fragment None, an error against the exact solution under 1e-6).
 docs/reliability_library.md lists the same classes.
 """
+import re
 import warnings
 
 import numpy as np
@@ -305,3 +306,40 @@ def test_a_callable_that_honours_d_is_accepted(f):
         dae = LinearDAE(N2, I2, f)
         dae.f.jet(t0, 2)  # the check runs on the first jet with derivatives
         assert dae.f._d_checked
+
+
+# -- functions without derivatives where the completion needs them ---------------------------------
+@pytest.mark.parametrize("expr", ["abs(t - 0.5)", "abs(sin(3*t))", "2 + abs(m*t)", "abs(p)"])
+@pytest.mark.parametrize("entry, key", [("f[1]", "f"), ("B[0][1]", "B")])
+def test_abs_in_a_spec_equation_is_refused_up_front(expr, entry, key):
+    """The completion differentiates A, B, f up to order k + 2; abs(u) has no derivative where u = 0."""
+    import tomllib
+
+    from fmu_build import SpecError, parse_spec
+    from test_spec_errors import BASE
+
+    fragment = {"f": 'f = [0, "p + sin(t)"]', "B": 'B = [[0, -1], [0, 0]]'}[key]
+    new = {"f": f'f = [0, "{expr}"]', "B": f'B = [[0, "{expr}"], [0, 0]]'}[key]
+    data = tomllib.loads(BASE.replace(fragment, new))
+    with pytest.raises(SpecError, match=rf"equations\.{re.escape(entry)}: abs\(\) is not allowed in the equations"):
+        parse_spec(data)
+
+
+def test_abs_in_a_spec_output_is_accepted():
+    """Outputs are evaluated, never differentiated: abs is fine there."""
+    import tomllib
+
+    from fmu_build import parse_spec
+    from test_spec_errors import BASE
+
+    spec = parse_spec(tomllib.loads(BASE + '\n[outputs]\nspeed = "abs(v)"\n'))
+    assert str(spec.outputs[0]["expr"]) == "Abs(v)"
+
+
+@pytest.mark.parametrize("expr", [sympy.Abs(t - 0.5), sympy.sign(t), sympy.Heaviside(t - 1), sympy.Max(t, 1),
+                                  sympy.floor(t)])
+def test_a_sympy_coefficient_without_derivatives_is_refused(expr):
+    with pytest.raises(ValueError, match=r"`f` contains .* which has no derivative where"):
+        LinearDAE(N2, I2, [expr, 0])
+    with pytest.raises(ValueError, match=r"`B` contains"):
+        LinearDAE(N2, sympy.Matrix([[1, 0], [0, 1 + expr]]))
