@@ -64,6 +64,27 @@ def scaled_chain(low):
     return res
 
 
+def column_scaled_chain(columns, method="alternative"):
+    """``N D y' + D y = f`` (N the 4x4 shift): the unknowns ``y = D^-1 x`` scaled by `columns`, e.g. y2 = 1e12 x2.
+
+    The error is relative to each component's largest exact value (the components differ by 1e24).
+    """
+    n, D = 4, np.asarray(columns, dtype=float)
+    fs = [sympy.sin(t), sympy.cos(t), t, sympy.Integer(1)]
+    exact_f = sympy.lambdify(t, [fs[0] - sympy.diff(fs[1], t) + sympy.diff(fs[2], t, 2) - sympy.diff(fs[3], t, 3),
+                                 fs[1] - sympy.diff(fs[2], t) + sympy.diff(fs[3], t, 2), fs[2] - sympy.diff(fs[3], t), fs[3]])
+    exact = lambda s: np.array([np.broadcast_to(v, np.shape(s)) for v in exact_f(s)], dtype=float) / (  # noqa: E731
+        D[:, None] if np.ndim(s) else D)
+    dae = LinearDAE(np.eye(n, k=1) * D, np.diag(D), fs)
+    lam = None if method == "standard" else 1.0
+    atol = 1e-12 * np.max(np.abs(exact(np.linspace(0, 2, 11))), axis=1)  # per component: they differ by 1e24
+    res = solve_dae(dae, (0.0, 2.0), exact(0.0), completion=method, lam=lam, t_eval=np.linspace(0, 2, 11),
+                    rtol=1e-10, atol=atol)
+    X = exact(res.t)
+    res.error = float(np.max(np.abs(res.x - X) / np.max(np.abs(X), axis=1, keepdims=True)))
+    return res
+
+
 def scaled_nilpotent_chain(low, high):
     p = gallery.nilpotent_chain(3, seed=0)
     rows = np.logspace(np.log10(low), np.log10(high), p.dae.n)
@@ -168,6 +189,12 @@ CASES = [
     (lambda: scaled_chain(1e-12), SOLVED, None),
     (lambda: scaled_nilpotent_chain(1e-6, 1e6), SOLVED, None),
     (lambda: scaled_nilpotent_chain(1e-12, 1.0), SOLVED, None),
+    # badly scaled unknowns (columns) are equilibrated too, and the solution scaled back
+    (lambda: column_scaled_chain([1, 1e-12, 1, 1]), SOLVED, None),
+    (lambda: column_scaled_chain([1, 1e-12, 1, 1], "standard"), SOLVED, None),
+    (lambda: column_scaled_chain([1, 1e-12, 1, 1], "stabilized"), SOLVED, None),
+    (lambda: column_scaled_chain([1e-12, 1, 1e12, 1]), SOLVED, None),
+    (lambda: column_scaled_chain(np.logspace(-6, 6, 4)), SOLVED, None),
 ]
 
 
@@ -343,3 +370,25 @@ def test_a_sympy_coefficient_without_derivatives_is_refused(expr):
         LinearDAE(N2, I2, [expr, 0])
     with pytest.raises(ValueError, match=r"`B` contains"):
         LinearDAE(N2, sympy.Matrix([[1, 0], [0, 1 + expr]]))
+
+
+def test_column_equilibration_leaves_the_alternative_completion_unchanged():
+    """y = D^-1 x: the alternative completion of the scaled DAE is exactly D^-1 G D (its constraints and its
+    index-one part are the same subspaces in either unknowns); with D = 2^-12 on one column both are computed."""
+    p = gallery.nilpotent_chain(3, seed=0)
+    D = np.ones(p.dae.n)
+    D[1] = 2.0 ** -12
+    scaled = LinearDAE(p.dae.A.value * D, p.dae.B.value * D, JetCallable(lambda s, order: p.dae.f_jet(s, order)))
+    c, c_scaled = complete(p.dae, "alternative", lam=2.0), complete(scaled, "alternative", lam=2.0)
+    assert c_scaled._col_scales is not None and c._col_scales is None
+    G, g = c.matrices(0.7)
+    G_s, g_s = c_scaled.matrices(0.7)
+    np.testing.assert_allclose(G_s, G * D[None, :] / D[:, None], rtol=1e-9, atol=1e-9 * np.abs(G).max())
+    np.testing.assert_allclose(g_s, g / D, rtol=1e-9, atol=1e-9 * np.abs(g / D).max())
+    x = p.exact(np.array([0.7]))[:, 0] + 0.01
+    # the same constraints (Z2 is a basis of the same left null space, up to rotation): the same residual norm
+    np.testing.assert_allclose(np.linalg.norm(c_scaled.constraint_residual(0.7, x / D)),
+                               np.linalg.norm(c.constraint_residual(0.7, x)), rtol=1e-9)
+    # the nearest consistent point is sought in the given unknowns y, so project agrees up to the scaling's metric:
+    # both are consistent
+    assert np.linalg.norm(c_scaled.constraint_residual(0.7, c_scaled.project(0.7, x / D))) < 1e-9
