@@ -250,11 +250,11 @@ def solve_completion(
     def fun(t, x):
         try:
             return rhs(t, x)
-        except ValueError as exc:
+        except Exception as exc:  # noqa: BLE001 - anything from the coefficients ends the run with what it has
             raise _ForcingFailed(t, exc) from exc
 
     if method == "CVODE":
-        return _solve_cvode(completion, rhs, jac, (t0, t1), x0, t_eval, rtol, atol, options, built)
+        return _solve_cvode(completion, _as_value_error(rhs), jac, (t0, t1), x0, t_eval, rtol, atol, options, built)
     if _is_implicit(method) and "jac" not in options:
         options["jac"] = completion.jac(t0, x0) if completion.dae.is_constant else jac
     if not _is_implicit(method):
@@ -280,6 +280,18 @@ def solve_completion(
         t=sol.t, x=x, success=bool(sol.success), status=sol.status, message=message,
         nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=sol.sol, completion=completion,
     )
+
+
+def _as_value_error(rhs):
+    """`rhs` raising only ValueError (the failure CVODE's driver stops on and reports), whatever went wrong."""
+    def checked(t, x):
+        try:
+            return rhs(t, x)
+        except ValueError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - a callable returning text mid-run raises TypeError
+            raise ValueError(str(exc)) from exc
+    return checked
 
 
 def _backward_refusal(completion, t0, t1):

@@ -283,6 +283,23 @@ def test_a_callable_raising_anything_mid_run_keeps_the_trajectory(exc, solver):
     assert chain_error(res) < 1e-8
 
 
+def turns_bad_after(t_bad, bad):
+    """f = (sin t, 0) until `t_bad`, then `bad` (text, complex: a TypeError in the checks, not in the callable)."""
+    def f(s, d):
+        return bad if s > t_bad else [np.sin(s + d * np.pi / 2), 0.0]
+    return f
+
+
+@pytest.mark.parametrize("bad", [["a", "b"], [1j, 0.0]], ids=["text", "complex"])
+@pytest.mark.parametrize("solver", ["RK45", "Radau", "CVODE"])
+def test_a_callable_returning_the_wrong_type_mid_run_keeps_the_trajectory(bad, solver):
+    res = solve_dae(LinearDAE(N2, I2, turns_bad_after(0.3, bad)), (0.0, 1.0), [0.0, 0.0], lam=1.0, method=solver,
+                    rtol=1e-10, atol=1e-12)
+    assert not res.success and res.status == -2
+    assert "`f(t, d)` must return real numbers" in res.message and "failed at t=" in res.message, res.message
+    assert res.t.size >= 2 and res.t[-1] <= 0.3 + 1e-12 and chain_error(res) < 1e-8
+
+
 @pytest.mark.parametrize("name, make", [
     ("f", lambda h: LinearDAE(N2, I2, h)),
     ("B", lambda h: LinearDAE(N2, lambda s, d: np.eye(2) * (1 + 1j) if d == 0 else np.zeros((2, 2)))),
