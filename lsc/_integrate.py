@@ -133,7 +133,11 @@ def solve_completion(
     completion : Completion
         From `complete`.
     t_span : pair of float
-        Interval of integration ``(t0, t1)``.
+        Interval of integration ``(t0, t1)``. ``t1 < t0`` (backward) only for
+        the standard completion: backward, the added eigenvalues ``-lam`` of
+        the stabilized and alternative completions are growth like
+        ``exp(lam |t - t0|)``, so a reversed `t_span` is refused for them
+        (reverse time in the DAE instead).
     x0 : array_like, shape (n,)
         Initial state; it need not be consistent (the completion's added
         dynamics then decide what happens to the error).
@@ -162,9 +166,13 @@ def solve_completion(
         stability alone would need more than 1e5 evaluations, a
         `StiffnessWarning` with the estimated cost is issued before the run.
     t_eval : array_like, optional
-        Output times (default: the solver's steps).
+        Output times (default: the solver's steps): finite, within `t_span`,
+        strictly monotone from ``t0`` towards ``t1``, not empty; checked the
+        same way for every method.
     rtol, atol : float or array_like, optional
-        Tolerances, as in solve_ivp ('expm': the accuracy asked for).
+        Tolerances, as in solve_ivp ('expm': the accuracy asked for): positive
+        and finite, scalars or of shape (n,), for every method (``atol = 0``
+        is refused: components at or through zero could not meet it).
     project : bool, optional
         Replace `x0` by the nearest consistent point (`Completion.project`)
         before integrating.
