@@ -98,6 +98,9 @@ def check_t_eval(t_eval, t_span):
 
 
 def _check_tol(name, tol, n):
+    if isinstance(tol, (bool, np.bool_, str, bytes)) or np.asarray(tol).dtype.kind in "bSUO" and \
+            any(isinstance(v, (bool, np.bool_, str, bytes)) for v in np.ravel(np.asarray(tol, dtype=object))):
+        raise TypeError(f"`{name}` must be a positive finite number or an array of shape ({n},); found {tol!r}.")
     try:
         arr = np.asarray(tol, dtype=float)
     except (TypeError, ValueError):

@@ -267,6 +267,8 @@ BAD_TOL = [
     (dict(rtol=np.inf), "`rtol` must be positive"),
     (dict(atol=["small"] * 3), "`atol` must be"),
     (dict(atol="one too many"), "`atol` must be a number or"),
+    (dict(rtol=True), "`rtol` must be a positive finite number"),
+    (dict(atol="1e-8"), "`atol` must be a positive finite number"),
 ]
 
 
