@@ -131,7 +131,8 @@ class CallableFunction(TimeFunction):
     def jet(self, t, order):
         if order >= 1 and not self._d_checked:
             self._d_checked = True
-            self._check_first_derivative(float(t))
+            if not hasattr(self.fn, "jet"):  # a jet function returns all orders at once: it has no `d` to ignore
+                self._check_first_derivative(float(t))
         if hasattr(self.fn, "jet"):
             # The callable computes all derivatives at once (e.g. by jets).
             return self._checked(self._call(self.fn.jet, t, order, "jet(t, order)", f"at t={float(t)!r}"),
@@ -155,7 +156,7 @@ class CallableFunction(TimeFunction):
             raise ValueError(f"{name} raised {type(exc).__name__} {where}: {exc}") from exc
 
     def _check_first_derivative(self, t):
-        """Refuse a callable whose ``d = 1`` value is not the derivative of its ``d = 0`` values near `t`.
+        """Refuse a callable ``h(t, d)`` whose ``d = 1`` value is not the derivative of its ``d = 0`` values near `t`.
 
         A callable that ignores `d` (returns the value for every order) gives a silently wrong
         completion. Central differences of ``h(., 0)`` with steps ``s`` and ``s/2``,
@@ -170,9 +171,8 @@ class CallableFunction(TimeFunction):
         s = 1e-4 * max(1.0, abs(t))
 
         def value(tt, d=0):
-            return self.jet(tt, d)[d] if hasattr(self.fn, "jet") else \
-                self._checked(self._call(self.fn, tt, d, "(t, d)", f"at t={tt!r}, d={d}"), self.shape, "(t, d)",
-                              f"at t={tt!r}, d={d}")
+            where = f"at t={tt!r}, d={d}"
+            return self._checked(self._call(self.fn, tt, d, "(t, d)", where), self.shape, "(t, d)", where)
 
         h0, h1 = value(t), value(t, 1)
         d_s = (value(t + s) - value(t - s)) / (2 * s)
@@ -182,9 +182,8 @@ class CallableFunction(TimeFunction):
         allowed = 100 * float(np.max(np.abs(d_s - d_half), initial=0.0)) \
             + 1e-6 * max(float(np.max(np.abs(h0), initial=0.0)), float(np.max(np.abs(h1), initial=0.0))) + 1e-300
         if mismatch > allowed:
-            call = f"`{self.name}.jet(t, order)`" if hasattr(self.fn, "jet") else f"`{self.name}(t, d)`"
             raise ValueError(
-                f"{call} must honour its derivative order `d` (return the d-th time derivative): at t={t!r} its "
+                f"`{self.name}(t, d)` must honour its derivative order `d` (return the d-th time derivative): at t={t!r} its "
                 f"d=1 value differs from a difference quotient of its d=0 values by {mismatch:.3g} (allowed "
                 f"{allowed:.3g}; d=1 gave {np.asarray(h1).ravel()[:4].tolist()}, the quotient "
                 f"{np.asarray(richardson).ravel()[:4].tolist()}). A callable that ignores `d` makes the "
