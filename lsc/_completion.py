@@ -31,7 +31,7 @@ from ._exceptions import DimensionError, IndexDeterminationError
 from ._forcing import Forcing
 from ._index import check_solvability, determine_index, k_works
 from ._linalg import numerical_rank, validate_rcond
-from ._problem import check_dae, row_equilibration, row_scaled, varying_view
+from ._problem import check_dae, column_equilibration, row_equilibration, row_scaled, unscale_columns, varying_view
 from ._rate import as_rate, lam_at
 from ._timefunc import TimeFunction, _shape_str
 from ._validate import check_k, check_t_span
@@ -214,12 +214,16 @@ class Completion:
         # Badly scaled rows are equilibrated once (constant scales, so the solutions do not change);
         # the arrays are built from the scaled equations, `_W` still acts on the given f.
         self._row_scales = row_equilibration(dae, self._t_ref)
-        self._eq = dae if self._row_scales is None else row_scaled(dae, self._row_scales)
+        self._col_scales = column_equilibration(dae, self._t_ref)  # unknowns too: x = diag(c) y
+        self._eq = dae if self._row_scales is None and self._col_scales is None else \
+            row_scaled(dae, self._row_scales, self._col_scales)
         if dae.is_constant:
             fac = _Factors(self._eq, self.k, self._t_ref, self.extra_order, self.rcond)
             self._std = fac
             self._rank = fac.rank
             self._G, self._W = self._maps(fac, self._t_ref)
+            if self._col_scales is not None:
+                self._G, self._W = unscale_columns(fac, self._G, self._W, self._col_scales)
             self._W_c = fac.cg
             if self._row_scales is not None:
                 columns = np.tile(self._row_scales, self._order + 1)
@@ -304,6 +308,8 @@ class Completion:
             return hit
         fac = self._factors(t)
         G, g = self._maps(fac, t)
+        if self._col_scales is not None:
+            G, g = unscale_columns(fac, G, g, self._col_scales)
         self._cache[t] = (fac, G, g)
         if len(self._cache) > _CACHE_SIZE:
             self._cache.popitem(last=False)

@@ -166,15 +166,24 @@ class Forcing:
         """``[f; f'; ...; f^(top)]`` at every time, shape ``((top + 1) n_f, len(ts))``."""
         f, shape = self.f, self.f.shape
         fn = getattr(f, "fn", None)
+        if top >= 1 and ts.size and not getattr(f, "_d_checked", True):
+            f.jet(float(ts[0]), 1)  # the set-up check that the callable honours d (lsc._timefunc)
         if self._callable_vectorizes is not False and fn is not None and not hasattr(fn, "jet") and ts.size > 1:
             # A callable written with numpy ufuncs accepts an array t: one call per order.
             try:
-                rows = [np.asarray(fn(ts, d), dtype=float) for d in range(top + 1)]
-                if all(r.shape == shape + (ts.size,) for r in rows):
-                    self._callable_vectorizes = True
-                    return np.concatenate([r.reshape(self.n_f, ts.size) for r in rows], axis=0)
+                raw = [fn(ts, d) for d in range(top + 1)]
             except Exception:  # noqa: BLE001 - any failure means: not vectorized; the loop below reports errors
-                pass
+                raw = None
+            if raw is not None and any(np.iscomplexobj(r) for r in raw):
+                raise TypeError(f"`{f.name}(t, d)` must return real numbers of shape {shape}; got complex values "
+                                "for an array of times (their imaginary part would be lost).")
+            try:
+                rows = None if raw is None else [np.asarray(r, dtype=float) for r in raw]
+            except (TypeError, ValueError):
+                rows = None
+            if rows is not None and all(r.shape == shape + (ts.size,) for r in rows):
+                self._callable_vectorizes = True
+                return np.concatenate([r.reshape(self.n_f, ts.size) for r in rows], axis=0)
             self._callable_vectorizes = False
         return np.column_stack([f.jet(float(t), top).reshape(-1) for t in ts]) if ts.size else \
             np.zeros(((top + 1) * self.n_f, 0))

@@ -6,7 +6,7 @@ import scipy.linalg
 from ._derivative_array import array_jets
 from ._exceptions import IndexDeterminationError
 from ._linalg import default_rcond, numerical_rank, validate_rcond
-from ._problem import check_dae, row_equilibration
+from ._problem import check_dae, column_equilibration, row_equilibration
 from ._validate import check_k, check_t_span, check_time
 
 __all__ = ["differentiation_index", "check_solvability", "ArrayRanks", "SolvabilityReport"]
@@ -74,6 +74,9 @@ def array_ranks(dae, k, t, rcond, previous=None, memo=None):
     if r is not None:  # diag(r) on every block row: the same ranks, told apart in floating point
         scale = np.tile(r, k + 1)[:, None]
         J, F = scale * J, scale * F
+    c = column_equilibration(dae, t)
+    if c is not None:  # unknowns x = diag(c) y, and their derivatives: the same ranks
+        J, F = J * np.tile(c, k + 1), F * c
     rcond = default_rcond(J.shape) if rcond is None else rcond
     s = scipy.linalg.svdvals(J)
     scale = s[0] if s.size else 0.0
@@ -105,6 +108,9 @@ def pencil_is_regular(dae, rcond=None):
     r = row_equilibration(dae)
     if r is not None:
         A, B = r[:, None] * A, r[:, None] * B
+    c = column_equilibration(dae)
+    if c is not None:
+        A, B = A * c, B * c
     scale = (np.linalg.norm(B, 2) or 1.0) / (np.linalg.norm(A, 2) or 1.0)
     for s in (0.7317 * scale, -1.3641 * scale):
         M = s * A + B

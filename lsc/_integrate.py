@@ -8,7 +8,7 @@ from ._chebyshev import ChebyshevCoefficients, EvaluationFailed
 from ._completion import Completion, complete
 from ._derivative_array import lam_jet
 from ._exceptions import StiffnessWarning
-from ._validate import check_state, check_t_span
+from ._validate import check_state, check_t_eval, check_t_span, check_tolerances
 
 __all__ = ["CompletionResult", "solve_completion", "solve_dae"]
 
@@ -89,11 +89,7 @@ def _solve_expm(completion, t0, t1, x0, t_eval, rtol, atol, options):
         raise ValueError(f"`taylor_degree` must be a non-negative int; found {q!r}.")
     if max_step is not None and not max_step > 0:
         raise ValueError(f"`max_step` must be positive; found {max_step!r}.")
-    t_out = np.linspace(t0, t1, 101) if t_eval is None else np.asarray(t_eval, dtype=float)
-    direction = np.sign(t1 - t0)
-    if t_out.ndim != 1 or np.any(direction * np.diff(t_out) < 0) or np.any(direction * (t_out - t0) < 0) \
-            or np.any(direction * (t_out - t1) > 0):
-        raise ValueError("`t_eval` must be sorted in the direction of integration and lie within `t_span`.")
+    t_out = np.linspace(t0, t1, 101) if t_eval is None else t_eval  # checked by solve_completion
     X, message = _expm.integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=q, max_step=max_step)
     return CompletionResult(
         t=t_out, x=X, success=True, status=0, message=message,
@@ -137,7 +133,11 @@ def solve_completion(
     completion : Completion
         From `complete`.
     t_span : pair of float
-        Interval of integration ``(t0, t1)``.
+        Interval of integration ``(t0, t1)``. ``t1 < t0`` (backward) only for
+        the standard completion: backward, the added eigenvalues ``-lam`` of
+        the stabilized and alternative completions are growth like
+        ``exp(lam |t - t0|)``, so a reversed `t_span` is refused for them
+        (reverse time in the DAE instead).
     x0 : array_like, shape (n,)
         Initial state; it need not be consistent (the completion's added
         dynamics then decide what happens to the error).
@@ -166,9 +166,13 @@ def solve_completion(
         stability alone would need more than 1e5 evaluations, a
         `StiffnessWarning` with the estimated cost is issued before the run.
     t_eval : array_like, optional
-        Output times (default: the solver's steps).
+        Output times (default: the solver's steps): finite, within `t_span`,
+        strictly monotone from ``t0`` towards ``t1``, not empty; checked the
+        same way for every method.
     rtol, atol : float or array_like, optional
-        Tolerances, as in solve_ivp ('expm': the accuracy asked for).
+        Tolerances, as in solve_ivp ('expm': the accuracy asked for): positive
+        and finite, scalars or of shape (n,), for every method (``atol = 0``
+        is refused: components at or through zero could not meet it).
     project : bool, optional
         Replace `x0` by the nearest consistent point (`Completion.project`)
         before integrating.
@@ -220,6 +224,10 @@ def solve_completion(
         raise TypeError(f"`completion` must be an lsc Completion (see lsc.complete); found {type(completion).__name__}.")
     t0, t1 = check_t_span(t_span)
     x0 = check_state("x0", x0, completion.n)
+    t_eval = check_t_eval(t_eval, (t0, t1))
+    rtol, atol = check_tolerances(rtol, atol, completion.n)
+    if t1 < t0 and completion.uses_lam:
+        raise ValueError(_backward_refusal(completion, t0, t1))
     tol = _interpolation_tol(interpolate, rtol)  # bad input fails here, whatever the method
     completion._check_rate_on((t0, t1))  # a time-varying lam must be positive on the whole run
     if method == "expm":
@@ -250,11 +258,11 @@ def solve_completion(
     def fun(t, x):
         try:
             return rhs(t, x)
-        except ValueError as exc:
+        except Exception as exc:  # noqa: BLE001 - anything from the coefficients ends the run with what it has
             raise _ForcingFailed(t, exc) from exc
 
     if method == "CVODE":
-        return _solve_cvode(completion, rhs, jac, (t0, t1), x0, t_eval, rtol, atol, options, built)
+        return _solve_cvode(completion, _as_value_error(rhs), jac, (t0, t1), x0, t_eval, rtol, atol, options, built)
     if _is_implicit(method) and "jac" not in options:
         options["jac"] = completion.jac(t0, x0) if completion.dae.is_constant else jac
     if not _is_implicit(method):
@@ -279,6 +287,33 @@ def solve_completion(
     return CompletionResult(
         t=sol.t, x=x, success=bool(sol.success), status=sol.status, message=message,
         nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=sol.sol, completion=completion,
+    )
+
+
+def _as_value_error(rhs):
+    """`rhs` raising only ValueError (the failure CVODE's driver stops on and reports), whatever went wrong."""
+    def checked(t, x):
+        try:
+            return rhs(t, x)
+        except ValueError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - a callable returning text mid-run raises TypeError
+            raise ValueError(str(exc)) from exc
+    return checked
+
+
+def _backward_refusal(completion, t0, t1):
+    """Why a completion with added eigenvalues -lam cannot run from t0 back to t1 < t0."""
+    growth = ""
+    if isinstance(completion.lam, float):
+        growth = f" (lam x length = {completion.lam * (t0 - t1):.3g} here)"
+    return (
+        f"`t_span` = ({t0!r}, {t1!r}) runs backward (t1 < t0), which the {completion.method!r} completion cannot do: "
+        "its added eigenvalues -lam make off-manifold errors decay like exp(-lam (t - t0)) forward in time, and "
+        f"grow like exp(lam |t - t0|) backward{growth}, so rounding and step errors would swamp the solution. "
+        "Integrate forward; or reverse time in the DAE (y(s) = x(-s) solves -A(-s) y' + B(-s) y = f(-s)) and "
+        "integrate that forward from s = -t0; or use the 'standard' completion (added eigenvalues 0), which may "
+        "run backward."
     )
 
 

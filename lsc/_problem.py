@@ -137,40 +137,87 @@ def varying_view(dae):
 
 
 def row_equilibration(dae, t=0.0):
-    """Row scales ``r`` (powers of two) that give the rows of ``[A(t), B(t)]`` norms in [0.7, 1.4], or None.
+    """Row scales ``r`` (powers of two) for the equations, or None (see `equilibration`)."""
+    return equilibration(dae, t)[0]
 
-    None when the nonzero row norms already lie within a factor `ROW_SPREAD`
-    of one another: the DAE is then used as given. Multiplying equation i by
-    ``r[i]`` changes neither the solutions nor any rank of the derivative
-    array (each block row is multiplied by ``diag(r)``), but it decides
-    whether the ranks can be *told* in floating point: rows spread over
-    1e-6..1e6 put the array's smallest nonzero singular values below the
-    rank threshold. Powers of two scale without rounding.
-    """
-    M = np.hstack([dae.A(t), dae.B(t)])
-    norms = np.linalg.norm(M, axis=1)
+
+def column_equilibration(dae, t=0.0):
+    """Column scales ``c`` (powers of two) for the unknowns ``x = diag(c) y``, or None (see `equilibration`)."""
+    return equilibration(dae, t)[1]
+
+
+def _power_of_two_scales(norms):
+    """``2^-round(log2(norm))`` for the nonzero norms, 1 for the zero ones."""
+    scales = np.ones(norms.shape)
     nonzero = norms > 0.0
-    if not np.any(nonzero) or norms[nonzero].max() <= ROW_SPREAD * norms[nonzero].min():
-        return None
-    r = np.ones(dae.n)
-    r[nonzero] = 2.0 ** -np.round(np.log2(norms[nonzero]))
-    return r
+    scales[nonzero] = 2.0 ** -np.round(np.log2(norms[nonzero]))
+    return scales
+
+
+def _spread(values):
+    """Largest over smallest nonzero magnitude (1 when there is none)."""
+    nonzero = np.abs(values[values != 0.0])
+    return nonzero.max() / nonzero.min() if nonzero.size else 1.0
+
+
+def _row_scales(A, B):
+    norms = np.linalg.norm(np.hstack([A, B]), axis=1)
+    return _power_of_two_scales(norms) if _spread(norms) > ROW_SPREAD else np.ones(A.shape[0])
+
+
+def _column_scales(A, B):
+    norms = np.linalg.norm(np.vstack([A, B]), axis=0)
+    return _power_of_two_scales(norms) if _spread(norms) > ROW_SPREAD else np.ones(A.shape[1])
+
+
+def equilibration(dae, t=0.0):
+    """``(r, c)``: scales of the equations and of the unknowns (powers of two, each None if not needed).
+
+    Rows: when the nonzero row norms of ``[A(t), B(t)]`` spread by more than `ROW_SPREAD`, ``r``
+    brings each to norm in [0.7, 1.4]. Multiplying equation i by ``r[i]`` changes neither the
+    solutions nor any rank of the derivative array (each block row is multiplied by ``diag(r)``),
+    but it decides whether the ranks can be *told* in floating point: rows spread over 1e-6..1e6
+    put the array's smallest nonzero singular values below the rank threshold.
+
+    Columns: when, after that, the nonzero column norms of ``[A; B]`` still spread by more than
+    `ROW_SPREAD` (``x2 = 1e12 x1``), ``c`` scales the unknowns, ``x = diag(c) y``, bringing each
+    column to norm ~1: no rank changes, solutions map one to one. Two orders are tried, rows then
+    columns and columns then rows (a large unknown also inflates the norms of the rows it enters),
+    and the one whose scaled ``[A, B]`` has the smaller spread of nonzero entries is kept.
+    Below both spreads the DAE is used as given. Powers of two scale without rounding.
+    """
+    A, B = dae.A(t), dae.B(t)
+    r = _row_scales(A, B)
+    Ar, Br = r[:, None] * A, r[:, None] * B
+    if _spread(np.linalg.norm(np.vstack([Ar, Br]), axis=0)) <= ROW_SPREAD:
+        return (None if np.all(r == 1.0) else r), None
+    candidates = [(r, _column_scales(Ar, Br))]
+    c = _column_scales(A, B)
+    candidates.append((_row_scales(A * c, B * c), c))
+    r, c = min(candidates, key=lambda rc: _spread(rc[0][:, None] * np.hstack([A * rc[1], B * rc[1]])))
+    return (None if np.all(r == 1.0) else r), (None if np.all(c == 1.0) else c)
 
 
 class _RowScaled(TimeFunction):
-    """``diag(r) h(t)`` for a coefficient ``h`` (rows scaled, derivatives too: r is constant)."""
+    """``diag(r) h(t) diag(c)`` for a coefficient ``h`` (derivatives too: r and c are constant)."""
 
-    def __init__(self, h, r):
+    def __init__(self, h, r, c=None):
         super().__init__(h.name, h.shape)
         self.h = h
-        self.r = r.reshape((-1,) + (1,) * (len(h.shape) - 1))
+        self.r = np.ones(h.shape[0]) if r is None else r
+        self.r = self.r.reshape((-1,) + (1,) * (len(h.shape) - 1))
+        self.c = 1.0 if c is None or len(h.shape) == 1 else c
 
     def jet(self, t, order):
-        return self.r * self.h.jet(t, order)
+        return self.r * self.h.jet(t, order) * self.c
 
 
-def row_scaled(dae, r):
-    """The DAE ``diag(r) (A x' + B x - f) = 0``: the same solutions, equations scaled by `r`."""
+def row_scaled(dae, r, c=None):
+    """The DAE ``diag(r) (A D y' + B D y - f) = 0``, ``D = diag(c)``: the solutions ``y = D^-1 x``.
+
+    Rows scaled by `r` (None: not scaled) change no solution; columns scaled by `c` (None: not
+    scaled) give the unknowns ``y = x / c``.
+    """
     scaled = object.__new__(LinearDAE)
     scaled.__dict__.update(dae.__dict__)
     for name in ("A", "B", "f"):
@@ -178,10 +225,23 @@ def row_scaled(dae, r):
         if h is None:
             continue
         if isinstance(h, ConstantFunction):
-            setattr(scaled, name, ConstantFunction(h.name, h.value * r.reshape((-1,) + (1,) * (h.value.ndim - 1))))
+            value = h.value if r is None else h.value * r.reshape((-1,) + (1,) * (h.value.ndim - 1))
+            setattr(scaled, name, ConstantFunction(h.name, value if c is None or value.ndim == 1 else value * c))
         else:
-            setattr(scaled, name, _RowScaled(h, r))
+            setattr(scaled, name, _RowScaled(h, r, c))
     return scaled
+
+
+def unscale_columns(fac, G, g, c):
+    """``(G, g)`` of a completion computed in ``y = x / c``, back in ``x``; `fac`'s constraints too.
+
+    ``x' = diag(c) (G_y diag(c)^-1 x + g_y)``. The constraints ``C_y y = C_y diag(c)^-1 x`` become
+    ``C = C_y diag(c)^-1`` (after the completion's maps, which use `fac` in ``y``), so residuals,
+    `project` (nearest consistent ``x``) and the manifold's basis are those of the given unknowns.
+    """
+    fac.C = fac.C / c
+    fac._C_svd = None
+    return c[:, None] * G / c, (c[:, None] if np.ndim(g) == 2 else c) * g
 
 
 def _infer_n(value, name):

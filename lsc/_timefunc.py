@@ -126,20 +126,76 @@ class CallableFunction(TimeFunction):
     def __init__(self, name, fn, shape):
         super().__init__(name, shape)
         self.fn = fn
+        self._d_checked = False
 
     def jet(self, t, order):
+        if order >= 1 and not self._d_checked:
+            self._d_checked = True
+            if not hasattr(self.fn, "jet"):  # a jet function returns all orders at once: it has no `d` to ignore
+                self._check_first_derivative(float(t))
         if hasattr(self.fn, "jet"):
             # The callable computes all derivatives at once (e.g. by jets).
-            return self._checked(self.fn.jet(t, order), (order + 1,) + self.shape, "jet(t, order)",
-                                 f"at t={float(t)!r}")
+            return self._checked(self._call(self.fn.jet, t, order, "jet(t, order)", f"at t={float(t)!r}"),
+                                 (order + 1,) + self.shape, "jet(t, order)", f"at t={float(t)!r}")
         out = np.empty((order + 1,) + self.shape)
         for d in range(order + 1):
-            out[d] = self._checked(self.fn(t, d), self.shape, "(t, d)", f"at t={float(t)!r}, d={d}")
+            where = f"at t={float(t)!r}, d={d}"
+            out[d] = self._checked(self._call(self.fn, t, d, "(t, d)", where), self.shape, "(t, d)", where)
         return out
+
+    def _call(self, fn, t, arg, call, where):
+        """``fn(t, arg)``; whatever it raises becomes a ValueError naming the coefficient and the time.
+
+        A ValueError is what a run turns into ``success=False`` with the trajectory kept, so a user's
+        ZeroDivisionError or KeyError mid-run ends the run the same way as a NaN does.
+        """
+        try:
+            return fn(t, arg)
+        except Exception as exc:  # noqa: BLE001 - the user's code: anything may come out of it
+            name = f"`{self.name}{'.' if call.startswith('jet') else ''}{call}`"
+            raise ValueError(f"{name} raised {type(exc).__name__} {where}: {exc}") from exc
+
+    def _check_first_derivative(self, t):
+        """Refuse a callable ``h(t, d)`` whose ``d = 1`` value is not the derivative of its ``d = 0`` values near `t`.
+
+        A callable that ignores `d` (returns the value for every order) gives a silently wrong
+        completion. Central differences of ``h(., 0)`` with steps ``s`` and ``s/2``,
+        ``s = 1e-4 max(1, |t|)``, give ``D`` (the Richardson combination, error O(s^4)) and an
+        estimate ``|D(s) - D(s/2)|`` of the truncation error; the callable is refused when
+        ``|h(t, 1) - D| > 100 |D(s) - D(s/2)| + 1e-6 max(|h(t, 0)|, |h(t, 1)|) + 1e-300``. A smooth
+        callable that honours `d` passes with a margin of ~30 on the first term and ~1e5 on the
+        second (rounding in ``D`` is ~1e-12 of ``|h|``), however fast it varies: a fast ``h`` makes the
+        truncation estimate large, so it is accepted (not checked) rather than refused. A kink within
+        ``s`` of `t` could be refused wrongly; coefficients must be smooth there anyway.
+        """
+        s = 1e-4 * max(1.0, abs(t))
+
+        def value(tt, d=0):
+            where = f"at t={tt!r}, d={d}"
+            return self._checked(self._call(self.fn, tt, d, "(t, d)", where), self.shape, "(t, d)", where)
+
+        h0, h1 = value(t), value(t, 1)
+        d_s = (value(t + s) - value(t - s)) / (2 * s)
+        d_half = (value(t + s / 2) - value(t - s / 2)) / s
+        richardson = (4 * d_half - d_s) / 3
+        mismatch = float(np.max(np.abs(h1 - richardson), initial=0.0))
+        allowed = 100 * float(np.max(np.abs(d_s - d_half), initial=0.0)) \
+            + 1e-6 * max(float(np.max(np.abs(h0), initial=0.0)), float(np.max(np.abs(h1), initial=0.0))) + 1e-300
+        if mismatch > allowed:
+            raise ValueError(
+                f"`{self.name}(t, d)` must honour its derivative order `d` (return the d-th time derivative): at t={t!r} its "
+                f"d=1 value differs from a difference quotient of its d=0 values by {mismatch:.3g} (allowed "
+                f"{allowed:.3g}; d=1 gave {np.asarray(h1).ravel()[:4].tolist()}, the quotient "
+                f"{np.asarray(richardson).ravel()[:4].tolist()}). A callable that ignores `d` makes the "
+                "completion silently wrong."
+            )
 
     def _checked(self, raw, shape, call, where):
         """`raw` as a finite float array of `shape`, or an error naming the call and where it was made."""
         call = f"`{self.name}{'.' if call.startswith('jet') else ''}{call}`"
+        if np.iscomplexobj(raw) or any(isinstance(v, complex) for v in np.ravel(np.asarray(raw, dtype=object))):
+            raise TypeError(f"{call} must return real numbers of shape {_shape_str(shape)}; got complex values "
+                            f"{where} (their imaginary part would be lost).")
         try:
             value = np.asarray(raw, dtype=float)
         except (TypeError, ValueError):
@@ -206,7 +262,20 @@ def _sympy_matrix(name, obj, shape):
             "use one Symbol('t') (with the same assumptions) everywhere in it."
         )
     t_symbol = next(iter(symbols)) if symbols else sympy.Symbol("t")
+    kinks = sorted({type(a).__name__ for a in mat.atoms(*_without_derivative(sympy)) if a.has(t_symbol)})
+    if kinks:
+        raise ValueError(
+            f"`{name}` contains {', '.join(kinks)}, which has no derivative where its argument is zero or jumps "
+            f"(abs, sign, Heaviside, floor, ceiling, Max, Min): the completion differentiates `{name}` in time, so "
+            "use a smooth alternative (e.g. sqrt(u**2 + eps**2) for Abs(u)) or split the interval at the kink."
+        )
     return mat, t_symbol
+
+
+def _without_derivative(sympy):
+    """Sympy functions of t whose time derivative is missing at some t (a jump or a Dirac delta)."""
+    return (sympy.Abs, sympy.sign, sympy.Heaviside, sympy.DiracDelta, sympy.floor, sympy.ceiling, sympy.Max,
+            sympy.Min, sympy.frac)
 
 
 def _contains_sympy(obj):
@@ -250,6 +319,8 @@ def _as_float_array(name, obj):
     """A finite float array from array-like input, or a TypeError/ValueError."""
     if isinstance(obj, (str, bytes)):
         raise TypeError(f"`{name}` must be array_like of real numbers, got {type(obj).__name__}.")
+    if np.iscomplexobj(obj):  # a complex ndarray converts to float with a warning, dropping the imaginary part
+        raise TypeError(f"`{name}` must be real; complex coefficients are not supported.")
     try:
         value = np.array(obj, dtype=float)
     except (TypeError, ValueError):

@@ -11,7 +11,7 @@ import numpy as np
 from ._exceptions import DimensionError
 from ._timefunc import _shape_str
 
-__all__ = ["check_k", "check_lam_value", "check_time", "check_t_span", "check_state"]
+__all__ = ["check_k", "check_lam_value", "check_time", "check_t_span", "check_state", "check_t_eval", "check_tolerances"]
 
 
 def check_k(k, name="k"):
@@ -63,3 +63,59 @@ def check_state(name, x, n):
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"`{name}` must be finite; found {arr.tolist()}.")
     return arr
+
+
+def check_t_eval(t_eval, t_span):
+    """`t_eval` as a float array strictly monotone in the direction of `t_span` and within it, or None.
+
+    One check for every method: left to the solvers, CVODE integrated past `t_span` and RK45
+    dropped points silently.
+    """
+    if t_eval is None:
+        return None
+    t0, t1 = t_span
+    try:
+        arr = np.asarray(t_eval, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(f"`t_eval` must be array_like of real numbers; found {t_eval!r}.") from None
+    if arr.ndim != 1:
+        raise ValueError(f"`t_eval` must be 1-D; found shape {_shape_str(arr.shape)}.")
+    if arr.size == 0:
+        raise ValueError("`t_eval` must not be empty (pass None for the solver's own steps).")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"`t_eval` must be finite; found {arr[~np.isfinite(arr)][:3].tolist()}.")
+    low, high = min(t0, t1), max(t0, t1)
+    outside = arr[(arr < low) | (arr > high)]
+    if outside.size:
+        raise ValueError(f"`t_eval` must lie within `t_span` = ({t0!r}, {t1!r}); found {outside[:3].tolist()}.")
+    steps = np.diff(arr) * np.sign(t1 - t0)
+    if np.any(steps <= 0):
+        i = int(np.argmax(steps <= 0))
+        word = "increasing" if t1 > t0 else "decreasing"
+        raise ValueError(f"`t_eval` must be sorted, strictly {word} from t_span[0] to t_span[1]; found "
+                         f"{arr[i]!r} followed by {arr[i + 1]!r}.")
+    return arr
+
+
+def _check_tol(name, tol, n):
+    if isinstance(tol, (bool, np.bool_, str, bytes)) or np.asarray(tol).dtype.kind in "bSUO" and \
+            any(isinstance(v, (bool, np.bool_, str, bytes)) for v in np.ravel(np.asarray(tol, dtype=object))):
+        raise TypeError(f"`{name}` must be a positive finite number or an array of shape ({n},); found {tol!r}.")
+    try:
+        arr = np.asarray(tol, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(f"`{name}` must be a positive finite number or an array of shape ({n},); found {tol!r}.") from None
+    if np.iscomplexobj(tol) or arr.shape not in ((), (n,)):
+        raise ValueError(f"`{name}` must be a number or an array of shape ({n},); found {tol!r}.")
+    if not np.all(np.isfinite(arr) & (arr > 0.0)):
+        raise ValueError(
+            f"`{name}` must be positive and finite (every entry); found {tol!r}. A zero `atol` asks for a pure "
+            "relative error, which a state component at or through zero (an algebraic variable, a constrained "
+            "direction) cannot meet: the step size collapses with a message that does not say why."
+        )
+    return float(arr) if arr.ndim == 0 else arr
+
+
+def check_tolerances(rtol, atol, n):
+    """``(rtol, atol)`` checked the same way for every method: positive and finite, scalars or shape (n,)."""
+    return _check_tol("rtol", rtol, n), _check_tol("atol", atol, n)

@@ -7,6 +7,7 @@ CompletionResult with success=False whose message holds the fragment) or ``SOLVE
 success=True and, with the fragment None, an error against the exact solution under 1e-6).
 docs/reliability_library.md lists the same classes.
 """
+import re
 import warnings
 
 import numpy as np
@@ -60,6 +61,27 @@ def scaled_chain(low):
     exact = lambda s: np.array([np.broadcast_to(v, np.shape(s)) for v in exact_f(s)], dtype=float)  # noqa: E731
     res = solve_dae(dae, (0.0, 2.0), exact(0.0), lam=1.0, t_eval=np.linspace(0, 2, 11), rtol=1e-10, atol=1e-12)
     res.error = float(np.max(np.abs(res.x - exact(res.t))))
+    return res
+
+
+def column_scaled_chain(columns, method="alternative"):
+    """``N D y' + D y = f`` (N the 4x4 shift): the unknowns ``y = D^-1 x`` scaled by `columns`, e.g. y2 = 1e12 x2.
+
+    The error is relative to each component's largest exact value (the components differ by 1e24).
+    """
+    n, D = 4, np.asarray(columns, dtype=float)
+    fs = [sympy.sin(t), sympy.cos(t), t, sympy.Integer(1)]
+    exact_f = sympy.lambdify(t, [fs[0] - sympy.diff(fs[1], t) + sympy.diff(fs[2], t, 2) - sympy.diff(fs[3], t, 3),
+                                 fs[1] - sympy.diff(fs[2], t) + sympy.diff(fs[3], t, 2), fs[2] - sympy.diff(fs[3], t), fs[3]])
+    exact = lambda s: np.array([np.broadcast_to(v, np.shape(s)) for v in exact_f(s)], dtype=float) / (  # noqa: E731
+        D[:, None] if np.ndim(s) else D)
+    dae = LinearDAE(np.eye(n, k=1) * D, np.diag(D), fs)
+    lam = None if method == "standard" else 1.0
+    atol = 1e-12 * np.max(np.abs(exact(np.linspace(0, 2, 11))), axis=1)  # per component: they differ by 1e24
+    res = solve_dae(dae, (0.0, 2.0), exact(0.0), completion=method, lam=lam, t_eval=np.linspace(0, 2, 11),
+                    rtol=1e-10, atol=atol)
+    X = exact(res.t)
+    res.error = float(np.max(np.abs(res.x - X) / np.max(np.abs(X), axis=1, keepdims=True)))
     return res
 
 
@@ -167,6 +189,12 @@ CASES = [
     (lambda: scaled_chain(1e-12), SOLVED, None),
     (lambda: scaled_nilpotent_chain(1e-6, 1e6), SOLVED, None),
     (lambda: scaled_nilpotent_chain(1e-12, 1.0), SOLVED, None),
+    # badly scaled unknowns (columns) are equilibrated too, and the solution scaled back
+    (lambda: column_scaled_chain([1, 1e-12, 1, 1]), SOLVED, None),
+    (lambda: column_scaled_chain([1, 1e-12, 1, 1], "standard"), SOLVED, None),
+    (lambda: column_scaled_chain([1, 1e-12, 1, 1], "stabilized"), SOLVED, None),
+    (lambda: column_scaled_chain([1e-12, 1, 1e12, 1]), SOLVED, None),
+    (lambda: column_scaled_chain(np.logspace(-6, 6, 4)), SOLVED, None),
 ]
 
 
@@ -232,3 +260,152 @@ def test_a_constant_sympy_rate_is_a_constant():
 def test_exceptions_subclass_builtins():
     assert issubclass(DimensionError, ValueError)
     assert issubclass(IndexDeterminationError, ValueError)
+
+
+# -- a callable coefficient that misbehaves ---------------------------------------------------------
+def raises_after(t_bad, exc):
+    """f = (sin t, 0) until `t_bad`, then raises `exc` (any exception, not only ValueError)."""
+    def f(s, d):
+        if s > t_bad:
+            raise exc
+        return [np.sin(s + d * np.pi / 2), 0.0]
+    return f
+
+
+@pytest.mark.parametrize("exc", [ZeroDivisionError("division by zero"), KeyError("table"), RuntimeError("lookup")])
+@pytest.mark.parametrize("solver", ["RK45", "Radau", "CVODE"])
+def test_a_callable_raising_anything_mid_run_keeps_the_trajectory(exc, solver):
+    dae = LinearDAE(N2, I2, raises_after(0.3, exc))
+    res = solve_dae(dae, (0.0, 1.0), [0.0, 0.0], lam=1.0, method=solver, rtol=1e-10, atol=1e-12)
+    assert not res.success and res.status == -2
+    assert "`f(t, d)` raised " + type(exc).__name__ in res.message and "at t=" in res.message, res.message
+    assert res.t.size >= 2 and res.t[0] == 0.0 and res.t[-1] <= 0.3 + 1e-12
+    assert chain_error(res) < 1e-8
+
+
+def turns_bad_after(t_bad, bad):
+    """f = (sin t, 0) until `t_bad`, then `bad` (text, complex: a TypeError in the checks, not in the callable)."""
+    def f(s, d):
+        return bad if s > t_bad else [np.sin(s + d * np.pi / 2), 0.0]
+    return f
+
+
+@pytest.mark.parametrize("bad", [["a", "b"], [1j, 0.0]], ids=["text", "complex"])
+@pytest.mark.parametrize("solver", ["RK45", "Radau", "CVODE"])
+def test_a_callable_returning_the_wrong_type_mid_run_keeps_the_trajectory(bad, solver):
+    res = solve_dae(LinearDAE(N2, I2, turns_bad_after(0.3, bad)), (0.0, 1.0), [0.0, 0.0], lam=1.0, method=solver,
+                    rtol=1e-10, atol=1e-12)
+    assert not res.success and res.status == -2
+    assert "`f(t, d)` must return real numbers" in res.message and "failed at t=" in res.message, res.message
+    assert res.t.size >= 2 and res.t[-1] <= 0.3 + 1e-12 and chain_error(res) < 1e-8
+
+
+@pytest.mark.parametrize("name, make", [
+    ("f", lambda h: LinearDAE(N2, I2, h)),
+    ("B", lambda h: LinearDAE(N2, lambda s, d: np.eye(2) * (1 + 1j) if d == 0 else np.zeros((2, 2)))),
+])
+def test_complex_values_from_a_callable_are_refused(name, make):
+    h = lambda s, d: np.array([np.sin(s + d * np.pi / 2) + 1j, 0.0])  # noqa: E731
+    with pytest.raises(TypeError, match=rf"`{name}\(t, d\)` must return real numbers.*complex"):
+        complete(make(h), "alternative", lam=1.0).rhs(0.0, np.zeros(2))
+
+
+def test_complex_values_from_a_vectorized_callable_forcing_are_refused():
+    """The forcing of a constant completion calls f on an array of times when it can: complex is refused there too."""
+    def f(s, d):
+        value = np.sin(s + d * np.pi / 2) + (1j if np.ndim(s) else 0)  # complex only when vectorized
+        return np.array([value, 0.0 * s])
+    c = complete(LinearDAE(N2, I2, f), "alternative", lam=1.0)
+    with pytest.raises(TypeError, match=r"`f\(t, d\)` must return real numbers.*complex"):
+        solve_completion(c, (0.0, 1.0), [0.0, 0.0], method="expm", max_step=0.05)
+
+
+def test_a_complex_constant_array_is_refused():
+    with pytest.raises(TypeError, match="`A` must be real"):
+        LinearDAE(np.array([[1 + 0.5j, 0], [0, 1]]), I2)
+
+
+@pytest.mark.parametrize("name, make", [
+    ("f", lambda: LinearDAE(N2, I2, lambda s, d: [np.sin(s), 0.0])),            # f' given as f
+    ("f", lambda: LinearDAE(N2, I2, lambda s, d: [1.0 + s, 2.0])),              # f' given as f (a line)
+    ("f", lambda: LinearDAE(N2, I2, lambda s, d: [3.0, 0.0])),                  # a constant, d ignored: f' = 3?
+    ("B", lambda: LinearDAE(N2, lambda s, d: np.array([[1.0, 0], [0, 1 + s]]), [0.0, 1.0])),
+])
+@pytest.mark.parametrize("solver", ["RK45", "expm", "CVODE"])
+def test_a_callable_that_ignores_d_is_refused_at_set_up(name, make, solver):
+    """Before the run (at `complete` for time-varying coefficients, before the first step for a forcing)."""
+    with pytest.raises(ValueError, match=rf"`{name}\(t, d\)` must honour its derivative order `d`"):
+        solve_dae(make(), (0.0, 1.0), [0.0, 0.0], lam=1.0, method=solver)
+
+
+@pytest.mark.parametrize("f", [
+    lambda s, d: [np.sin(1e3 * s + d * np.pi / 2) * 1e3 ** d, 0.0],         # fast
+    lambda s, d: [1e-9 * np.exp(s), 0.0],                                    # tiny, and every derivative is f
+    lambda s, d: [1e9 * np.cos(s + d * np.pi / 2), 0.0],                      # large
+    lambda s, d: [np.exp(2 * s) * 2.0 ** d, 0.0],                             # steep
+    lambda s, d: [s ** 3 if d == 0 else 3 * s ** 2 if d == 1 else 6 * s if d == 2 else 6.0 if d == 3 else 0.0, 0.0],
+])
+def test_a_callable_that_honours_d_is_accepted(f):
+    for t0 in (0.0, 0.5, -3.0, 7.0, 300.0):
+        dae = LinearDAE(N2, I2, f)
+        dae.f.jet(t0, 2)  # the check runs on the first jet with derivatives
+        assert dae.f._d_checked
+
+
+# -- functions without derivatives where the completion needs them ---------------------------------
+@pytest.mark.parametrize("expr", ["abs(t - 0.5)", "abs(sin(3*t))", "2 + abs(m*t)", "abs(p)"])
+@pytest.mark.parametrize("entry, key", [("f[1]", "f"), ("B[0][1]", "B")])
+def test_abs_in_a_spec_equation_is_refused_up_front(expr, entry, key):
+    """The completion differentiates A, B, f up to order k + 2; abs(u) has no derivative where u = 0."""
+    import tomllib
+
+    from fmu_build import SpecError, parse_spec
+    from test_spec_errors import BASE
+
+    fragment = {"f": 'f = [0, "p + sin(t)"]', "B": 'B = [[0, -1], [0, 0]]'}[key]
+    new = {"f": f'f = [0, "{expr}"]', "B": f'B = [[0, "{expr}"], [0, 0]]'}[key]
+    data = tomllib.loads(BASE.replace(fragment, new))
+    with pytest.raises(SpecError, match=rf"equations\.{re.escape(entry)}: abs\(\) is not allowed in the equations"):
+        parse_spec(data)
+
+
+def test_abs_in_a_spec_output_is_accepted():
+    """Outputs are evaluated, never differentiated: abs is fine there."""
+    import tomllib
+
+    from fmu_build import parse_spec
+    from test_spec_errors import BASE
+
+    spec = parse_spec(tomllib.loads(BASE + '\n[outputs]\nspeed = "abs(v)"\n'))
+    assert str(spec.outputs[0]["expr"]) == "Abs(v)"
+
+
+@pytest.mark.parametrize("expr", [sympy.Abs(t - 0.5), sympy.sign(t), sympy.Heaviside(t - 1), sympy.Max(t, 1),
+                                  sympy.floor(t)])
+def test_a_sympy_coefficient_without_derivatives_is_refused(expr):
+    with pytest.raises(ValueError, match=r"`f` contains .* which has no derivative where"):
+        LinearDAE(N2, I2, [expr, 0])
+    with pytest.raises(ValueError, match=r"`B` contains"):
+        LinearDAE(N2, sympy.Matrix([[1, 0], [0, 1 + expr]]))
+
+
+def test_column_equilibration_leaves_the_alternative_completion_unchanged():
+    """y = D^-1 x: the alternative completion of the scaled DAE is exactly D^-1 G D (its constraints and its
+    index-one part are the same subspaces in either unknowns); with D = 2^-12 on one column both are computed."""
+    p = gallery.nilpotent_chain(3, seed=0)
+    D = np.ones(p.dae.n)
+    D[1] = 2.0 ** -12
+    scaled = LinearDAE(p.dae.A.value * D, p.dae.B.value * D, JetCallable(lambda s, order: p.dae.f_jet(s, order)))
+    c, c_scaled = complete(p.dae, "alternative", lam=2.0), complete(scaled, "alternative", lam=2.0)
+    assert c_scaled._col_scales is not None and c._col_scales is None
+    G, g = c.matrices(0.7)
+    G_s, g_s = c_scaled.matrices(0.7)
+    np.testing.assert_allclose(G_s, G * D[None, :] / D[:, None], rtol=1e-9, atol=1e-9 * np.abs(G).max())
+    np.testing.assert_allclose(g_s, g / D, rtol=1e-9, atol=1e-9 * np.abs(g / D).max())
+    x = p.exact(np.array([0.7]))[:, 0] + 0.01
+    # the same constraints (Z2 is a basis of the same left null space, up to rotation): the same residual norm
+    np.testing.assert_allclose(np.linalg.norm(c_scaled.constraint_residual(0.7, x / D)),
+                               np.linalg.norm(c.constraint_residual(0.7, x)), rtol=1e-9)
+    # the nearest consistent point is sought in the given unknowns y, so project agrees up to the scaling's metric:
+    # both are consistent
+    assert np.linalg.norm(c_scaled.constraint_residual(0.7, c_scaled.project(0.7, x / D))) < 1e-9

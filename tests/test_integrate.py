@@ -195,3 +195,90 @@ def test_expm_refuses_time_varying():
     p = gallery.thesis_example3()
     with pytest.raises(ValueError, match="constant coefficients"):
         solve_completion(complete(p.dae, "standard"), p.t_span, p.x0, method="expm")
+
+
+# -- a reversed t_span ------------------------------------------------------------------------------
+BACKWARD_METHODS = ["RK45", "Radau", "expm", "CVODE"]
+
+
+@pytest.mark.parametrize("solver", BACKWARD_METHODS)
+@pytest.mark.parametrize("method", ["stabilized", "alternative"])
+def test_a_reversed_t_span_is_refused_where_the_added_eigenvalues_are_minus_lam(method, solver):
+    """Backward in time -lam is growth: from the exact x(2), x(0) came out 1e30 off with success=True."""
+    p = gallery.prescribed_path()
+    c = complete(p.dae, method, lam=10.0)
+    with pytest.raises(ValueError, match=r"`t_span` = \(2\.0, 0\.0\) runs backward.*grow like exp\(lam"):
+        solve_completion(c, (2.0, 0.0), p.exact(np.array([2.0]))[:, 0], method=solver, rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("solver", ["RK45", "Radau", "expm"])
+def test_the_standard_completion_integrates_backward(solver):
+    """Added eigenvalues 0: off-manifold errors grow at most polynomially either way, so x(0) is reached."""
+    p = gallery.prescribed_path()
+    c = complete(p.dae, "standard")
+    ts = np.linspace(2.0, 0.0, 5)
+    res = solve_completion(c, (2.0, 0.0), p.exact(ts[:1])[:, 0], method=solver, t_eval=ts, rtol=1e-10, atol=1e-12)
+    assert res.success, res.message
+    exact = p.exact(ts)
+    assert np.max(np.abs(res.x - exact) / (1 + np.abs(exact))) < 1e-7
+
+
+# -- t_eval and tolerances: one check for every method ---------------------------------------------
+ALL_SOLVERS = ["RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA", "expm", "CVODE"]
+BAD_T_EVAL = {
+    "outside": ([0.0, 0.5, 1.5], "lie within `t_span`"),
+    "before": ([-0.5, 0.5], "lie within `t_span`"),
+    "unsorted": ([0.0, 0.7, 0.3], "increasing"),
+    "repeated": ([0.0, 0.5, 0.5], "increasing"),
+    "nan": ([0.0, np.nan, 1.0], "finite"),
+    "empty": ([], "empty"),
+    "matrix": ([[0.0, 1.0]], "1-D"),
+    "text": (["a"], "real numbers"),
+}
+
+
+@pytest.mark.parametrize("solver", ALL_SOLVERS)
+@pytest.mark.parametrize("case", sorted(BAD_T_EVAL))
+def test_a_bad_t_eval_is_refused_by_every_method(case, solver):
+    p = gallery.nilpotent_chain(2)
+    c = complete(p.dae, "alternative", lam=1.0)
+    t_eval, fragment = BAD_T_EVAL[case]
+    with pytest.raises((ValueError, TypeError), match="`t_eval`") as info:
+        solve_completion(c, (0.0, 1.0), p.x0, method=solver, t_eval=t_eval)
+    assert fragment in str(info.value)
+
+
+@pytest.mark.parametrize("solver", ["RK45", "expm", "CVODE"])
+def test_t_eval_at_the_ends_of_t_span_is_kept(solver):
+    p = gallery.nilpotent_chain(2)
+    c = complete(p.dae, "alternative", lam=1.0)
+    res = solve_completion(c, p.t_span, p.x0, method=solver, t_eval=[p.t_span[0], p.t_span[1]], rtol=1e-8, atol=1e-10)
+    assert res.success and res.t.tolist() == list(p.t_span)
+
+
+BAD_TOL = [
+    (dict(atol=0.0), "`atol` must be positive"),
+    (dict(atol=-1e-8), "`atol` must be positive"),
+    (dict(atol=np.nan), "`atol` must be positive"),
+    (dict(atol="one zero"), "`atol` must be positive"),
+    (dict(rtol=0.0), "`rtol` must be positive"),
+    (dict(rtol=-1e-3), "`rtol` must be positive"),
+    (dict(rtol=np.nan), "`rtol` must be positive"),
+    (dict(rtol=np.inf), "`rtol` must be positive"),
+    (dict(atol=["small"] * 3), "`atol` must be"),
+    (dict(atol="one too many"), "`atol` must be a number or"),
+    (dict(rtol=True), "`rtol` must be a positive finite number"),
+    (dict(atol="1e-8"), "`atol` must be a positive finite number"),
+]
+
+
+@pytest.mark.parametrize("solver", ALL_SOLVERS)
+@pytest.mark.parametrize("tol, fragment", BAD_TOL, ids=[f"{k}={v!r}" for (d, _) in BAD_TOL for k, v in d.items()])
+def test_bad_tolerances_get_one_message_from_every_method(tol, fragment, solver):
+    p = gallery.nilpotent_chain(1)
+    c = complete(p.dae, "alternative", lam=1.0)
+    shaped = {"one zero": [1e-8] * (c.n - 1) + [0.0], "one too many": [1e-8] * (c.n + 1)}
+    tol = {k: shaped.get(v, v) if isinstance(v, str) else v for k, v in tol.items()}
+    with pytest.raises((ValueError, TypeError)) as info:
+        solve_completion(c, (0.0, 1.0), p.x0, method=solver, **tol)
+    assert fragment in str(info.value)

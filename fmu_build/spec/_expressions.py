@@ -43,7 +43,7 @@ class ExpressionError(ValueError):
     """An expression in a spec is not allowed; the message names the field."""
 
 
-def parse_expression(text, names, field):
+def parse_expression(text, names, field, *, differentiated=False):
     """Parse `text` into a sympy expression over the symbols in `names`.
 
     Parameters
@@ -54,6 +54,9 @@ def parse_expression(text, names, field):
         Allowed identifiers -> sympy symbols (``t``, parameters, inputs).
     field : str
         Where the expression came from, for messages (e.g. ``equations.B[1][0]``).
+    differentiated : bool, optional
+        The expression will be differentiated in time (the equations' ``A``, ``B``, ``f``):
+        functions without a derivative where their argument vanishes (``abs``) are refused.
 
     Examples
     --------
@@ -101,7 +104,27 @@ def parse_expression(text, names, field):
         raise ExpressionError(f"{field}: {_short(text)!r} cannot be converted ({type(exc).__name__}: {exc})") from None
     _check_result(expr, text, field, sympy)
     _check_size(expr, text, field, sympy)
+    if differentiated:
+        _check_differentiable(expr, field, sympy)
     return expr
+
+
+def _check_differentiable(expr, field, sympy):
+    """Refuse ``abs`` where derivatives are needed: at a zero of its argument it has none.
+
+    The completion differentiates every coefficient up to order k + 2 (and an input's derivatives
+    enter by the chain rule); the derivative of ``abs(u)`` is ``sign(u) u'``, which jumps where
+    ``u = 0``, and its own derivative is a Dirac delta there. Whether ``u`` vanishes during a run
+    cannot be known when an input or a parameter enters it, so ``abs`` is refused in the equations
+    (outputs are only evaluated, and may use it).
+    """
+    if expr.has(sympy.Abs):
+        raise ExpressionError(
+            f"{field}: abs() is not allowed in the equations: the completion differentiates A, B and f in time "
+            "(up to order k + 2), and abs(u) has no derivative where u = 0 (its first derivative jumps, its second is "
+            "infinite there). Use a smooth alternative, e.g. sqrt(u**2 + eps**2) with a small eps (a parameter), or "
+            "split the simulation where u changes sign; abs() is allowed in [outputs]"
+        )
 
 
 def _short(text, limit=80):

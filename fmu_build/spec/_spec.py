@@ -518,7 +518,7 @@ def _matrix(rows, field, shape, names, problems, vector=False):
         for j, value in enumerate(row):
             where = f"{field}[{i}]" if vector else f"{field}[{i}][{j}]"
             try:
-                out[i, j] = parse_expression(value, names, where)
+                out[i, j] = parse_expression(value, names, where, differentiated=True)
             except ExpressionError as exc:
                 problems.append(str(exc))
                 ok = False
