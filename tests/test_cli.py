@@ -82,7 +82,7 @@ def test_readme_native_host_recipe_verbatim(tmp_path):
     run = subprocess.run(["bash", "-ec", recipe], cwd=tmp_path, env={**os.environ, "PATH": path},
                          capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, (run.stdout[-2000:], run.stderr[-2000:])
-    csv = tmp_path / "PrescribedPath.csv"
+    csv = tmp_path / "out" / "PrescribedPath.csv"  # the recipe runs ecos inside out/
     header = [h.strip().split("::")[-1].split("[")[0] for h in csv.read_text().splitlines()[0].split(",")]
     rows = np.loadtxt(csv, delimiter=",", skiprows=1)
     assert rows.shape[0] == 1001
