@@ -33,6 +33,7 @@ from ._index import check_solvability, determine_index, k_works
 from ._linalg import numerical_rank, validate_rcond
 from ._problem import check_dae, row_equilibration, row_scaled, varying_view
 from ._rate import as_rate, lam_at
+from ._structured import StructuredFactors, StructuredFallback, constraint_svd
 from ._timefunc import TimeFunction, _shape_str
 from ._validate import check_k, check_t_span
 
@@ -108,18 +109,27 @@ class _Factors:
         self.cg = self.Z2.T @ self.Lg[0]
         self._C_svd = None
         self._first_rows = None
+        self.A0, self.B0 = J[:n, :n], jets.F[0][:n]
+        self.has_Jd = q >= 1 and bool(np.any(jets.J[1]))
+
+    def times_F(self, X, d):
+        """``X @ F^(d)``."""
+        return X @ self.jets.F[d]
+
+    def times_L(self, X, d):
+        """``X @ Lg[d]``: the d-th derivative's forcing map (or value)."""
+        return X @ self.Lg[d]
+
+    def range_basis(self, X, rcond, t):
+        """Orthonormal basis of range(X); refuses a rank-deficient X."""
+        Z, s, _ = np.linalg.svd(X, full_matrices=False)
+        if numerical_rank(s, X.shape, rcond, what="A T2") < X.shape[1]:
+            raise IndexDeterminationError(f"A T2 is rank deficient at t={t!r}: the DAE is not solvable.")
+        return Z
 
     def _c_svd(self):
         if self._C_svd is None:
-            a = self.C.shape[0]
-            Uc, sc, Vct = np.linalg.svd(self.C)
-            rank_C = numerical_rank(sc, self.C.shape, None, what="constraint matrix Z2^T F")
-            if rank_C != a:
-                raise IndexDeterminationError(
-                    f"the constraints Z2^T F x = Z2^T g are dependent (rank {rank_C} < {a}) at t={self.t!r}: "
-                    "[J, F] does not have full row rank, so the DAE is not solvable."
-                )
-            self._C_svd = (Uc, sc, Vct)
+            self._C_svd = constraint_svd(self.C, self.t)
         return self._C_svd
 
     @property
@@ -197,7 +207,7 @@ class Completion:
     extra_order = 0
     _fastest_rate = None  # max |Re eig(G)| for constant coefficients, cached by lsc.stiffness_ratio
 
-    def __init__(self, dae, *, lam=None, k=None, rcond=None, t_span=None):
+    def __init__(self, dae, *, lam=None, k=None, rcond=None, t_span=None, setup="auto"):
         check_dae(dae)
         self.dae = dae
         self.n = dae.n
@@ -208,7 +218,8 @@ class Completion:
         if dae.is_constant and isinstance(self.lam, TimeFunction):
             # G(t) follows lam(t): evaluate it where it is asked for, like time-varying coefficients.
             self.dae = dae = varying_view(dae)
-        self.k = self._check_k(k)
+        self.setup, self.setup_note, self._structured = self._check_setup(setup), None, None
+        self.k = self._structured_k(k) if self.setup == "structured" else self._check_k(k)
         self._order = self.k + self.extra_order
         self._cache = OrderedDict()
         # Badly scaled rows are equilibrated once (constant scales, so the solutions do not change);
@@ -216,10 +227,9 @@ class Completion:
         self._row_scales = row_equilibration(dae, self._t_ref)
         self._eq = dae if self._row_scales is None else row_scaled(dae, self._row_scales)
         if dae.is_constant:
-            fac = _Factors(self._eq, self.k, self._t_ref, self.extra_order, self.rcond)
+            fac, (self._G, self._W) = self._constant_maps()
             self._std = fac
             self._rank = fac.rank
-            self._G, self._W = self._maps(fac, self._t_ref)
             self._W_c = fac.cg
             if self._row_scales is not None:
                 columns = np.tile(self._row_scales, self._order + 1)
@@ -229,6 +239,39 @@ class Completion:
             fac = self._factors(self._t_ref, check=False)
             self._rank = fac.rank
         self.n_constraints = fac.C.shape[0]
+
+    # -- set-up (constant coefficients) --------------------------------------
+    def _check_setup(self, setup):
+        if setup not in ("auto", "dense"):
+            raise ValueError(f"`setup` must be 'auto' or 'dense'; found {setup!r}.")
+        return "structured" if setup == "auto" and self.dae.is_constant else "dense"
+
+    def _structured_k(self, k):
+        """k from the structured set-up (lsc._structured); on a declined problem the dense path decides."""
+        dae, t = self.dae, self._t_ref
+        k = None if k is None else check_k(k)
+        scales = row_equilibration(dae, t)  # the equations the completion is built from (`self._eq` below)
+        eq = dae if scales is None else row_scaled(dae, scales)
+        try:
+            fac = StructuredFactors(eq.A(t), eq.B(t), k, self.extra_order, self.rcond)
+        except StructuredFallback as exc:
+            self.setup, self.setup_note = "dense", f"structured set-up declined: {exc}"
+            return self._check_k(k)
+        if k is not None and k > K_ABOVE_INDEX and k > fac.index + K_ABOVE_INDEX:
+            return self._check_k(k)  # the dense path's refusal, with its message
+        self._structured = fac
+        return fac.k
+
+    def _constant_maps(self):
+        """``(fac, (G, W))`` at construction; a structured set-up that declines here hands over to the dense one."""
+        fac = self._structured
+        if fac is not None:
+            try:
+                return fac, self._maps(fac, self._t_ref)
+            except StructuredFallback as exc:
+                self.setup, self.setup_note = "dense", f"structured set-up declined: {exc}"
+        fac = _Factors(self._eq, self.k, self._t_ref, self.extra_order, self.rcond)
+        return fac, self._maps(fac, self._t_ref)
 
     # -- validation ---------------------------------------------------------
     def _check_lam(self, lam):
@@ -439,7 +482,7 @@ class StandardCompletion(Completion):
 
     def _maps(self, fac, t):
         P = fac.first_rows
-        return -P @ fac.jets.F[0], P @ fac.Lg[0]
+        return -fac.times_F(P, 0), fac.times_L(P, 0)
 
 
 class StabilizedCompletion(StandardCompletion):
@@ -503,25 +546,20 @@ class AlternativeCompletion(Completion):
 
     def _maps(self, fac, t):
         n = self.n
-        jets = fac.jets
-        A = jets.J[0][:n, :n]
-        B = jets.F[0][:n]
+        A, B = fac.A0, fac.B0
         Z2, C = fac.Z2, fac.C
-        AT2 = A @ fac.T2
-        Z1, s1, _ = np.linalg.svd(AT2, full_matrices=False)
-        if numerical_rank(s1, AT2.shape, self.rcond, what="A T2") < AT2.shape[1]:
-            raise IndexDeterminationError(f"A T2 is rank deficient at t={t!r}: the DAE is not solvable.")
+        Z1 = fac.range_basis(A @ fac.T2, self.rcond, t)
         M = np.vstack([Z1.T @ A, C])
         # c' = (Z2^T)' (F x - g) + Z2^T (F' x + F x' - g') = -lam c, with
-        # (Z2^T)' = -Z2^T J' J^+, so (Z2^T)' (F x - g) = -Y (F x - g).
-        Jd = jets.J[1]
-        if np.any(Jd):
-            Y = fac.times_pinv(Z2.T @ Jd)
-        else:
-            Y = np.zeros((Z2.shape[1], Jd.shape[0]))
+        # (Z2^T)' = -Z2^T J' J^+, so (Z2^T)' (F x - g) = -Y (F x - g); Y = 0 for constant coefficients.
         lam = self._lam_jet(t)[0]
-        G_num = np.vstack([-Z1.T @ B, -lam * C + Y @ jets.F[0] - Z2.T @ jets.F[1]])
-        W_num = np.concatenate([Z1.T @ fac.f0, (lam * Z2.T - Y) @ fac.Lg[0] + Z2.T @ fac.Lg[1]], axis=0)
+        G_c = -lam * C - fac.times_F(Z2.T, 1)
+        W_c = lam * fac.cg + fac.times_L(Z2.T, 1)
+        if fac.has_Jd:
+            Y = fac.times_pinv(Z2.T @ fac.jets.J[1])
+            G_c, W_c = G_c + fac.times_F(Y, 0), W_c - fac.times_L(Y, 0)
+        G_num = np.vstack([-Z1.T @ B, G_c])
+        W_num = np.concatenate([Z1.T @ fac.f0, W_c], axis=0)
         # one LU for both right-hand sides (W_num is a matrix or, time-varying, a vector)
         sol = np.linalg.solve(M, np.column_stack([G_num, W_num]))
         return sol[:, :n], sol[:, n:].reshape(W_num.shape)
@@ -534,7 +572,7 @@ COMPLETIONS = {
 }
 
 
-def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None):
+def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None, setup="auto"):
     """Complete a linear DAE to an ODE ``x' = G(t) x + g(t)``.
 
     Parameters
@@ -600,4 +638,4 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None):
         cls = COMPLETIONS[method]
     else:
         raise ValueError(f"`method` must be one of {set(COMPLETIONS)} or a Completion subclass; found {method!r}.")
-    return cls(dae, lam=lam, k=k, rcond=rcond, t_span=t_span)
+    return cls(dae, lam=lam, k=k, rcond=rcond, t_span=t_span, setup=setup)

@@ -1,0 +1,304 @@
+"""Structured set-up of a constant-coefficient completion: n-sized blocks, no derivative-array SVD.
+
+For constant ``A, B`` the standard derivative array with ``k`` differentiations
+is block lower bidiagonal (``A`` on the diagonal, ``B`` below). Everything a
+completion needs from it is
+
+- ``Z2``: an orthonormal basis of its left null space, and
+- ``P``: the first ``n`` rows of ``J^+``.
+
+If ``X`` is any matrix with ``X J = [I, 0, ..., 0]`` (it exists when ``J`` is
+1-full), then ``P = X (I - Z2 Z2^T)``: for ``r`` in the range of ``J`` every
+solution of ``J w = r`` has the same ``x'`` block, and ``J^+`` first projects
+onto that range. Both ``X`` and ``Z2`` follow from the pencil:
+
+1. A shift ``mu`` with ``B_mu = B + mu A`` well conditioned (LU). ``B_mu`` is
+   ``B`` of the equation for ``y = exp(-mu t) x``, whose derivative array is
+   ``(Lam kron I)`` times the one for ``x`` (rows) and a unit block-triangular
+   change of the unknowns whose first block row is ``[I, 0, ...]``. So
+   ``Z2 = orth((Lam^T kron I) Z2_y)`` and ``X = X_y (Lam kron I)``, with ``Lam``
+   the ``stabilization_jets`` of the constant rate ``-mu``.
+2. ``M^T = B_mu^-T A^T``. A staircase reduction (orthogonal deflation of null
+   spaces, rank-revealing QR with column pivoting on each level) gives an
+   orthonormal ``U = [U_R, U_S]`` with ``M^T = U [[X_RR, 0], [X_SR, X_SS]] U^T``,
+   ``X_SS`` nilpotent and ``X_RR`` invertible. The number of levels is the
+   index ``nu``; ``U_S`` spans the left generalized null space of ``M``.
+3. For the shifted array (``B_mu`` invertible) ``z_{j+1} = -M^T z_j``, so the
+   left null space is spanned by the blocks ``U_S (-X_SS)^j``, ``j = 0..k``;
+   and ``X_y``'s blocks are ``Y_0 = U_R X_RR^-1 U_R^T B_mu^-T``,
+   ``Y_j = U_S (-X_SS)^(j-1) Phi`` with ``Phi = (U_S^T - X_SR X_RR^-1 U_R^T) B_mu^-T``.
+
+Cost: one LU of ``B_mu``, ``nu + 1`` pivoted QRs of shrinking blocks (the last
+one skipped when an LU condition estimate already shows the block
+invertible), and matrix products of n-sized blocks; nothing of size
+``((k+1) n)^2`` is formed. Rank decisions use ``rcond`` relative to the
+largest pivot of each reduced block; a decision within a factor
+``_MARGIN`` of the threshold, or no well-conditioned shift, is not taken
+here: `StructuredFallback` says why and the caller uses the dense path.
+"""
+
+from math import comb
+
+import numpy as np
+import scipy.linalg
+from scipy.linalg import lapack
+
+from ._derivative_array import stabilization_jets
+from ._exceptions import IndexDeterminationError
+from ._linalg import default_rcond, numerical_rank
+
+__all__ = ["StructuredFallback", "StructuredArray", "StructuredFactors", "constraint_svd", "structured_array"]
+
+# A rank decision closer than this factor to the threshold goes to the dense path (its SVDs decide it and
+# warn): the margin `numerical_rank` warns within.
+_MARGIN = 100.0
+# Shifts tried, in units of ||B|| / ||A|| (the pencil's natural scale); a regular pencil is singular at
+# no more than n of them.
+_SHIFTS = (0.7317, -1.3641, 2.2713, -0.4127)
+# B_mu is accepted when its reciprocal condition number (1-norm estimate) exceeds this.
+_SHIFT_RCOND = 1e-6
+
+
+class StructuredFallback(Exception):
+    """The structured set-up cannot decide this problem as safely as the dense one (message: why)."""
+
+
+def _shift(A, B):
+    """``(mu, lu)`` with ``B + mu A`` well conditioned, or StructuredFallback."""
+    nA, nB = np.linalg.norm(A, 1), np.linalg.norm(B, 1)
+    scale = (nB or 1.0) / (nA or 1.0)
+    worst = None
+    for s in _SHIFTS:
+        mu = s * scale
+        Bm = B + mu * A
+        lu, piv, info = lapack.dgetrf(Bm)
+        if info == 0:
+            rc, _ = lapack.dgecon(lu, np.linalg.norm(Bm, 1))
+            if rc > _SHIFT_RCOND:
+                return mu, (lu, piv)
+            worst = rc
+        else:
+            worst = 0.0
+    raise StructuredFallback(
+        f"B + mu A is ill conditioned at every trial shift (reciprocal condition {worst:.1e}): the pencil is "
+        "singular or nearly so"
+    )
+
+
+def _default_rcond(n, level):
+    """The dense path's default for the array with `level` differentiations, ``[J, F]`` of shape (level+1) n x (level+2) n."""
+    return default_rcond(((level + 1) * n, (level + 2) * n))
+
+
+def _count_above(values, tol, what):
+    """How many of `values` exceed `tol`; a value within `_MARGIN` of it is a close call left to the dense path."""
+    if np.any((values > tol / _MARGIN) & (values < tol * _MARGIN)):
+        raise StructuredFallback(f"the rank decision on {what} is a close call (within {_MARGIN:g} of the threshold)")
+    return int(np.count_nonzero(values > tol))
+
+
+def _orth(X):
+    return np.linalg.qr(X)[0] if X.shape[1] else X
+
+
+def _solve_bordered(M, P, Q):
+    """LU of the bordered matrix ``[[M, P], [Q^T, 0]]``."""
+    a = P.shape[1]
+    K = np.block([[M, P], [Q.T, np.zeros((a, a))]])
+    return scipy.linalg.lu_factor(K, check_finite=False)
+
+
+def _generalized_null_space(A, Bm, Mt, rcond, kmax):
+    """``(U_S, levels)``: orthonormal basis of the generalized null space of ``Mt = B_mu^-T A^T``.
+
+    Level 1 is null(Mt) = null(A^T), decided by a pivoted QR of ``A`` itself (the rank the dense path decides
+    first, with the same threshold). Level j + 1 is ``{z : Mt z in N_j}``: ``Mt z = N_j c`` needs ``N_j c`` in
+    range(Mt), i.e. ``c`` in the null space of ``Wl^T N_j`` (``Wl`` spans range(Mt)^perp = B_mu null(A)), a
+    small matrix of cosines; ``z`` is then one solve with a bordered matrix factorized once.
+    """
+    n = A.shape[0]
+    Q, R, piv = scipy.linalg.qr(A, pivoting=True)
+    d = np.abs(np.diag(R))
+    if d.size == 0 or d[0] == 0.0:
+        raise StructuredFallback("A is zero")
+    tol0 = rcond if rcond is not None else _default_rcond(n, 0)
+    r = _count_above(d / d[0], tol0, "A (k=0)")
+    if r == n:
+        return np.zeros((n, 0)), 0
+    N1 = Q[:, r:]
+    Nr = np.zeros((n, n - r))
+    Nr[piv[:r]] = -scipy.linalg.solve_triangular(R[:r, :r], R[:r, r:])
+    Nr[piv[r:]] = np.eye(n - r)
+    Wl = _orth(Bm @ Nr)
+    lu = _solve_bordered(Mt, Wl, N1)
+    N, levels = N1, 1
+    while True:
+        if levels > kmax:
+            raise StructuredFallback(f"the index exceeds kmax={kmax}")
+        H = Wl.T @ N
+        _, sv, Vh = np.linalg.svd(H)
+        tol = rcond if rcond is not None else _default_rcond(n, levels)
+        sv = np.concatenate([sv, np.zeros(N.shape[1] - sv.size)])
+        rank = _count_above(sv, tol, f"level {levels + 1} of the staircase")
+        c = Vh[rank:].T
+        if N1.shape[1] + c.shape[1] == N.shape[1]:
+            return N, levels
+        V = np.vstack([N @ c, np.zeros((N1.shape[1], c.shape[1]))])
+        Z = scipy.linalg.lu_solve(lu, V, check_finite=False)[:n]
+        N = _orth(np.hstack([N1, Z]))
+        levels += 1
+
+
+def _lam(k, c):
+    """``Lam[i, j] = C(i, j) c^(i - j)``: ``(d/dt + c)^i`` in terms of ``d^j/dt^j``."""
+    Lam = np.zeros((k + 1, k + 1))
+    for i in range(k + 1):
+        for j in range(i + 1):
+            Lam[i, j] = comb(i, j) * c ** (i - j)
+    return Lam
+
+
+class StructuredArray:
+    """What a completion needs from the standard derivative array, found from n-sized blocks.
+
+    Attributes
+    ----------
+    index : int
+        The differentiation index (number of staircase levels).
+    k : int
+    n, a : int
+        Unknowns and constraints (corank of J).
+    Z2 : ndarray, shape ((k+1) n, a)
+        Orthonormal basis of the left null space of J.
+    first_rows : ndarray, shape (n, (k+1) n)
+        The first n rows of ``J^+``.
+    shift : float
+        The shift ``mu`` used.
+    """
+
+    def __init__(self, index, k, n, Z2, first_rows, shift):
+        self.index, self.k, self.n, self.Z2, self.first_rows, self.shift = index, k, n, Z2, first_rows, shift
+        self.a = Z2.shape[1]
+
+
+def _pencil_reduction(A, B, rcond, kmax):
+    """Shift, ``Mt = B_mu^-T A^T`` and its generalized null space."""
+    mu, lu = _shift(A, B)
+    Mt = scipy.linalg.lu_solve(lu, A.T, trans=1)
+    U_S, index = _generalized_null_space(A, B + mu * A, Mt, rcond, kmax)
+    return mu, lu, Mt, U_S, index
+
+
+def structured_index(A, B, rcond=None, kmax=10):
+    """The differentiation index of a regular constant pencil (StructuredFallback when not clear-cut)."""
+    return _pencil_reduction(np.asarray(A, float), np.asarray(B, float), rcond, kmax)[-1]
+
+
+def structured_array(A, B, k=None, rcond=None, kmax=10):
+    """The `StructuredArray` of ``A x' + B x = f`` with k (None: the index) differentiations.
+
+    Raises StructuredFallback when a rank decision is not clear-cut, no
+    shift makes ``B + mu A`` well conditioned, or ``k`` is below the index
+    (the dense path then refuses or decides).
+    """
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    n = A.shape[0]
+    mu, lu, Mt, U_S, index = _pencil_reduction(A, B, rcond, kmax)
+    k = index if k is None else k
+    if k < index:
+        raise StructuredFallback(f"k={k} is below the index {index}")
+    a = U_S.shape[1]
+    Binv_T = scipy.linalg.lu_solve(lu, np.eye(n), trans=1)
+    # Y_0 with Mt Y_0 = B_mu^-T modulo span(U_S) (U_S^T Y_0 = 0 fixes it); the rest, Y_1 = U_S Psi, lies in U_S.
+    sol = scipy.linalg.lu_solve(_solve_bordered(Mt, U_S, U_S), np.vstack([Binv_T, np.zeros((a, n))]), check_finite=False)
+    Y = [sol[:n]]
+    Psi = sol[n:]
+    X_SS = U_S.T @ (Mt @ U_S)
+    Z = [U_S]
+    step = np.eye(a)
+    for _ in range(k):
+        Y.append(U_S @ (step @ Psi))
+        step = step @ (-X_SS)
+        Z.append(U_S @ step)
+    Lam = _lam(k, -mu)
+    X = np.einsum("ij,icr->rjc", Lam, np.stack(Y)).reshape(n, (k + 1) * n)
+    Zx = np.einsum("ji,jna->ina", Lam, np.stack(Z)).reshape((k + 1) * n, a)
+    Z2 = _orth(Zx)
+    first_rows = X - (X @ Z2) @ Z2.T
+    return StructuredArray(index, k, n, Z2, first_rows, mu)
+
+
+def constraint_svd(C, t):
+    """SVD of the constraint matrix ``C = Z2^T F``; refuses dependent constraints ([J, F] not of full row rank)."""
+    a = C.shape[0]
+    Uc, sc, Vct = np.linalg.svd(C)
+    rank_C = numerical_rank(sc, C.shape, None, what="constraint matrix Z2^T F")
+    if rank_C != a:
+        raise IndexDeterminationError(
+            f"the constraints Z2^T F x = Z2^T g are dependent (rank {rank_C} < {a}) at t={t!r}: "
+            "[J, F] does not have full row rank, so the DAE is not solvable."
+        )
+    return Uc, sc, Vct
+
+
+class StructuredFactors:
+    """The standard derivative array's factors for constant ``A, B`` from a `StructuredArray`.
+
+    Offers what a completion's ``_maps`` uses (``first_rows``, ``Z2``, ``C``,
+    ``cg``, ``f0``, ``A0``, ``B0``, ``times_F``, ``times_L``, ``T2``,
+    ``C_pinv``, ``range_basis``) without forming ``J``, ``F`` or the forcing
+    map ``L = Lam kron I``: ``F = [B; 0; ...]`` and ``L`` act block by block.
+    """
+
+    has_Jd = False  # constant coefficients: J' = 0
+
+    def __init__(self, A, B, k, q, rcond, kmax=10):
+        s = structured_array(A, B, k, rcond, kmax)
+        n = s.n
+        self.n, self.t, self.k, self.q, self.index = n, 0.0, s.k, q, s.index
+        self.rank = (s.k + 1) * n - s.a
+        self.Z2, self.first_rows, self.shift = s.Z2, s.first_rows, s.shift
+        self.A0, self.B0 = A, B
+        self._Lam = stabilization_jets(s.k, q, None)
+        self.C = self.Z2[:n].T @ B
+        self.cg = self.times_L(self.Z2.T, 0)
+        self.f0 = np.eye(n, (s.k + q + 1) * n)
+        self._C_svd = None
+
+    def times_F(self, X, d):
+        """``X @ F^(d)`` with ``F = [B; 0; ...]`` (constant, so ``F' = 0``)."""
+        if d:
+            return np.zeros((X.shape[0], self.n))
+        return X[:, : self.n] @ self.B0
+
+    def times_L(self, X, d):
+        """``X @ (Lam[d] kron I_n)``, block by block."""
+        m = X.shape[0]
+        blocks = X.reshape(m, self.k + 1, self.n)
+        return np.einsum("ij,mic->mjc", self._Lam[d], blocks).reshape(m, -1)
+
+    def _c_svd(self):
+        if self._C_svd is None:
+            self._C_svd = constraint_svd(self.C, self.t)
+        return self._C_svd
+
+    @property
+    def T2(self):
+        Uc, sc, Vct = self._c_svd()
+        return Vct[sc.size :].T
+
+    @property
+    def C_pinv(self):
+        Uc, sc, Vct = self._c_svd()
+        return (Vct[: sc.size].T / sc) @ Uc.T
+
+    def range_basis(self, X, rcond, t):
+        """Orthonormal basis of range(X) from a QR; full column rank is certified by a condition estimate."""
+        if X.shape[1] == 0:
+            return X
+        Q, R = scipy.linalg.qr(X, mode="economic")
+        rc, info = lapack.dtrcon(R, norm="1", uplo="U")
+        tol = rcond if rcond is not None else default_rcond(X.shape)
+        if not rc / X.shape[1] > tol * _MARGIN:
+            raise StructuredFallback("A T2 is not clearly of full column rank")
+        return Q
