@@ -120,13 +120,6 @@ class _Factors:
         """``X @ Lg[d]``: the d-th derivative's forcing map (or value)."""
         return X @ self.Lg[d]
 
-    def range_basis(self, X, rcond, t):
-        """Orthonormal basis of range(X); refuses a rank-deficient X."""
-        Z, s, _ = np.linalg.svd(X, full_matrices=False)
-        if numerical_rank(s, X.shape, rcond, what="A T2") < X.shape[1]:
-            raise IndexDeterminationError(f"A T2 is rank deficient at t={t!r}: the DAE is not solvable.")
-        return Z
-
     def _c_svd(self):
         if self._C_svd is None:
             self._C_svd = constraint_svd(self.C, self.t)
@@ -155,6 +148,20 @@ class _Factors:
         """``X @ J^+`` from the SVD factors."""
         r = self.rank
         return ((X @ self.Vt[:r].T) / self.s[:r]) @ self.U[:, :r].T
+
+    def index_one_solve(self, G_c, W_c, rcond, t):
+        """``(G, W)`` from ``[Z1^T A; C] x' = [-Z1^T B x + Z1^T f; G_c x + W_c]``, Z1 an orthonormal basis of range(A T2)."""
+        n, A = self.n, self.A0
+        AT2 = A @ self.T2
+        Z1, s1, _ = np.linalg.svd(AT2, full_matrices=False)
+        if numerical_rank(s1, AT2.shape, rcond, what="A T2") < AT2.shape[1]:
+            raise IndexDeterminationError(f"A T2 is rank deficient at t={t!r}: the DAE is not solvable.")
+        M = np.vstack([Z1.T @ A, self.C])
+        G_num = np.vstack([-Z1.T @ self.B0, G_c])
+        W_num = np.concatenate([Z1.T @ self.f0, W_c], axis=0)
+        # one LU for both right-hand sides (W_num is a matrix or, time-varying, a vector)
+        sol = np.linalg.solve(M, np.column_stack([G_num, W_num]))
+        return sol[:, :n], sol[:, n:].reshape(W_num.shape)
 
 
 class Completion:
@@ -545,11 +552,7 @@ class AlternativeCompletion(Completion):
     extra_order = 1
 
     def _maps(self, fac, t):
-        n = self.n
-        A, B = fac.A0, fac.B0
         Z2, C = fac.Z2, fac.C
-        Z1 = fac.range_basis(A @ fac.T2, self.rcond, t)
-        M = np.vstack([Z1.T @ A, C])
         # c' = (Z2^T)' (F x - g) + Z2^T (F' x + F x' - g') = -lam c, with
         # (Z2^T)' = -Z2^T J' J^+, so (Z2^T)' (F x - g) = -Y (F x - g); Y = 0 for constant coefficients.
         lam = self._lam_jet(t)[0]
@@ -558,11 +561,7 @@ class AlternativeCompletion(Completion):
         if fac.has_Jd:
             Y = fac.times_pinv(Z2.T @ fac.jets.J[1])
             G_c, W_c = G_c + fac.times_F(Y, 0), W_c - fac.times_L(Y, 0)
-        G_num = np.vstack([-Z1.T @ B, G_c])
-        W_num = np.concatenate([Z1.T @ fac.f0, W_c], axis=0)
-        # one LU for both right-hand sides (W_num is a matrix or, time-varying, a vector)
-        sol = np.linalg.solve(M, np.column_stack([G_num, W_num]))
-        return sol[:, :n], sol[:, n:].reshape(W_num.shape)
+        return fac.index_one_solve(G_c, W_c, self.rcond, t)
 
 
 COMPLETIONS = {

@@ -109,7 +109,9 @@ def _solve_bordered(M, P, Q):
 
 
 def _generalized_null_space(A, Bm, Mt, rcond, kmax):
-    """``(U_S, levels)``: orthonormal basis of the generalized null space of ``Mt = B_mu^-T A^T``.
+    """``(U_S, levels, N1, Nr)``: the generalized null space of ``Mt = B_mu^-T A^T``, left and right null(A).
+
+    All orthonormal bases.
 
     Level 1 is null(Mt) = null(A^T), decided by a pivoted QR of ``A`` itself (the rank the dense path decides
     first, with the same threshold). Level j + 1 is ``{z : Mt z in N_j}``: ``Mt z = N_j c`` needs ``N_j c`` in
@@ -117,18 +119,19 @@ def _generalized_null_space(A, Bm, Mt, rcond, kmax):
     small matrix of cosines; ``z`` is then one solve with a bordered matrix factorized once.
     """
     n = A.shape[0]
-    Q, R, piv = scipy.linalg.qr(A, pivoting=True)
+    (qr, tau), R, piv = scipy.linalg.qr(A, mode="raw", pivoting=True)  # Q stays in Householder form
     d = np.abs(np.diag(R))
     if d.size == 0 or d[0] == 0.0:
         raise StructuredFallback("A is zero")
     tol0 = rcond if rcond is not None else _default_rcond(n, 0)
     r = _count_above(d / d[0], tol0, "A (k=0)")
     if r == n:
-        return np.zeros((n, 0)), 0
-    N1 = Q[:, r:]
+        return np.zeros((n, 0)), 0, np.zeros((n, 0)), np.zeros((n, 0))
+    N1, _, info = lapack.dormqr("L", "N", qr, tau, np.eye(n, n - r, -r), max(1, 64 * (n - r)))
     Nr = np.zeros((n, n - r))
     Nr[piv[:r]] = -scipy.linalg.solve_triangular(R[:r, :r], R[:r, r:])
     Nr[piv[r:]] = np.eye(n - r)
+    Nr = _orth(Nr)
     Wl = _orth(Bm @ Nr)
     lu = _solve_bordered(Mt, Wl, N1)
     N, levels = N1, 1
@@ -142,7 +145,7 @@ def _generalized_null_space(A, Bm, Mt, rcond, kmax):
         rank = _count_above(sv, tol, f"level {levels + 1} of the staircase")
         c = Vh[rank:].T
         if N1.shape[1] + c.shape[1] == N.shape[1]:
-            return N, levels
+            return N, levels, N1, Nr
         V = np.vstack([N @ c, np.zeros((N1.shape[1], c.shape[1]))])
         Z = scipy.linalg.lu_solve(lu, V, check_finite=False)[:n]
         N = _orth(np.hstack([N1, Z]))
@@ -185,13 +188,13 @@ def _pencil_reduction(A, B, rcond, kmax):
     """Shift, ``Mt = B_mu^-T A^T`` and its generalized null space."""
     mu, lu = _shift(A, B)
     Mt = scipy.linalg.lu_solve(lu, A.T, trans=1)
-    U_S, index = _generalized_null_space(A, B + mu * A, Mt, rcond, kmax)
-    return mu, lu, Mt, U_S, index
+    U_S, index, N1, Nr = _generalized_null_space(A, B + mu * A, Mt, rcond, kmax)
+    return mu, lu, Mt, U_S, index, N1, Nr
 
 
 def structured_index(A, B, rcond=None, kmax=10):
     """The differentiation index of a regular constant pencil (StructuredFallback when not clear-cut)."""
-    return _pencil_reduction(np.asarray(A, float), np.asarray(B, float), rcond, kmax)[-1]
+    return _pencil_reduction(np.asarray(A, float), np.asarray(B, float), rcond, kmax)[4]
 
 
 def structured_array(A, B, k=None, rcond=None, kmax=10):
@@ -203,7 +206,7 @@ def structured_array(A, B, k=None, rcond=None, kmax=10):
     """
     A, B = np.asarray(A, float), np.asarray(B, float)
     n = A.shape[0]
-    mu, lu, Mt, U_S, index = _pencil_reduction(A, B, rcond, kmax)
+    mu, lu, Mt, U_S, index, N1, Nr = _pencil_reduction(A, B, rcond, kmax)
     k = index if k is None else k
     if k < index:
         raise StructuredFallback(f"k={k} is below the index {index}")
@@ -225,7 +228,9 @@ def structured_array(A, B, k=None, rcond=None, kmax=10):
     Zx = np.einsum("ji,jna->ina", Lam, np.stack(Z)).reshape((k + 1) * n, a)
     Z2 = _orth(Zx)
     first_rows = X - (X @ Z2) @ Z2.T
-    return StructuredArray(index, k, n, Z2, first_rows, mu)
+    out = StructuredArray(index, k, n, Z2, first_rows, mu)
+    out.null_A, out.left_null_A = Nr, N1
+    return out
 
 
 def constraint_svd(C, t):
@@ -246,7 +251,7 @@ class StructuredFactors:
 
     Offers what a completion's ``_maps`` uses (``first_rows``, ``Z2``, ``C``,
     ``cg``, ``f0``, ``A0``, ``B0``, ``times_F``, ``times_L``, ``T2``,
-    ``C_pinv``, ``range_basis``) without forming ``J``, ``F`` or the forcing
+    ``C_pinv``, ``index_one_solve``) without forming ``J``, ``F`` or the forcing
     map ``L = Lam kron I``: ``F = [B; 0; ...]`` and ``L`` act block by block.
     """
 
@@ -257,6 +262,7 @@ class StructuredFactors:
         n = s.n
         self.n, self.t, self.k, self.q, self.index = n, 0.0, s.k, q, s.index
         self.rank = (s.k + 1) * n - s.a
+        self.structured = s
         self.Z2, self.first_rows, self.shift = s.Z2, s.first_rows, s.shift
         self.A0, self.B0 = A, B
         self._Lam = stabilization_jets(s.k, q, None)
@@ -292,13 +298,40 @@ class StructuredFactors:
         Uc, sc, Vct = self._c_svd()
         return (Vct[: sc.size].T / sc) @ Uc.T
 
-    def range_basis(self, X, rcond, t):
-        """Orthonormal basis of range(X) from a QR; full column rank is certified by a condition estimate."""
-        if X.shape[1] == 0:
-            return X
-        Q, R = scipy.linalg.qr(X, mode="economic")
-        rc, info = lapack.dtrcon(R, norm="1", uplo="U")
-        tol = rcond if rcond is not None else default_rcond(X.shape)
-        if not rc / X.shape[1] > tol * _MARGIN:
-            raise StructuredFallback("A T2 is not clearly of full column rank")
-        return Q
+    def index_one_solve(self, G_c, W_c, rcond, t):
+        """``(G, W)`` of the alternative completion from its constraint rows ``C x' = G_c x + W_c``.
+
+        The dense path solves ``[Z1^T A; C] x' = [-Z1^T B x + Z1^T f; ...]`` with ``Z1`` an orthonormal
+        basis of range(A T2). Equivalently, with ``Ws`` one of its orthogonal complement (dimension a),
+        ``A x' + Ws m = f - B x``, ``C x' = ...`` (``m`` absorbs the part of the equations ``Z1^T`` drops): one
+        LU of a bordered (n + a) matrix, no SVD. ``Ws`` = {u : A^T u in range(C^T)}: ``A^T u = C^T b``
+        with ``b`` in null((null A)^T C^T), solved with A^T bordered by its null spaces.
+        """
+        n, A, C = self.n, self.A0, self.C
+        s = self.structured
+        Nr, N1 = s.null_A, s.left_null_A
+        a1 = N1.shape[1]
+        if a1:
+            _, sv, Vh = np.linalg.svd(Nr.T @ C.T)
+            sv = np.concatenate([sv, np.zeros(C.shape[0] - sv.size)])
+            rank = _count_above(sv / max(sv[0], 1.0), rcond if rcond is not None else default_rcond(C.shape), "A T2")
+            beta = Vh[rank:].T
+            lu = _solve_bordered(A.T, Nr, N1)
+            U = scipy.linalg.lu_solve(lu, np.vstack([C.T @ beta, np.zeros((a1, beta.shape[1]))]), check_finite=False)[:n]
+            Ws = _orth(np.hstack([N1, U]))
+        else:
+            Ws = np.zeros((n, 0))
+        if Ws.shape[1] != C.shape[0]:
+            raise StructuredFallback(f"A T2 does not have corank {C.shape[0]}")
+        K = np.block([[A, Ws], [C, np.zeros((C.shape[0], Ws.shape[1]))]])
+        lu, piv, info = lapack.dgetrf(K)
+        rc, _ = lapack.dgecon(lu, np.linalg.norm(K, 1))
+        tol = rcond if rcond is not None else default_rcond(K.shape)
+        if info != 0 or not rc / K.shape[0] > tol * _MARGIN:
+            raise StructuredFallback("the index-one system [A, Ws; C, 0] is not clearly invertible")
+        S = scipy.linalg.lu_solve((lu, piv), np.eye(K.shape[0]), check_finite=False)[:n]
+        S11, S12 = S[:, :n], S[:, n:]
+        G = -S11 @ self.B0 + S12 @ G_c
+        W = S12 @ W_c
+        W[:, :n] += S11  # f0 = [I, 0, ...]
+        return G, W
