@@ -207,6 +207,10 @@ class Completion:
         dimension of the added dynamics.
     t_span : tuple or None
         Interval over which ``k`` was decided (time-varying DAEs).
+    setup : {'structured', 'dense'}
+        How the constant-coefficient set-up was computed (see `complete`).
+    setup_note : str or None
+        Why the structured set-up declined, when it did.
     """
 
     method = None
@@ -600,6 +604,15 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None, setup="a
         Without it ``k`` is decided at t = 0. Either way, every evaluation
         checks that the array keeps its rank and stays 1-full, and raises
         `IndexDeterminationError` naming the time otherwise.
+    setup : {'auto', 'dense'}, optional
+        For constant coefficients, 'auto' computes the index, the ranks and
+        the completion from n-sized blocks of the pencil (a shift, a
+        staircase of null spaces, bordered LU solves; `lsc._structured`)
+        instead of SVDs of the whole derivative arrays, and falls back to
+        the dense path when a rank decision there is a close call or no
+        shift makes ``B + mu A`` well conditioned (`Completion.setup_note`
+        says why). 'dense' always uses the SVDs. Time-varying completions
+        are always dense.
 
     Returns
     -------

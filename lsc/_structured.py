@@ -214,20 +214,28 @@ def structured_array(A, B, k=None, rcond=None, kmax=10):
     Binv_T = scipy.linalg.lu_solve(lu, np.eye(n), trans=1)
     # Y_0 with Mt Y_0 = B_mu^-T modulo span(U_S) (U_S^T Y_0 = 0 fixes it); the rest, Y_1 = U_S Psi, lies in U_S.
     sol = scipy.linalg.lu_solve(_solve_bordered(Mt, U_S, U_S), np.vstack([Binv_T, np.zeros((a, n))]), check_finite=False)
-    Y = [sol[:n]]
+    del Binv_T
     Psi = sol[n:]
     X_SS = U_S.T @ (Mt @ U_S)
+    Lam = _lam(k, -mu)
+    # X = X_y (Lam kron I), block column j = sum_i Lam[i, j] Y_i^T, accumulated without stacking the Y_i
+    X = np.zeros((n, k + 1, n))
+    X += sol[:n].T[:, None, :] * Lam[0][None, :, None]
     Z = [U_S]
     step = np.eye(a)
-    for _ in range(k):
-        Y.append(U_S @ (step @ Psi))
+    for i in range(1, k + 1):
+        Yi_T = (step @ Psi).T @ U_S.T
+        for j in range(i + 1):
+            X[:, j] += Lam[i, j] * Yi_T
         step = step @ (-X_SS)
         Z.append(U_S @ step)
-    Lam = _lam(k, -mu)
-    X = np.einsum("ij,icr->rjc", Lam, np.stack(Y)).reshape(n, (k + 1) * n)
+    X = X.reshape(n, (k + 1) * n)
     Zx = np.einsum("ji,jna->ina", Lam, np.stack(Z)).reshape((k + 1) * n, a)
     Z2 = _orth(Zx)
-    first_rows = X - (X @ Z2) @ Z2.T
+    XZ = X @ Z2
+    for j in range(k + 1):  # first_rows = X (I - Z2 Z2^T), in place, one n x n block at a time
+        X[:, j * n : (j + 1) * n] -= XZ @ Z2[j * n : (j + 1) * n].T
+    first_rows = X
     out = StructuredArray(index, k, n, Z2, first_rows, mu)
     out.null_A, out.left_null_A = Nr, N1
     return out
@@ -250,7 +258,7 @@ class StructuredFactors:
     """The standard derivative array's factors for constant ``A, B`` from a `StructuredArray`.
 
     Offers what a completion's ``_maps`` uses (``first_rows``, ``Z2``, ``C``,
-    ``cg``, ``f0``, ``A0``, ``B0``, ``times_F``, ``times_L``, ``T2``,
+    ``cg``, ``A0``, ``B0``, ``times_F``, ``times_L``, ``T2``,
     ``C_pinv``, ``index_one_solve``) without forming ``J``, ``F`` or the forcing
     map ``L = Lam kron I``: ``F = [B; 0; ...]`` and ``L`` act block by block.
     """
@@ -268,7 +276,6 @@ class StructuredFactors:
         self._Lam = stabilization_jets(s.k, q, None)
         self.C = self.Z2[:n].T @ B
         self.cg = self.times_L(self.Z2.T, 0)
-        self.f0 = np.eye(n, (s.k + q + 1) * n)
         self._C_svd = None
 
     def times_F(self, X, d):
