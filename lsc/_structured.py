@@ -109,9 +109,8 @@ def _solve_bordered(M, P, Q):
 
 
 def _generalized_null_space(A, Bm, Mt, rcond, kmax):
-    """``(U_S, levels, N1, Nr)``: the generalized null space of ``Mt = B_mu^-T A^T``, left and right null(A).
-
-    All orthonormal bases.
+    """``(U_S, levels, N1, Nr, Wl, lu)``: the generalized null space of ``Mt = B_mu^-T A^T``, left and right
+    null(A), range(Mt)^perp (all orthonormal bases) and the LU of ``[[Mt, Wl], [N1^T, 0]]``.
 
     Level 1 is null(Mt) = null(A^T), decided by a pivoted QR of ``A`` itself (the rank the dense path decides
     first, with the same threshold). Level j + 1 is ``{z : Mt z in N_j}``: ``Mt z = N_j c`` needs ``N_j c`` in
@@ -126,7 +125,8 @@ def _generalized_null_space(A, Bm, Mt, rcond, kmax):
     tol0 = rcond if rcond is not None else _default_rcond(n, 0)
     r = _count_above(d / d[0], tol0, "A (k=0)")
     if r == n:
-        return np.zeros((n, 0)), 0, np.zeros((n, 0)), np.zeros((n, 0))
+        empty = np.zeros((n, 0))
+        return empty, 0, empty, empty, empty, scipy.linalg.lu_factor(Mt, check_finite=False)
     N1, _, info = lapack.dormqr("L", "N", qr, tau, np.eye(n, n - r, -r), max(1, 64 * (n - r)))
     Nr = np.zeros((n, n - r))
     Nr[piv[:r]] = -scipy.linalg.solve_triangular(R[:r, :r], R[:r, r:])
@@ -145,7 +145,7 @@ def _generalized_null_space(A, Bm, Mt, rcond, kmax):
         rank = _count_above(sv, tol, f"level {levels + 1} of the staircase")
         c = Vh[rank:].T
         if N1.shape[1] + c.shape[1] == N.shape[1]:
-            return N, levels, N1, Nr
+            return N, levels, N1, Nr, Wl, lu
         V = np.vstack([N @ c, np.zeros((N1.shape[1], c.shape[1]))])
         Z = scipy.linalg.lu_solve(lu, V, check_finite=False)[:n]
         N = _orth(np.hstack([N1, Z]))
@@ -188,8 +188,8 @@ def _pencil_reduction(A, B, rcond, kmax):
     """Shift, ``Mt = B_mu^-T A^T`` and its generalized null space."""
     mu, lu = _shift(A, B)
     Mt = scipy.linalg.lu_solve(lu, A.T, trans=1)
-    U_S, index, N1, Nr = _generalized_null_space(A, B + mu * A, Mt, rcond, kmax)
-    return mu, lu, Mt, U_S, index, N1, Nr
+    U_S, index, N1, Nr, Wl, lu_Mt = _generalized_null_space(A, B + mu * A, Mt, rcond, kmax)
+    return mu, lu, Mt, U_S, index, N1, Nr, Wl, lu_Mt
 
 
 def structured_index(A, B, rcond=None, kmax=10):
@@ -206,16 +206,19 @@ def structured_array(A, B, k=None, rcond=None, kmax=10):
     """
     A, B = np.asarray(A, float), np.asarray(B, float)
     n = A.shape[0]
-    mu, lu, Mt, U_S, index, N1, Nr = _pencil_reduction(A, B, rcond, kmax)
+    mu, lu, Mt, U_S, index, N1, Nr, Wl, lu_Mt = _pencil_reduction(A, B, rcond, kmax)
     k = index if k is None else k
     if k < index:
         raise StructuredFallback(f"k={k} is below the index {index}")
     a = U_S.shape[1]
     Binv_T = scipy.linalg.lu_solve(lu, np.eye(n), trans=1)
-    # Y_0 with Mt Y_0 = B_mu^-T modulo span(U_S) (U_S^T Y_0 = 0 fixes it); the rest, Y_1 = U_S Psi, lies in U_S.
-    sol = scipy.linalg.lu_solve(_solve_bordered(Mt, U_S, U_S), np.vstack([Binv_T, np.zeros((a, n))]), check_finite=False)
+    # Y_0 with Mt Y_0 = B_mu^-T - U_S Psi: Psi (least norm) puts the right side into range(Mt) = Wl^perp, then
+    # the bordered LU of the staircase solves; Y_1 = B_mu^-T - Mt Y_0 = U_S Psi.
+    Psi = np.linalg.lstsq(Wl.T @ U_S, Wl.T @ Binv_T, rcond=None)[0] if a else np.zeros((0, n))
+    rhs = np.vstack([Binv_T - U_S @ Psi, np.zeros((Wl.shape[1], n))])
     del Binv_T
-    Psi = sol[n:]
+    sol = scipy.linalg.lu_solve(lu_Mt, rhs, check_finite=False)
+    del rhs
     X_SS = U_S.T @ (Mt @ U_S)
     Lam = _lam(k, -mu)
     # X = X_y (Lam kron I), block column j = sum_i Lam[i, j] Y_i^T, accumulated without stacking the Y_i
