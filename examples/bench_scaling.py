@@ -18,6 +18,7 @@ BLAS thread count of ``LSC_BENCH_THREADS`` (default 2; set before numpy is impor
 Writes ``out/bench_scaling.md``; with ``--docs`` ``docs/_generated/bench_scaling.md``.
 
 Run:  python examples/bench_scaling.py [--docs] [--dense-max N] [n ...]
+      python examples/bench_scaling.py --index-only [--docs] [n ...]   (dense index determination alone)
 """
 
 import os
@@ -44,14 +45,14 @@ METHODS = (("standard", None), ("stabilized", 2.0), ("alternative", 2.0))
 
 
 def timed(fn):
-    """``(seconds, peak MiB, result)`` of one call."""
+    """``(wall seconds, CPU seconds of this process, all threads, peak MiB, result)`` of one call."""
     tracemalloc.start()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     out = fn()
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     peak = tracemalloc.get_traced_memory()[1] / 2**20
     tracemalloc.stop()
-    return seconds, peak, out
+    return seconds, cpu, peak, out
 
 
 def rel(X, Y):
@@ -78,7 +79,7 @@ def exact_check(p, c):
     for t in times:
         x, xd = p.exact(t), p.exact(t, 1)
         res = max(res, float(np.linalg.norm(xd - c.rhs(t, x)) / np.linalg.norm(xd)))
-    sol = solve_ivp(c.rhs, (0.0, 0.5), p.exact(0.0), method="DOP853", rtol=1e-12, atol=1e-12, jac=c.jac)
+    sol = solve_ivp(c.rhs, (0.0, 0.5), p.exact(0.0), method="DOP853", rtol=1e-12, atol=1e-12)
     err = float(np.linalg.norm(sol.y[:, -1] - p.exact(0.5)) / np.linalg.norm(p.exact(0.5)))
     return res, err
 
@@ -96,18 +97,19 @@ def fmt(v, spec):
 
 
 def report(rows, notes):
-    header = ("| n | structured [s] | peak [MiB] | dense [s] | dense peak [MiB] | ratio | max rel. diff G | W | "
-              "C^T C | C^T cg |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    header = ("| n | structured [s] | CPU [s] | peak [MiB] | dense [s] | CPU [s] | peak [MiB] | ratio | "
+              "max rel. diff G | W | C^T C | C^T cg |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     lines = [header]
     for r in rows:
         diff = r.get("diff")
         ratio = None if r.get("dense") is None else r["dense"] / r["structured"]
-        lines.append(f"| {r['n']} | {r['structured']:.2f} | {r['peak']:.0f} | {fmt(r.get('dense'), '.2f')} | "
+        lines.append(f"| {r['n']} | {r['structured']:.2f} | {r['cpu']:.2f} | {r['peak']:.0f} | "
+                     f"{fmt(r.get('dense'), '.2f')} | {fmt(r.get('dense_cpu'), '.2f')} | "
                      f"{fmt(r.get('dense_peak'), '.0f')} | {fmt(ratio, '.1f')} | "
                      + " | ".join(fmt(None if diff is None else diff[i], ".1e") for i in range(4)) + " |")
-    p_s, p_d = fit(rows, "structured"), fit(rows, "dense", 100)
-    summary = [f"Fitted exponent of the structured set-up (n >= 250): {fmt(p_s, '.2f')}; "
-               f"dense (n >= 100, where run): {fmt(p_d, '.2f')}."] + notes
+    p_s, p_c, p_d = fit(rows, "structured"), fit(rows, "cpu"), fit(rows, "dense", 100)
+    summary = [f"Fitted exponent of the structured set-up (n >= 250): wall time {fmt(p_s, '.2f')}, CPU time "
+               f"{fmt(p_c, '.2f')}; dense (n >= 100, where run): wall time {fmt(p_d, '.2f')}."] + notes
     return "\n".join(lines) + "\n\n" + "\n".join(f"- {s}" for s in summary) + "\n"
 
 
@@ -115,29 +117,53 @@ def write(text, docs):
     target = (ROOT / "docs" / "_generated") if docs else (ROOT / "out")
     target.mkdir(parents=True, exist_ok=True)
     intro = ("Set-up of the alternative completion (lam = 2, k = None) of random index-3 pencils (chains 3, 2), "
-             f"{THREADS} BLAS threads, one run of `examples/bench_scaling.py`. Differences: largest over the "
-             "standard, stabilized and alternative completions, relative to the largest entry.\n\n")
+             f"{THREADS} BLAS threads, one run of `examples/bench_scaling.py`. CPU: time of the process over all "
+             "its threads (on a loaded machine wall time also measures the other processes). Differences: "
+             "largest over the standard, stabilized and alternative completions, relative to the largest "
+             "entry.\n\n")
     (target / "bench_scaling.md").write_text(intro + text)
     return target / "bench_scaling.md"
 
 
+def index_only(sizes, docs):
+    """The dense index determination (`differentiation_index`: SVDs of the arrays k = 0..4) for large n."""
+    lines = ["| n | index [s] |", "|---:|---:|"]
+    target = (ROOT / "docs" / "_generated") if docs else (ROOT / "out")
+    target.mkdir(parents=True, exist_ok=True)
+    for n in sizes:
+        p = gallery.random_pencil(n=n, blocks=(3, 2), seed=0)
+        t0 = time.perf_counter()
+        k = lsc.differentiation_index(p.dae)
+        seconds = time.perf_counter() - t0
+        assert k == 3
+        lines.append(f"| {n} | {seconds:.1f} |")
+        print(lines[-1], flush=True)
+        (target / "bench_scaling_index.md").write_text(
+            "The dense index determination alone for large n (`examples/bench_scaling.py --index-only`), "
+            f"{THREADS} BLAS threads, one measurement each:\n\n" + "\n".join(lines) + "\n")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("sizes", nargs="*", type=int, default=list(SIZES))
+    ap.add_argument("sizes", nargs="*", type=int, default=None)
     ap.add_argument("--dense-max", type=int, default=250)
+    ap.add_argument("--index-only", action="store_true", help="time the dense index determination alone")
     ap.add_argument("--docs", action="store_true", help="write docs/_generated instead of out/")
     args = ap.parse_args(argv)
+    if args.index_only:
+        return index_only(args.sizes or (400, 800), args.docs)
+    args.sizes = args.sizes or list(SIZES)
     rows, notes = [], []
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     notes.append(f"Load average at the start: {load:.1f} on {os.cpu_count()} cores.")
     for n in args.sizes:
         p = gallery.random_pencil(n=n, blocks=(3, 2), seed=0)
         row = {"n": n}
-        row["structured"], row["peak"], c = timed(lambda: lsc.complete(p.dae, "alternative", lam=2.0))
+        row["structured"], row["cpu"], row["peak"], c = timed(lambda: lsc.complete(p.dae, "alternative", lam=2.0))
         if c.setup != "structured":
             notes.append(f"n={n}: {c.setup_note}")
         if n <= args.dense_max:
-            row["dense"], row["dense_peak"], _ = timed(lambda: lsc.complete(p.dae, "alternative", lam=2.0, setup="dense"))
+            row["dense"], row["dense_cpu"], row["dense_peak"], _ = timed(lambda: lsc.complete(p.dae, "alternative", lam=2.0, setup="dense"))
             row["diff"] = differences(p.dae)
         if n == 1000:
             res, err = exact_check(p, c)

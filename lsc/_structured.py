@@ -18,23 +18,30 @@ onto that range. Both ``X`` and ``Z2`` follow from the pencil:
    change of the unknowns whose first block row is ``[I, 0, ...]``. So
    ``Z2 = orth((Lam^T kron I) Z2_y)`` and ``X = X_y (Lam kron I)``, with ``Lam``
    the ``stabilization_jets`` of the constant rate ``-mu``.
-2. ``M^T = B_mu^-T A^T``. A staircase reduction (orthogonal deflation of null
-   spaces, rank-revealing QR with column pivoting on each level) gives an
-   orthonormal ``U = [U_R, U_S]`` with ``M^T = U [[X_RR, 0], [X_SR, X_SS]] U^T``,
-   ``X_SS`` nilpotent and ``X_RR`` invertible. The number of levels is the
-   index ``nu``; ``U_S`` spans the left generalized null space of ``M``.
-3. For the shifted array (``B_mu`` invertible) ``z_{j+1} = -M^T z_j``, so the
+2. ``Mt = B_mu^-T A^T``. Its generalized null space (the left one of ``M``)
+   is found level by level: level 1 is null(A^T), from a pivoted QR of
+   ``A`` (the rank the dense path decides first, k = 0); level ``j + 1`` is
+   ``{z : Mt z in N_j}``, decided on a small matrix (``Wl^T N_j``, ``Wl`` an
+   orthonormal basis of range(Mt)^perp) and solved with one bordered LU of
+   ``[[Mt, Wl], [N1^T, 0]]``. The number of levels is the index ``nu``;
+   ``U_S`` (orthonormal, ``a`` columns) spans the space, ``X_SS = U_S^T Mt U_S``
+   is nilpotent.
+3. For the shifted array (``B_mu`` invertible) ``z_{j+1} = -Mt z_j``, so the
    left null space is spanned by the blocks ``U_S (-X_SS)^j``, ``j = 0..k``;
-   and ``X_y``'s blocks are ``Y_0 = U_R X_RR^-1 U_R^T B_mu^-T``,
-   ``Y_j = U_S (-X_SS)^(j-1) Phi`` with ``Phi = (U_S^T - X_SR X_RR^-1 U_R^T) B_mu^-T``.
+   and ``X_y`` has the blocks ``Y_0^T, ..., Y_k^T`` with
+   ``Mt Y_0 = B_mu^-T - U_S Psi`` and ``Y_j = U_S (-X_SS)^(j-1) Psi``.
 
-Cost: one LU of ``B_mu``, ``nu + 1`` pivoted QRs of shrinking blocks (the last
-one skipped when an LU condition estimate already shows the block
-invertible), and matrix products of n-sized blocks; nothing of size
-``((k+1) n)^2`` is formed. Rank decisions use ``rcond`` relative to the
-largest pivot of each reduced block; a decision within a factor
-``_MARGIN`` of the threshold, or no well-conditioned shift, is not taken
-here: `StructuredFallback` says why and the caller uses the dense path.
+Cost: LUs of ``B_mu`` and of two bordered (n + a) matrices, one pivoted
+QR of ``A``, solves and products of n-sized blocks; nothing of size
+``((k+1) n)^2`` is formed. Rank decisions use ``rcond`` (default: the dense
+path's default for the array of that level) relative to the largest pivot
+of ``A`` or, on the small level matrices, to 1 (they hold cosines between
+orthonormal bases). A decision within a factor ``_MARGIN`` (100, the margin
+of `RankDecisionWarning`) of the threshold, no shift that makes ``B + mu A``
+well conditioned (singular or nearly singular pencils), k below the index
+or an index-one system that is not clearly invertible is not decided here:
+`StructuredFallback` says why and the caller uses the dense path, which
+decides, warns or refuses as it always does.
 """
 
 from math import comb
