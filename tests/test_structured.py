@@ -132,3 +132,17 @@ def test_exact_solution_and_memory_at_n_300():
     # one dense J of k = 3 alone is (4 n)^2 doubles (the dense set-up holds J, U, V and [J, F]); the
     # structured one holds n x (k + 1) n blocks and the forcing map, n x (k + 2) n
     assert peak < (4 * n) ** 2 * 8, peak / ((4 * n) ** 2 * 8)
+
+
+@pytest.mark.parametrize("rcond", [1e-9, 1e-6])
+def test_explicit_rcond_structured_equals_dense(rcond):
+    p = gallery.random_pencil(n=10, blocks=(3, 2), seed=1)
+    for method, lam in METHOD_LAMS:
+        assert_same_setup(p.dae, method, lam, rcond=rcond)
+
+
+def test_zero_A_falls_back_and_is_completed_as_before():
+    c = complete(LinearDAE(np.zeros((3, 3)), np.eye(3)), "alternative", lam=1.0)
+    assert (c.setup, c.k) == ("dense", 1)
+    assert "A is zero" in c.setup_note
+    np.testing.assert_allclose(c._G, -np.eye(3), atol=1e-14)
