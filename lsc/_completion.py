@@ -255,7 +255,9 @@ class Completion:
     def _check_setup(self, setup):
         if setup not in ("auto", "dense"):
             raise ValueError(f"`setup` must be 'auto' or 'dense'; found {setup!r}.")
-        return "structured" if setup == "auto" and self.dae.is_constant else "dense"
+        # a user's subclass may read the dense factors (`fac.jets`) in its `_maps`: it keeps them
+        builtin = type(self)._maps in (StandardCompletion._maps, StabilizedCompletion._maps, AlternativeCompletion._maps)
+        return "structured" if setup == "auto" and self.dae.is_constant and builtin else "dense"
 
     def _structured_k(self, k):
         """k from the structured set-up (lsc._structured); on a declined problem the dense path decides."""
@@ -638,8 +640,8 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None, setup="a
     >>> t = sympy.Symbol("t")
     >>> dae = LinearDAE([[0, 1], [0, 0]], np.eye(2), [0, sympy.sin(t)])
     >>> c = complete(dae, "alternative", lam=2.0)
-    >>> c.k, c.n_constraints
-    (2, 2)
+    >>> c.k, c.n_constraints, c.setup
+    (2, 2, 'structured')
     >>> x = np.array([-np.cos(0.5), np.sin(0.5)])
     >>> np.allclose(c.rhs(0.5, x), [np.sin(0.5), np.cos(0.5)])
     True

@@ -146,3 +146,20 @@ def test_zero_A_falls_back_and_is_completed_as_before():
     assert (c.setup, c.k) == ("dense", 1)
     assert "A is zero" in c.setup_note
     np.testing.assert_allclose(c._G, -np.eye(3), atol=1e-14)
+
+
+def test_user_subclass_keeps_the_dense_factors():
+    """A Completion subclass with its own `_maps` gets the dense factors its contract promises."""
+    from lsc import Completion
+
+    class Seen(Completion):
+        method = "seen"
+
+        def _maps(self, fac, t):
+            P = fac.first_rows
+            return -P @ fac.jets.F[0], P @ fac.Lg[0]
+
+    p = gallery.random_pencil(n=8, blocks=(2, 1), seed=2)
+    c = complete(p.dae, Seen)
+    assert c.setup == "dense"
+    np.testing.assert_allclose(c._G, complete(p.dae, "standard")._G, atol=1e-12)
