@@ -163,3 +163,21 @@ def test_user_subclass_keeps_the_dense_factors():
     c = complete(p.dae, Seen)
     assert c.setup == "dense"
     np.testing.assert_allclose(c._G, complete(p.dae, "standard")._G, atol=1e-12)
+
+
+def test_badly_scaled_rows_structured_equals_dense():
+    """Row equilibration happens before either set-up: both see the same equations."""
+    p = gallery.random_pencil(n=12, blocks=(3, 2), seed=3)
+    D = np.diag(np.logspace(-4, 4, 12))
+    dae = LinearDAE(D @ p.dae.A(0.0), D @ p.dae.B(0.0))
+    for method, lam in METHOD_LAMS:
+        assert_same_setup(dae, method, lam)
+
+
+@pytest.mark.parametrize("cond, reason", [(1e3, "close call"), (1e4, "ill conditioned at every trial shift")])
+def test_ill_conditioned_transformations_fall_back_to_dense(cond, reason):
+    """Where the dense path still decides, the structured one declines (documented limit) and the result is dense."""
+    p = gallery.random_pencil(n=12, blocks=(3, 2), seed=3, cond=cond)
+    c = complete(p.dae, "alternative", lam=2.0)
+    assert c.setup == "dense" and reason in c.setup_note
+    np.testing.assert_array_equal(c._G, complete(p.dae, "alternative", lam=2.0, setup="dense")._G)
