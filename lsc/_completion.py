@@ -181,6 +181,9 @@ class Completion:
        (a `_Factors`), return ``(G, W)``: ``x' = G x + W`` where ``W`` is
        built from ``fac.Lg`` and ``fac.f0`` only linearly, so it is the
        forcing map (constant coefficients) or the forcing value at `t`.
+       The built-in methods use only ``fac.times_F``, ``fac.times_L`` and the
+       basis attributes, so for constant coefficients they also accept a
+       `lsc._structured.StructuredFactors` (no dense ``J``).
     5. ``added_eigenvalue``: the value theory assigns to the added dynamics
        of a constant-coefficient completion.
 
