@@ -33,6 +33,7 @@ from ._index import check_solvability, determine_index, k_works
 from ._linalg import numerical_rank, validate_rcond
 from ._problem import check_dae, column_equilibration, row_equilibration, row_scaled, unscale_columns, varying_view
 from ._rate import as_rate, lam_at
+from ._structured import StructuredFactors, StructuredFallback, constraint_svd
 from ._timefunc import TimeFunction, _shape_str
 from ._validate import check_k, check_t_span
 
@@ -108,18 +109,20 @@ class _Factors:
         self.cg = self.Z2.T @ self.Lg[0]
         self._C_svd = None
         self._first_rows = None
+        self.A0, self.B0 = J[:n, :n], jets.F[0][:n]
+        self.has_Jd = q >= 1 and bool(np.any(jets.J[1]))
+
+    def times_F(self, X, d):
+        """``X @ F^(d)``."""
+        return X @ self.jets.F[d]
+
+    def times_L(self, X, d):
+        """``X @ Lg[d]``: the d-th derivative's forcing map (or value)."""
+        return X @ self.Lg[d]
 
     def _c_svd(self):
         if self._C_svd is None:
-            a = self.C.shape[0]
-            Uc, sc, Vct = np.linalg.svd(self.C)
-            rank_C = numerical_rank(sc, self.C.shape, None, what="constraint matrix Z2^T F")
-            if rank_C != a:
-                raise IndexDeterminationError(
-                    f"the constraints Z2^T F x = Z2^T g are dependent (rank {rank_C} < {a}) at t={self.t!r}: "
-                    "[J, F] does not have full row rank, so the DAE is not solvable."
-                )
-            self._C_svd = (Uc, sc, Vct)
+            self._C_svd = constraint_svd(self.C, self.t)
         return self._C_svd
 
     @property
@@ -146,6 +149,20 @@ class _Factors:
         r = self.rank
         return ((X @ self.Vt[:r].T) / self.s[:r]) @ self.U[:, :r].T
 
+    def index_one_solve(self, G_c, W_c, rcond, t):
+        """``(G, W)`` from ``[Z1^T A; C] x' = [-Z1^T B x + Z1^T f; G_c x + W_c]``, Z1 an orthonormal basis of range(A T2)."""
+        n, A = self.n, self.A0
+        AT2 = A @ self.T2
+        Z1, s1, _ = np.linalg.svd(AT2, full_matrices=False)
+        if numerical_rank(s1, AT2.shape, rcond, what="A T2") < AT2.shape[1]:
+            raise IndexDeterminationError(f"A T2 is rank deficient at t={t!r}: the DAE is not solvable.")
+        M = np.vstack([Z1.T @ A, self.C])
+        G_num = np.vstack([-Z1.T @ self.B0, G_c])
+        W_num = np.concatenate([Z1.T @ self.f0, W_c], axis=0)
+        # one LU for both right-hand sides (W_num is a matrix or, time-varying, a vector)
+        sol = np.linalg.solve(M, np.column_stack([G_num, W_num]))
+        return sol[:, :n], sol[:, n:].reshape(W_num.shape)
+
 
 class Completion:
     """Base class of the ODE completions ``x' = G x + g(t)`` of a linear DAE.
@@ -164,6 +181,9 @@ class Completion:
        (a `_Factors`), return ``(G, W)``: ``x' = G x + W`` where ``W`` is
        built from ``fac.Lg`` and ``fac.f0`` only linearly, so it is the
        forcing map (constant coefficients) or the forcing value at `t`.
+       The built-in methods use only ``fac.times_F``, ``fac.times_L`` and the
+       basis attributes, so for constant coefficients they also accept a
+       `lsc._structured.StructuredFactors` (no dense ``J``).
     5. ``added_eigenvalue``: the value theory assigns to the added dynamics
        of a constant-coefficient completion.
 
@@ -190,6 +210,10 @@ class Completion:
         dimension of the added dynamics.
     t_span : tuple or None
         Interval over which ``k`` was decided (time-varying DAEs).
+    setup : {'structured', 'dense'}
+        How the constant-coefficient set-up was computed (see `complete`).
+    setup_note : str or None
+        Why the structured set-up declined, when it did.
     """
 
     method = None
@@ -197,7 +221,7 @@ class Completion:
     extra_order = 0
     _fastest_rate = None  # max |Re eig(G)| for constant coefficients, cached by lsc.stiffness_ratio
 
-    def __init__(self, dae, *, lam=None, k=None, rcond=None, t_span=None):
+    def __init__(self, dae, *, lam=None, k=None, rcond=None, t_span=None, setup="auto"):
         check_dae(dae)
         self.dae = dae
         self.n = dae.n
@@ -208,20 +232,20 @@ class Completion:
         if dae.is_constant and isinstance(self.lam, TimeFunction):
             # G(t) follows lam(t): evaluate it where it is asked for, like time-varying coefficients.
             self.dae = dae = varying_view(dae)
-        self.k = self._check_k(k)
-        self._order = self.k + self.extra_order
-        self._cache = OrderedDict()
         # Badly scaled rows are equilibrated once (constant scales, so the solutions do not change);
-        # the arrays are built from the scaled equations, `_W` still acts on the given f.
+        # the arrays (dense or structured) are built from the scaled equations, `_W` still acts on the given f.
         self._row_scales = row_equilibration(dae, self._t_ref)
         self._col_scales = column_equilibration(dae, self._t_ref)  # unknowns too: x = diag(c) y
         self._eq = dae if self._row_scales is None and self._col_scales is None else \
             row_scaled(dae, self._row_scales, self._col_scales)
+        self.setup, self.setup_note, self._structured = self._check_setup(setup), None, None
+        self.k = self._structured_k(k) if self.setup == "structured" else self._check_k(k)
+        self._order = self.k + self.extra_order
+        self._cache = OrderedDict()
         if dae.is_constant:
-            fac = _Factors(self._eq, self.k, self._t_ref, self.extra_order, self.rcond)
+            fac, (self._G, self._W) = self._constant_maps()
             self._std = fac
             self._rank = fac.rank
-            self._G, self._W = self._maps(fac, self._t_ref)
             if self._col_scales is not None:
                 self._G, self._W = unscale_columns(fac, self._G, self._W, self._col_scales)
             self._W_c = fac.cg
@@ -233,6 +257,39 @@ class Completion:
             fac = self._factors(self._t_ref, check=False)
             self._rank = fac.rank
         self.n_constraints = fac.C.shape[0]
+
+    # -- set-up (constant coefficients) --------------------------------------
+    def _check_setup(self, setup):
+        if setup not in ("auto", "dense"):
+            raise ValueError(f"`setup` must be 'auto' or 'dense'; found {setup!r}.")
+        # a user's subclass may read the dense factors (`fac.jets`) in its `_maps`: it keeps them
+        builtin = type(self)._maps in (StandardCompletion._maps, StabilizedCompletion._maps, AlternativeCompletion._maps)
+        return "structured" if setup == "auto" and self.dae.is_constant and builtin else "dense"
+
+    def _structured_k(self, k):
+        """k from the structured set-up (lsc._structured); on a declined problem the dense path decides."""
+        t, eq = self._t_ref, self._eq  # the equilibrated equations, as the dense path uses them
+        k = None if k is None else check_k(k)
+        try:
+            fac = StructuredFactors(eq.A(t), eq.B(t), k, self.extra_order, self.rcond)
+        except StructuredFallback as exc:
+            self.setup, self.setup_note = "dense", f"structured set-up declined: {exc}"
+            return self._check_k(k)
+        if k is not None and k > K_ABOVE_INDEX and k > fac.index + K_ABOVE_INDEX:
+            return self._check_k(k)  # the dense path's refusal, with its message
+        self._structured = fac
+        return fac.k
+
+    def _constant_maps(self):
+        """``(fac, (G, W))`` at construction; a structured set-up that declines here hands over to the dense one."""
+        fac = self._structured
+        if fac is not None:
+            try:
+                return fac, self._maps(fac, self._t_ref)
+            except StructuredFallback as exc:
+                self.setup, self.setup_note = "dense", f"structured set-up declined: {exc}"
+        fac = _Factors(self._eq, self.k, self._t_ref, self.extra_order, self.rcond)
+        return fac, self._maps(fac, self._t_ref)
 
     # -- validation ---------------------------------------------------------
     def _check_lam(self, lam):
@@ -445,7 +502,7 @@ class StandardCompletion(Completion):
 
     def _maps(self, fac, t):
         P = fac.first_rows
-        return -P @ fac.jets.F[0], P @ fac.Lg[0]
+        return -fac.times_F(P, 0), fac.times_L(P, 0)
 
 
 class StabilizedCompletion(StandardCompletion):
@@ -508,29 +565,16 @@ class AlternativeCompletion(Completion):
     extra_order = 1
 
     def _maps(self, fac, t):
-        n = self.n
-        jets = fac.jets
-        A = jets.J[0][:n, :n]
-        B = jets.F[0][:n]
         Z2, C = fac.Z2, fac.C
-        AT2 = A @ fac.T2
-        Z1, s1, _ = np.linalg.svd(AT2, full_matrices=False)
-        if numerical_rank(s1, AT2.shape, self.rcond, what="A T2") < AT2.shape[1]:
-            raise IndexDeterminationError(f"A T2 is rank deficient at t={t!r}: the DAE is not solvable.")
-        M = np.vstack([Z1.T @ A, C])
         # c' = (Z2^T)' (F x - g) + Z2^T (F' x + F x' - g') = -lam c, with
-        # (Z2^T)' = -Z2^T J' J^+, so (Z2^T)' (F x - g) = -Y (F x - g).
-        Jd = jets.J[1]
-        if np.any(Jd):
-            Y = fac.times_pinv(Z2.T @ Jd)
-        else:
-            Y = np.zeros((Z2.shape[1], Jd.shape[0]))
+        # (Z2^T)' = -Z2^T J' J^+, so (Z2^T)' (F x - g) = -Y (F x - g); Y = 0 for constant coefficients.
         lam = self._lam_jet(t)[0]
-        G_num = np.vstack([-Z1.T @ B, -lam * C + Y @ jets.F[0] - Z2.T @ jets.F[1]])
-        W_num = np.concatenate([Z1.T @ fac.f0, (lam * Z2.T - Y) @ fac.Lg[0] + Z2.T @ fac.Lg[1]], axis=0)
-        # one LU for both right-hand sides (W_num is a matrix or, time-varying, a vector)
-        sol = np.linalg.solve(M, np.column_stack([G_num, W_num]))
-        return sol[:, :n], sol[:, n:].reshape(W_num.shape)
+        G_c = -lam * C - fac.times_F(Z2.T, 1)
+        W_c = lam * fac.cg + fac.times_L(Z2.T, 1)
+        if fac.has_Jd:
+            Y = fac.times_pinv(Z2.T @ fac.jets.J[1])
+            G_c, W_c = G_c + fac.times_F(Y, 0), W_c - fac.times_L(Y, 0)
+        return fac.index_one_solve(G_c, W_c, self.rcond, t)
 
 
 COMPLETIONS = {
@@ -540,7 +584,7 @@ COMPLETIONS = {
 }
 
 
-def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None):
+def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None, setup="auto"):
     """Complete a linear DAE to an ODE ``x' = G(t) x + g(t)``.
 
     Parameters
@@ -569,6 +613,15 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None):
         Without it ``k`` is decided at t = 0. Either way, every evaluation
         checks that the array keeps its rank and stays 1-full, and raises
         `IndexDeterminationError` naming the time otherwise.
+    setup : {'auto', 'dense'}, optional
+        For constant coefficients, 'auto' computes the index, the ranks and
+        the completion from n-sized blocks of the pencil (a shift, a
+        staircase of null spaces, bordered LU solves; `lsc._structured`)
+        instead of SVDs of the whole derivative arrays, and falls back to
+        the dense path when a rank decision there is a close call or no
+        shift makes ``B + mu A`` well conditioned (`Completion.setup_note`
+        says why). 'dense' always uses the SVDs. Time-varying completions
+        are always dense.
 
     Returns
     -------
@@ -594,8 +647,8 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None):
     >>> t = sympy.Symbol("t")
     >>> dae = LinearDAE([[0, 1], [0, 0]], np.eye(2), [0, sympy.sin(t)])
     >>> c = complete(dae, "alternative", lam=2.0)
-    >>> c.k, c.n_constraints
-    (2, 2)
+    >>> c.k, c.n_constraints, c.setup
+    (2, 2, 'structured')
     >>> x = np.array([-np.cos(0.5), np.sin(0.5)])
     >>> np.allclose(c.rhs(0.5, x), [np.sin(0.5), np.cos(0.5)])
     True
@@ -606,4 +659,4 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None):
         cls = COMPLETIONS[method]
     else:
         raise ValueError(f"`method` must be one of {set(COMPLETIONS)} or a Completion subclass; found {method!r}.")
-    return cls(dae, lam=lam, k=k, rcond=rcond, t_span=t_span)
+    return cls(dae, lam=lam, k=k, rcond=rcond, t_span=t_span, setup=setup)

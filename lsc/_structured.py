@@ -1,0 +1,354 @@
+"""Structured set-up of a constant-coefficient completion: n-sized blocks, no derivative-array SVD.
+
+For constant ``A, B`` the standard derivative array with ``k`` differentiations
+is block lower bidiagonal (``A`` on the diagonal, ``B`` below). Everything a
+completion needs from it is
+
+- ``Z2``: an orthonormal basis of its left null space, and
+- ``P``: the first ``n`` rows of ``J^+``.
+
+If ``X`` is any matrix with ``X J = [I, 0, ..., 0]`` (it exists when ``J`` is
+1-full), then ``P = X (I - Z2 Z2^T)``: for ``r`` in the range of ``J`` every
+solution of ``J w = r`` has the same ``x'`` block, and ``J^+`` first projects
+onto that range. Both ``X`` and ``Z2`` follow from the pencil:
+
+1. A shift ``mu`` with ``B_mu = B + mu A`` well conditioned (LU). ``B_mu`` is
+   ``B`` of the equation for ``y = exp(-mu t) x``, whose derivative array is
+   ``(Lam kron I)`` times the one for ``x`` (rows) and a unit block-triangular
+   change of the unknowns whose first block row is ``[I, 0, ...]``. So
+   ``Z2 = orth((Lam^T kron I) Z2_y)`` and ``X = X_y (Lam kron I)``, with ``Lam``
+   the ``stabilization_jets`` of the constant rate ``-mu``.
+2. ``Mt = B_mu^-T A^T``. Its generalized null space (the left one of ``M``)
+   is found level by level: level 1 is null(A^T), from a pivoted QR of
+   ``A`` (the rank the dense path decides first, k = 0); level ``j + 1`` is
+   ``{z : Mt z in N_j}``, decided on a small matrix (``Wl^T N_j``, ``Wl`` an
+   orthonormal basis of range(Mt)^perp) and solved with one bordered LU of
+   ``[[Mt, Wl], [N1^T, 0]]``. The number of levels is the index ``nu``;
+   ``U_S`` (orthonormal, ``a`` columns) spans the space, ``X_SS = U_S^T Mt U_S``
+   is nilpotent.
+3. For the shifted array (``B_mu`` invertible) ``z_{j+1} = -Mt z_j``, so the
+   left null space is spanned by the blocks ``U_S (-X_SS)^j``, ``j = 0..k``;
+   and ``X_y`` has the blocks ``Y_0^T, ..., Y_k^T`` with
+   ``Mt Y_0 = B_mu^-T - U_S Psi`` and ``Y_j = U_S (-X_SS)^(j-1) Psi``.
+
+Cost: LUs of ``B_mu`` and of two bordered (n + a) matrices, one pivoted
+QR of ``A``, solves and products of n-sized blocks; nothing of size
+``((k+1) n)^2`` is formed. Rank decisions use ``rcond`` (default: the dense
+path's default for the array of that level) relative to the largest pivot
+of ``A`` or, on the small level matrices, to 1 (they hold cosines between
+orthonormal bases). A decision within a factor ``_MARGIN`` (100, the margin
+of `RankDecisionWarning`) of the threshold, no shift that makes ``B + mu A``
+well conditioned (singular or nearly singular pencils), k below the index
+or an index-one system that is not clearly invertible is not decided here:
+`StructuredFallback` says why and the caller uses the dense path, which
+decides, warns or refuses as it always does.
+"""
+
+from math import comb
+
+import numpy as np
+import scipy.linalg
+from scipy.linalg import lapack
+
+from ._derivative_array import stabilization_jets
+from ._exceptions import IndexDeterminationError
+from ._linalg import default_rcond, numerical_rank
+
+__all__ = ["StructuredFallback", "StructuredArray", "StructuredFactors", "constraint_svd", "structured_array"]
+
+# A rank decision closer than this factor to the threshold goes to the dense path (its SVDs decide it and
+# warn): the margin `numerical_rank` warns within.
+_MARGIN = 100.0
+# Shifts tried, in units of ||B|| / ||A|| (the pencil's natural scale); a regular pencil is singular at
+# no more than n of them.
+_SHIFTS = (0.7317, -1.3641, 2.2713, -0.4127)
+# B_mu is accepted when its reciprocal condition number (1-norm estimate) exceeds this.
+_SHIFT_RCOND = 1e-6
+
+
+class StructuredFallback(Exception):
+    """The structured set-up cannot decide this problem as safely as the dense one (message: why)."""
+
+
+def _shift(A, B):
+    """``(mu, lu)`` with ``B + mu A`` well conditioned, or StructuredFallback."""
+    nA, nB = np.linalg.norm(A, 1), np.linalg.norm(B, 1)
+    scale = (nB or 1.0) / (nA or 1.0)
+    worst = None
+    for s in _SHIFTS:
+        mu = s * scale
+        Bm = B + mu * A
+        lu, piv, info = lapack.dgetrf(Bm)
+        if info == 0:
+            rc, _ = lapack.dgecon(lu, np.linalg.norm(Bm, 1))
+            if rc > _SHIFT_RCOND:
+                return mu, (lu, piv)
+            worst = rc
+        else:
+            worst = 0.0
+    raise StructuredFallback(
+        f"B + mu A is ill conditioned at every trial shift (reciprocal condition {worst:.1e}): the pencil is "
+        "singular or nearly so"
+    )
+
+
+def _default_rcond(n, level):
+    """The dense path's default for the array with `level` differentiations, ``[J, F]`` of shape (level+1) n x (level+2) n."""
+    return default_rcond(((level + 1) * n, (level + 2) * n))
+
+
+def _count_above(values, tol, what):
+    """How many of `values` exceed `tol`; a value within `_MARGIN` of it is a close call left to the dense path."""
+    if np.any((values > tol / _MARGIN) & (values < tol * _MARGIN)):
+        raise StructuredFallback(f"the rank decision on {what} is a close call (within {_MARGIN:g} of the threshold)")
+    return int(np.count_nonzero(values > tol))
+
+
+def _orth(X):
+    return np.linalg.qr(X)[0] if X.shape[1] else X
+
+
+def _solve_bordered(M, P, Q):
+    """LU of the bordered matrix ``[[M, P], [Q^T, 0]]``."""
+    a = P.shape[1]
+    K = np.block([[M, P], [Q.T, np.zeros((a, a))]])
+    return scipy.linalg.lu_factor(K, check_finite=False)
+
+
+def _generalized_null_space(A, Bm, Mt, rcond, kmax):
+    """``(U_S, levels, N1, Nr, Wl, lu)``: the generalized null space of ``Mt = B_mu^-T A^T``, left and right
+    null(A), range(Mt)^perp (all orthonormal bases) and the LU of ``[[Mt, Wl], [N1^T, 0]]``.
+
+    Level 1 is null(Mt) = null(A^T), decided by a pivoted QR of ``A`` itself (the rank the dense path decides
+    first, with the same threshold). Level j + 1 is ``{z : Mt z in N_j}``: ``Mt z = N_j c`` needs ``N_j c`` in
+    range(Mt), i.e. ``c`` in the null space of ``Wl^T N_j`` (``Wl`` spans range(Mt)^perp = B_mu null(A)), a
+    small matrix of cosines; ``z`` is then one solve with a bordered matrix factorized once.
+    """
+    n = A.shape[0]
+    (qr, tau), R, piv = scipy.linalg.qr(A, mode="raw", pivoting=True)  # Q stays in Householder form
+    d = np.abs(np.diag(R))
+    if d.size == 0 or d[0] == 0.0:
+        raise StructuredFallback("A is zero")
+    tol0 = rcond if rcond is not None else _default_rcond(n, 0)
+    r = _count_above(d / d[0], tol0, "A (k=0)")
+    if r == n:
+        empty = np.zeros((n, 0))
+        return empty, 0, empty, empty, empty, scipy.linalg.lu_factor(Mt, check_finite=False)
+    N1, _, info = lapack.dormqr("L", "N", qr, tau, np.eye(n, n - r, -r), max(1, 64 * (n - r)))
+    Nr = np.zeros((n, n - r))
+    Nr[piv[:r]] = -scipy.linalg.solve_triangular(R[:r, :r], R[:r, r:])
+    Nr[piv[r:]] = np.eye(n - r)
+    Nr = _orth(Nr)
+    Wl = _orth(Bm @ Nr)
+    lu = _solve_bordered(Mt, Wl, N1)
+    N, levels = N1, 1
+    while True:
+        if levels > kmax:
+            raise StructuredFallback(f"the index exceeds kmax={kmax}")
+        H = Wl.T @ N
+        _, sv, Vh = np.linalg.svd(H)
+        tol = rcond if rcond is not None else _default_rcond(n, levels)
+        sv = np.concatenate([sv, np.zeros(N.shape[1] - sv.size)])
+        rank = _count_above(sv, tol, f"level {levels + 1} of the staircase")
+        c = Vh[rank:].T
+        if N1.shape[1] + c.shape[1] == N.shape[1]:
+            return N, levels, N1, Nr, Wl, lu
+        V = np.vstack([N @ c, np.zeros((N1.shape[1], c.shape[1]))])
+        Z = scipy.linalg.lu_solve(lu, V, check_finite=False)[:n]
+        N = _orth(np.hstack([N1, Z]))
+        levels += 1
+
+
+def _lam(k, c):
+    """``Lam[i, j] = C(i, j) c^(i - j)``: ``(d/dt + c)^i`` in terms of ``d^j/dt^j``."""
+    Lam = np.zeros((k + 1, k + 1))
+    for i in range(k + 1):
+        for j in range(i + 1):
+            Lam[i, j] = comb(i, j) * c ** (i - j)
+    return Lam
+
+
+class StructuredArray:
+    """What a completion needs from the standard derivative array, found from n-sized blocks.
+
+    Attributes
+    ----------
+    index : int
+        The differentiation index (number of staircase levels).
+    k : int
+    n, a : int
+        Unknowns and constraints (corank of J).
+    Z2 : ndarray, shape ((k+1) n, a)
+        Orthonormal basis of the left null space of J.
+    first_rows : ndarray, shape (n, (k+1) n)
+        The first n rows of ``J^+``.
+    shift : float
+        The shift ``mu`` used.
+    """
+
+    def __init__(self, index, k, n, Z2, first_rows, shift):
+        self.index, self.k, self.n, self.Z2, self.first_rows, self.shift = index, k, n, Z2, first_rows, shift
+        self.a = Z2.shape[1]
+
+
+def _pencil_reduction(A, B, rcond, kmax):
+    """Shift, ``Mt = B_mu^-T A^T`` and its generalized null space."""
+    mu, lu = _shift(A, B)
+    Mt = scipy.linalg.lu_solve(lu, A.T, trans=1)
+    U_S, index, N1, Nr, Wl, lu_Mt = _generalized_null_space(A, B + mu * A, Mt, rcond, kmax)
+    return mu, lu, Mt, U_S, index, N1, Nr, Wl, lu_Mt
+
+
+def structured_index(A, B, rcond=None, kmax=10):
+    """The differentiation index of a regular constant pencil (StructuredFallback when not clear-cut)."""
+    return _pencil_reduction(np.asarray(A, float), np.asarray(B, float), rcond, kmax)[4]
+
+
+def structured_array(A, B, k=None, rcond=None, kmax=10):
+    """The `StructuredArray` of ``A x' + B x = f`` with k (None: the index) differentiations.
+
+    Raises StructuredFallback when a rank decision is not clear-cut, no
+    shift makes ``B + mu A`` well conditioned, or ``k`` is below the index
+    (the dense path then refuses or decides).
+    """
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    n = A.shape[0]
+    mu, lu, Mt, U_S, index, N1, Nr, Wl, lu_Mt = _pencil_reduction(A, B, rcond, kmax)
+    k = index if k is None else k
+    if k < index:
+        raise StructuredFallback(f"k={k} is below the index {index}")
+    a = U_S.shape[1]
+    Binv_T = scipy.linalg.lu_solve(lu, np.eye(n), trans=1)
+    # Y_0 with Mt Y_0 = B_mu^-T - U_S Psi: Psi (least norm) puts the right side into range(Mt) = Wl^perp, then
+    # the bordered LU of the staircase solves; Y_1 = B_mu^-T - Mt Y_0 = U_S Psi.
+    Psi = np.linalg.lstsq(Wl.T @ U_S, Wl.T @ Binv_T, rcond=None)[0] if a else np.zeros((0, n))
+    rhs = np.vstack([Binv_T - U_S @ Psi, np.zeros((Wl.shape[1], n))])
+    del Binv_T
+    sol = scipy.linalg.lu_solve(lu_Mt, rhs, check_finite=False)
+    del rhs
+    X_SS = U_S.T @ (Mt @ U_S)
+    Lam = _lam(k, -mu)
+    # X = X_y (Lam kron I), block column j = sum_i Lam[i, j] Y_i^T, accumulated without stacking the Y_i
+    X = np.zeros((n, k + 1, n))
+    X += sol[:n].T[:, None, :] * Lam[0][None, :, None]
+    Z = [U_S]
+    step = np.eye(a)
+    for i in range(1, k + 1):
+        Yi_T = (step @ Psi).T @ U_S.T
+        for j in range(i + 1):
+            X[:, j] += Lam[i, j] * Yi_T
+        step = step @ (-X_SS)
+        Z.append(U_S @ step)
+    X = X.reshape(n, (k + 1) * n)
+    Zx = np.einsum("ji,jna->ina", Lam, np.stack(Z)).reshape((k + 1) * n, a)
+    Z2 = _orth(Zx)
+    XZ = X @ Z2
+    for j in range(k + 1):  # first_rows = X (I - Z2 Z2^T), in place, one n x n block at a time
+        X[:, j * n : (j + 1) * n] -= XZ @ Z2[j * n : (j + 1) * n].T
+    first_rows = X
+    out = StructuredArray(index, k, n, Z2, first_rows, mu)
+    out.null_A, out.left_null_A = Nr, N1
+    return out
+
+
+def constraint_svd(C, t):
+    """SVD of the constraint matrix ``C = Z2^T F``; refuses dependent constraints ([J, F] not of full row rank)."""
+    a = C.shape[0]
+    Uc, sc, Vct = np.linalg.svd(C)
+    rank_C = numerical_rank(sc, C.shape, None, what="constraint matrix Z2^T F")
+    if rank_C != a:
+        raise IndexDeterminationError(
+            f"the constraints Z2^T F x = Z2^T g are dependent (rank {rank_C} < {a}) at t={t!r}: "
+            "[J, F] does not have full row rank, so the DAE is not solvable."
+        )
+    return Uc, sc, Vct
+
+
+class StructuredFactors:
+    """The standard derivative array's factors for constant ``A, B`` from a `StructuredArray`.
+
+    Offers what a completion's ``_maps`` uses (``first_rows``, ``Z2``, ``C``,
+    ``cg``, ``A0``, ``B0``, ``times_F``, ``times_L``, ``T2``,
+    ``C_pinv``, ``index_one_solve``) without forming ``J``, ``F`` or the forcing
+    map ``L = Lam kron I``: ``F = [B; 0; ...]`` and ``L`` act block by block.
+    """
+
+    has_Jd = False  # constant coefficients: J' = 0
+
+    def __init__(self, A, B, k, q, rcond, kmax=10):
+        s = structured_array(A, B, k, rcond, kmax)
+        n = s.n
+        self.n, self.t, self.k, self.q, self.index = n, 0.0, s.k, q, s.index
+        self.rank = (s.k + 1) * n - s.a
+        self.structured = s
+        self.Z2, self.first_rows, self.shift = s.Z2, s.first_rows, s.shift
+        self.A0, self.B0 = A, B
+        self._Lam = stabilization_jets(s.k, q, None)
+        self.C = self.Z2[:n].T @ B
+        self.cg = self.times_L(self.Z2.T, 0)
+        self._C_svd = None
+
+    def times_F(self, X, d):
+        """``X @ F^(d)`` with ``F = [B; 0; ...]`` (constant, so ``F' = 0``)."""
+        if d:
+            return np.zeros((X.shape[0], self.n))
+        return X[:, : self.n] @ self.B0
+
+    def times_L(self, X, d):
+        """``X @ (Lam[d] kron I_n)``, block by block."""
+        m = X.shape[0]
+        blocks = X.reshape(m, self.k + 1, self.n)
+        return np.einsum("ij,mic->mjc", self._Lam[d], blocks).reshape(m, -1)
+
+    def _c_svd(self):
+        if self._C_svd is None:
+            self._C_svd = constraint_svd(self.C, self.t)
+        return self._C_svd
+
+    @property
+    def T2(self):
+        Uc, sc, Vct = self._c_svd()
+        return Vct[sc.size :].T
+
+    @property
+    def C_pinv(self):
+        Uc, sc, Vct = self._c_svd()
+        return (Vct[: sc.size].T / sc) @ Uc.T
+
+    def index_one_solve(self, G_c, W_c, rcond, t):
+        """``(G, W)`` of the alternative completion from its constraint rows ``C x' = G_c x + W_c``.
+
+        The dense path solves ``[Z1^T A; C] x' = [-Z1^T B x + Z1^T f; ...]`` with ``Z1`` an orthonormal
+        basis of range(A T2). Equivalently, with ``Ws`` one of its orthogonal complement (dimension a),
+        ``A x' + Ws m = f - B x``, ``C x' = ...`` (``m`` absorbs the part of the equations ``Z1^T`` drops): one
+        LU of a bordered (n + a) matrix, no SVD. ``Ws`` = {u : A^T u in range(C^T)}: ``A^T u = C^T b``
+        with ``b`` in null((null A)^T C^T), solved with A^T bordered by its null spaces.
+        """
+        n, A, C = self.n, self.A0, self.C
+        s = self.structured
+        Nr, N1 = s.null_A, s.left_null_A
+        a1 = N1.shape[1]
+        if a1:
+            _, sv, Vh = np.linalg.svd(Nr.T @ C.T)
+            sv = np.concatenate([sv, np.zeros(C.shape[0] - sv.size)])
+            rank = _count_above(sv / max(sv[0], 1.0), rcond if rcond is not None else default_rcond(C.shape), "A T2")
+            beta = Vh[rank:].T
+            lu = _solve_bordered(A.T, Nr, N1)
+            U = scipy.linalg.lu_solve(lu, np.vstack([C.T @ beta, np.zeros((a1, beta.shape[1]))]), check_finite=False)[:n]
+            Ws = _orth(np.hstack([N1, U]))
+        else:
+            Ws = np.zeros((n, 0))
+        if Ws.shape[1] != C.shape[0]:
+            raise StructuredFallback(f"A T2 does not have corank {C.shape[0]}")
+        K = np.block([[A, Ws], [C, np.zeros((C.shape[0], Ws.shape[1]))]])
+        lu, piv, info = lapack.dgetrf(K)
+        rc, _ = lapack.dgecon(lu, np.linalg.norm(K, 1))
+        tol = rcond if rcond is not None else default_rcond(K.shape)
+        if info != 0 or not rc / K.shape[0] > tol * _MARGIN:
+            raise StructuredFallback("the index-one system [A, Ws; C, 0] is not clearly invertible")
+        S = scipy.linalg.lu_solve((lu, piv), np.eye(K.shape[0]), check_finite=False)[:n]
+        S11, S12 = S[:, :n], S[:, n:]
+        G = -S11 @ self.B0 + S12 @ G_c
+        W = S12 @ W_c
+        W[:, :n] += S11  # f0 = [I, 0, ...]
+        return G, W
