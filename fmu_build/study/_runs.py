@@ -263,7 +263,7 @@ def ssp_layout(scenario):
 
     from fmpy import read_model_description
 
-    from .cosim import read_system
+    from ..cosim import read_system
 
     key = (os.fspath(scenario), os.path.getmtime(scenario)) if not isinstance(scenario, dict) else None
     if key is not None and key in _SSP_LAYOUT:

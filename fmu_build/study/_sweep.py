@@ -1,0 +1,302 @@
+"""The front of a study: `sweep`."""
+import math
+import os
+
+import numpy as np
+
+from ._execute import _execute, _Progress
+from ._grid import METRICS, _group_key, _points, _tightest, _valid
+from ._output import _read_finished, _rewrite, _stream_path
+from ._runs import run_dae, run_fmu, run_ssp
+
+# -- the target ----------------------------------------------------------------
+def _target(target, t_span, x0):
+    """(kind, payload, exact reference or None, t_span) for any accepted target."""
+    import lsc
+
+    if isinstance(target, lsc.gallery.Problem):
+        return "dae", {"dae": target.dae, "x0": target.x0}, target.exact, tuple(t_span or target.t_span)
+    if isinstance(target, lsc.LinearDAE):
+        if t_span is None or x0 is None:
+            raise ValueError("a LinearDAE target needs `t_span` and `x0` (a gallery Problem carries both).")
+        return "dae", {"dae": target, "x0": np.asarray(x0, dtype=float)}, None, tuple(t_span)
+    if isinstance(target, dict):
+        return "spec", target, None, t_span
+    if isinstance(target, (str, os.PathLike)):
+        path = os.fspath(target)
+        if not os.path.exists(path):
+            raise FileNotFoundError(f"`target` {path!r} does not exist.")
+        lower = path.lower()
+        if lower.endswith(".fmu"):
+            return "fmu", path, None, t_span
+        if lower.endswith(".toml"):
+            return "spec", path, None, t_span
+        if lower.endswith((".ssp", ".ssd")) or os.path.isdir(path):
+            return "ssp", path, None, t_span
+        raise ValueError(f"`target` must be an .fmu, a .toml spec, an SSP scenario (.ssp, .ssd or folder), "
+                         f"a spec dict or an lsc.LinearDAE; found {path!r}.")
+    raise TypeError("`target` must be an FMU path, a spec (path or dict), an SSP scenario or an lsc.LinearDAE; "
+                    f"found {type(target).__name__}.")
+
+
+# -- errors against a reference ------------------------------------------------
+def _error(t, x, ref, error_from):
+    """Largest absolute state error over the output times from `error_from` on."""
+    if t is None or x is None or x.size == 0:
+        return math.nan
+    if callable(ref):
+        xr = np.asarray(ref(t), dtype=float)
+    else:
+        tr, xrr = ref
+        if t[-1] > tr[-1] + 1e-9 * max(1.0, abs(tr[-1])) or t[0] < tr[0] - 1e-9 * max(1.0, abs(tr[0])):
+            return math.nan
+        xr = np.array([np.interp(t, tr, row) for row in xrr])
+    if xr.shape != x.shape:
+        raise ValueError(f"the reference has shape {xr.shape} where the run has {x.shape}.")
+    mask = t >= error_from - 1e-12 * max(1.0, abs(error_from))
+    if not mask.any():
+        return math.nan
+    err = float(np.max(np.abs(x[:, mask] - xr[:, mask])))
+    return err if math.isfinite(err) else math.inf
+
+
+
+# -- the study -------------------------------------------------------------------
+def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progress=True, output=None, t_span=None,
+          x0=None, error_from=None, n_workers=2, seed=0, curves=True):
+    """Run a parameter study: one simulation per point of `grid`, on Dask.
+
+    Parameters
+    ----------
+    target : path, dict, lsc.LinearDAE or lsc.gallery.Problem
+        An ``.fmu``; a spec (``.toml`` path or parsed dict: built once into an
+        FMU in a temporary folder); an SSP scenario (``.ssp``, ``.ssd`` or its
+        folder holding ``SystemStructure.ssd``: run with
+        ``fmu_build.cosimulate``, `t_span` and a ``step`` in the grid
+        required); a LinearDAE (then `t_span` and `x0` are required) or a
+        gallery Problem (carries both and its exact solution).
+    grid : dict or (int, dict)
+        ``{name: [values]}``: every combination (full grid). ``(size, {name:
+        (low, high)})``: a Latin hypercube sample of that size
+        (`scipy.stats.qmc.LatinHypercube`, seeded by `seed`); positive ranges
+        of ``lam``, ``step``, ``rtol``, ``atol`` are sampled log-uniformly.
+        See the module docstring for the names with a meaning of their own.
+    reference : None, 'exact', 'tightest', 'monolithic', callable or Problem
+        What the ``error`` column measures against. A callable maps times
+        ``t`` (shape (m,)) to states (shape (n, m)); a gallery Problem gives
+        its exact solution. 'tightest' runs, for every combination of the
+        model inputs, one extra run with the smallest step and tolerances and
+        the largest ``lam`` of the grid. 'monolithic' (SSP targets only) is
+        reserved: ``cosimulate`` has no monolithic solve, so it raises
+        NotImplementedError (pass the monolithic solution as a callable). None:
+        the exact solution if the target has one, else 'tightest'.
+    metrics : dict, optional
+        Extra columns ``{name: function(t, x, residual) -> float}``, computed
+        on the client from each run's trajectory.
+    scheduler : None, str or distributed.Client, optional
+        None: an embedded `distributed.LocalCluster` of `n_workers` worker
+        processes on loopback, closed at the end. An address
+        (``'tcp://host:8786'``) or a Client: an existing cluster (the FMU is
+        shipped to the workers as bytes). ``'serial'``: in this process,
+        without Dask (for debugging; a crashing run takes the process down).
+    progress : bool, optional
+        Show a progress bar (runs done, running, failed).
+    output : path, optional
+        ``.csv`` or ``.parquet`` file. Rows are appended to the CSV (for
+        Parquet: to ``output + '.partial.csv'``, converted at the end) as
+        they arrive; a study run again with the same output computes only the
+        runs not in it yet.
+    t_span : pair of float, optional
+        Horizon (default: the problem's, or the FMU's default experiment).
+    x0 : array_like, optional
+        Initial state of a LinearDAE target.
+    error_from : float, optional
+        The error counts from this time on (default: the start): the error
+        after a transient, e.g. of an initial ``offset``.
+    n_workers : int, optional
+        Worker processes of the embedded cluster.
+    seed : int, optional
+        Seed of the Latin hypercube.
+    curves : bool, optional
+        Keep each run's residual curve in ``df.attrs['curves']`` (run ->
+        (t, residual)) for `plot_study`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per run, indexed by ``run``: the grid's inputs, then `METRICS`
+        (``success``, ``message``, ``error``, ``residual_final``,
+        ``residual_peak``, ``run_time`` in seconds, ``steps``: communication
+        steps of an FMU, solver steps of a LinearDAE), then `metrics`. A run
+        that fails, raises or crashes its worker has ``success=False`` and the
+        reason in ``message``; the study goes on.
+
+    Examples
+    --------
+    >>> from lsc import gallery
+    >>> from fmu_build import sweep
+    >>> df = sweep(gallery.prescribed_path(t_span=(0.0, 2.0)), {"lam": [1.0, 10.0, -1.0]},
+    ...            scheduler="serial", progress=False)
+    >>> list(df.columns)
+    ['lam', 'success', 'message', 'error', 'residual_final', 'residual_peak', 'run_time', 'steps']
+    >>> df["success"].tolist(), bool(df["error"].iloc[1] < 1e-4), df["message"].iloc[2]
+    ([True, True, False], True, '`lam` must be positive; found -1.0')
+    """
+    import pandas as pd
+
+    points, names = _points(grid, seed)
+    metrics = dict(metrics or {})
+    for name in metrics:
+        if name in METRICS or name in names:
+            raise ValueError(f"`metrics` name {name!r} is already a column.")
+    kind, payload, exact, t_span = _target(target, t_span, x0)
+    if kind == "spec":
+        payload = _build_spec(payload)
+        kind = "fmu"
+    if kind == "fmu" and t_span is None:  # the FMU's default experiment (read from the archive, not run)
+        from fmpy import read_model_description
+
+        experiment = read_model_description(payload).defaultExperiment
+        if experiment is not None and experiment.stopTime is not None:
+            t_span = (float(experiment.startTime or 0.0), float(experiment.stopTime))
+
+    import lsc
+
+    if isinstance(reference, lsc.gallery.Problem):
+        reference = reference.exact
+    if reference is None:
+        reference = exact if exact is not None else "tightest"
+    elif reference == "exact":
+        if exact is None:
+            raise ValueError("`reference='exact'` needs a target with an exact solution (a gallery Problem); "
+                             "pass a callable or 'tightest'.")
+        reference = exact
+    elif reference == "monolithic":
+        if kind != "ssp":
+            raise ValueError("`reference='monolithic'` is for SSP targets; found a target of kind " + repr(kind) + ".")
+        raise NotImplementedError("`reference='monolithic'` needs a monolithic solve of the scenario from "
+                                  "fmu_build.cosim, which does not provide one yet: pass a callable or 'tightest'.")
+    elif not (callable(reference) or reference == "tightest"):
+        raise ValueError(f"`reference` must be None, 'exact', 'tightest', 'monolithic', a callable or a gallery "
+                         f"Problem; found {reference!r}.")
+
+    settings = {"t_span": t_span}
+    runner = {"dae": run_dae, "fmu": run_fmu, "ssp": run_ssp}[kind]
+    t0 = (t_span or (0.0,))[0]
+    error_from = t0 if error_from is None else float(error_from)
+
+    columns = ["run", *names, *METRICS, *metrics]
+    finished = _read_finished(output, names, points) if output is not None else {}
+    stream = _stream_path(output) if output is not None else None
+    if stream is not None:
+        _rewrite(stream, [finished[r] for r in sorted(finished)], columns)
+    todo = [i for i in range(len(points)) if i not in finished]
+
+    references = {}
+    tight = {}
+    if reference == "tightest":  # over the whole grid, so resumed rows and new ones share a reference
+        needed = {_group_key(points[i]) for i in todo}
+        tight = {k: p for k, p in _tightest([p for p in points if _valid(p)]).items() if k in needed}
+
+    rows = dict(finished)
+    curves_out = ResidualCurves()
+    done_count = [len(finished)]
+    failed_count = [sum(1 for r in finished.values() if not r["success"])]
+    waiting = {}  # group key -> list of (run, result) waiting for their reference
+
+    def emit(run, result):
+        row = {"run": run, **points[run]}
+        for m in METRICS:
+            if m != "error":
+                row[m] = result[m]
+        ref = reference if callable(reference) else references.get(_group_key(points[run]))
+        row["error"] = math.nan
+        if result["success"] and ref is None:
+            row["message"] = f"{row['message']}; no error: the reference run (the tightest point) failed"
+        if result["success"] and ref is not None:
+            try:
+                row["error"] = _error(result["t"], result["x"], ref, error_from)
+            except Exception as exc:
+                row["message"] = f"{row['message']}; the error could not be computed: {exc}"
+        for name, fn in metrics.items():
+            try:
+                row[name] = float(fn(result["t"], result["x"], result["residual"])) if result["success"] else math.nan
+            except Exception as exc:
+                row[name] = math.nan
+                row["message"] = f"{row['message']}; metric {name!r} failed: {exc}"
+        rows[run] = row
+        if curves and result.get("residual") is not None:
+            t_run, r_run = np.asarray(result["t"]), np.asarray(result["residual"])
+            if t_run.size > 400:  # a curve for a plot, not the trajectory
+                keep = np.unique(np.linspace(0, t_run.size - 1, 400).astype(int))
+                t_run, r_run = t_run[keep], r_run[keep]
+            curves_out[run] = (t_run, r_run)
+        if stream is not None:
+            pd.DataFrame([row], columns=columns).to_csv(stream, mode="a", header=False, index=False)
+        done_count[0] += 1
+        failed_count[0] += not row["success"]
+
+    def accept(tag, result):
+        if tag[0] == "ref":
+            key = tag[1]
+            references[key] = (result["t"], result["x"]) if result["success"] and result["t"] is not None else None
+            for run, res in waiting.pop(key, []):
+                emit(run, res)
+            return
+        run = tag[1]
+        key = _group_key(points[run])
+        if reference == "tightest" and key in tight and key not in references:
+            waiting.setdefault(key, []).append((run, result))
+        else:
+            emit(run, result)
+
+    jobs = [(("ref", key), point) for key, point in tight.items()] + [(("run", i), points[i]) for i in todo]
+    bar = _Progress(len(points), done_count, failed_count, progress)
+    try:
+        _execute(runner, payload, settings, jobs, accept, scheduler, n_workers, bar)
+    finally:
+        bar.close()
+    for key, items in list(waiting.items()):  # references that never arrived
+        references.setdefault(key, None)
+        for run, res in items:
+            emit(run, res)
+
+    df = pd.DataFrame([rows[r] for r in sorted(rows)], columns=columns).set_index("run")
+    df["success"] = df["success"].astype(bool)
+    df["steps"] = df["steps"].astype(int)
+    df.attrs["curves"] = curves_out
+    df.attrs["t_span"] = t_span
+    if output is not None and os.fspath(output).lower().endswith(".parquet"):
+        tmp = f"{os.fspath(output)}.tmp{os.getpid()}"
+        plain = df.copy()
+        plain.attrs = {}  # the residual curves are for plots, not for the file
+        plain.to_parquet(tmp)
+        os.replace(tmp, output)
+        os.remove(stream)
+    return df
+
+
+def _build_spec(spec):
+    import tempfile
+
+    from .._build import build_fmu
+
+    folder = tempfile.mkdtemp(prefix="lsc_study_spec_")
+    return os.fspath(build_fmu(spec, folder))
+
+
+class ResidualCurves(dict):
+    """Run -> (t, residual) of a study, kept in ``df.attrs['curves']``.
+
+    Shared, not copied, by the frames pandas derives from the study (pandas
+    deep-copies and compares ``attrs`` on every operation).
+    """
+
+    def __eq__(self, other):
+        return self is other
+
+    __hash__ = object.__hash__
+
+    def __deepcopy__(self, memo):
+        return self
+
