@@ -94,58 +94,111 @@ def _add_simulate(sub):
     p.add_argument("--step", type=float, help="communication step (default: the FMU's default experiment)")
     p.add_argument("--set", metavar="NAME=VALUE", action="append", default=[],
                    help="a start value, e.g. --set lambda=10 (repeatable)")
+    p.add_argument("--force", action="store_true", help="replace an existing output file that is not a result")
 
 
-def _read_input_csv(path):
-    import numpy as np
+def _experiment(args, md):
+    """(start, stop, step) from the options and the FMU's default experiment, each checked."""
+    from ._cli_checks import check_span, check_step, check_time
 
-    data = np.genfromtxt(path, delimiter=",", names=True, dtype=float, deletechars="")
-    if data.dtype.names is None or data.dtype.names[0] != "time":
-        raise ValueError(f"`--input` {path}: the first column must be 'time', found {data.dtype.names}")
-    return np.atleast_1d(data)
+    experiment = md.defaultExperiment
+    default = (lambda name: float(getattr(experiment, name)) if experiment is not None
+               and getattr(experiment, name) is not None else None)
+    start = check_time(args.start_time, "--start-time")
+    stop = check_time(args.stop_time, "--stop-time")
+    step = check_step(args.step, "--step")
+    start = start if start is not None else check_time(default("startTime"), "startTime of the FMU") or 0.0
+    stop = stop if stop is not None else check_time(default("stopTime"), "stopTime of the FMU")
+    if stop is None:
+        stop = start + 1.0  # fmpy's default when the FMU states none
+    step = step if step is not None else check_step(default("stepSize"), "stepSize of the FMU")
+    check_span(start, stop, step if step is not None else (stop - start) / 500, "--stop-time", "--step")
+    return start, stop, step
+
+
+def _simulate_output(args, md):
+    """The result file: -o, -o FOLDER/<model>.csv, or <model>.csv; checked against the inputs."""
+    from ._cli_checks import check_output
+
+    out = Path(args.output) if args.output else Path(f"{md.modelName}.csv")
+    if out.is_dir():
+        out = out / f"{md.modelName}.csv"
+    outputs = [v.name for v in md.modelVariables if v.causality == "output"]
+    for path in [out] + ([out.with_suffix(".png")] if args.plot else []):
+        check_output(path, [args.fmu, args.input], "-o", args.force, columns=outputs)
+    return out, outputs
 
 
 def _run_simulate(args):
-    import numpy as np
     from fmpy import read_model_description, simulate_fmu
-    from fmpy.util import write_csv
+
+    from ._cli_checks import check_fmu_file, check_input_csv
+
+    logs = []
+
+    def logger(env, instance, status, category, message):  # keep the FMU's warnings and errors for the reason
+        if status >= 1:
+            logs.append(message.decode("utf-8", "replace"))
 
     try:
-        start = _assignments(args.set, "--set", "NAME=VALUE")
-        signals = _read_input_csv(args.input) if args.input else None
+        check_fmu_file(args.fmu)
         md = read_model_description(args.fmu)
-        outputs = [v.name for v in md.modelVariables if v.causality == "output"]
-        step = args.step if args.step is not None else (float(md.defaultExperiment.stepSize)
-                                                        if md.defaultExperiment and md.defaultExperiment.stepSize else None)
-        result = simulate_fmu(args.fmu, start_time=args.start_time, stop_time=args.stop_time, output_interval=step,
-                              start_values=start, input=signals, output=outputs)
+        start_values = _assignments(args.set, "--set", "NAME=VALUE")
+        start, stop, step = _experiment(args, md)
+        out, outputs = _simulate_output(args, md)
+        signals = None
+        if args.input:
+            inputs = {v.name: v.start for v in md.modelVariables if v.causality == "input"}
+            signals = check_input_csv(args.input, inputs, start_values)
+        result = simulate_fmu(args.fmu, start_time=start, stop_time=stop, output_interval=step,
+                              start_values=start_values, input=signals, output=outputs, logger=logger,
+                              debug_logging=True)
     except Exception as exc:  # fmpy raises bare Exception; report any failure as one line
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2
-    out = Path(args.output) if args.output else Path(f"{md.modelName}.csv")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_csv(out, result)
+    _write_result(out, result)
     print(out)
     if args.plot:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, axes = plt.subplots(len(outputs), 1, sharex=True, figsize=(7, 1.6 * len(outputs) + 1), squeeze=False)
-        for ax, name in zip(axes[:, 0], outputs):
-            ax.plot(result["time"], result[name])
-            ax.set_ylabel(name)
-            if name == "constraint_residual" and np.all(result[name] > 0):
-                ax.set_yscale("log")
-        axes[-1, 0].set_xlabel("time")
-        fig.suptitle(f"{md.modelName} in fmpy")
-        fig.tight_layout()
-        png = out.with_suffix(".png")
-        fig.savefig(png, dpi=100)
-        plt.close(fig)
-        print(png)
+        print(_plot_simulation(out, result, outputs, md.modelName))
+    reached = result["time"][-1] if len(result) else start
+    if not reached >= stop - 1e-9 * max(1.0, abs(stop)):
+        reason = logs[-1] if logs else "the FMU gave no reason"
+        print(f"lsc-fmu: error: the run stopped at t = {reached:g} before the stop time {stop:g}: {reason}",
+              file=sys.stderr)
+        return 1
     return 0
+
+
+def _write_result(out, result):
+    """fmpy's CSV, written to a temporary file then renamed (no half-written result)."""
+    from fmpy.util import write_csv
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
+    write_csv(tmp, result)
+    os.replace(tmp, out)
+
+
+def _plot_simulation(out, result, outputs, name):
+    import matplotlib
+    import numpy as np
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(outputs), 1, sharex=True, figsize=(7, 1.6 * len(outputs) + 1), squeeze=False)
+    for ax, output in zip(axes[:, 0], outputs):
+        ax.plot(result["time"], result[output])
+        ax.set_ylabel(output)
+        if output == "constraint_residual" and np.all(result[output] > 0):
+            ax.set_yscale("log")
+    axes[-1, 0].set_xlabel("time")
+    fig.suptitle(f"{name} in fmpy")
+    fig.tight_layout()
+    png = out.with_suffix(".png")
+    fig.savefig(png, dpi=100)
+    plt.close(fig)
+    return png
 
 
 def _add_env(sub):
@@ -300,6 +353,7 @@ def _add_cosim(sub):
     cosim.add_argument("--output", action="append", metavar="COMP.VAR", help="a variable to record (repeatable)")
     cosim.add_argument("-o", "--result", default="result.csv", help="CSV file to write (default: result.csv)")
     cosim.add_argument("--plot", action="store_true", help="also write a PNG next to the CSV")
+    cosim.add_argument("--force", action="store_true", help="replace an existing output file that is not a result")
 
 
 def _run_cosim(args):
@@ -309,10 +363,21 @@ def _run_cosim(args):
 
     import numpy as np
 
+    from ._cli_checks import check_output, check_span, check_step, check_system_file, check_time
     from .cosim import cosimulate
 
     try:
+        check_span(0.0, check_time(args.stop_time, "--stop-time"), check_step(args.step_size, "--step-size"),
+                   "--stop-time", "--step-size")
+        outputs = [Path(args.result)] + ([Path(args.result).with_suffix(".png")] if args.plot else [])
+        for path in outputs:
+            check_output(path, [args.system], "-o", args.force, columns=args.output)
+        check_system_file(args.system)
         start = _assignments(args.start, "--start", "COMP.VAR=VALUE")
+    except ValueError as exc:
+        print(f"lsc-fmu: error: {exc}", file=sys.stderr)
+        return 2
+    try:
         with warnings.catch_warnings():
             warnings.simplefilter("always")
             result = cosimulate(args.system, args.stop_time, args.step_size, algorithm=args.algorithm,
@@ -321,9 +386,15 @@ def _run_cosim(args):
     except (ValueError, TypeError, OSError) as exc:
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2
+    except Exception as exc:  # a corrupt archive or description: BadZipFile, XMLSyntaxError, ...
+        print(f"lsc-fmu: error: could not read the system {args.system!r} ({type(exc).__name__}: {exc}); "
+              "expected an SSP archive (.ssp) or a SystemStructure.ssd (see docs/cosimulation.md).", file=sys.stderr)
+        return 2
     names = result.dtype.names
-    np.savetxt(args.result, np.column_stack([result[n] for n in names]) if len(result) else np.zeros((0, len(names))),
+    tmp = Path(args.result).with_name(f".{Path(args.result).name}.tmp{os.getpid()}")
+    np.savetxt(tmp, np.column_stack([result[n] for n in names]) if len(result) else np.zeros((0, len(names))),
                delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+    os.replace(tmp, args.result)
     if args.plot:
         import matplotlib
 
