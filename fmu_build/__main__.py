@@ -285,6 +285,8 @@ def _add_sweep(sub):
     sweep.add_argument("--recommend", type=float, metavar="ERROR", help="print the cheapest point reaching this error")
     sweep.add_argument("--cost", default="run_time", choices=["run_time", "steps"], help="cost the recommendation minimizes")
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
+    sweep.add_argument("--timeout", type=float, metavar="SECONDS",
+                       help="end a run that takes longer (its worker is restarted; recorded as failed)")
 
 
 def _value(text):
@@ -329,7 +331,7 @@ def _run_sweep(args):
             target = getattr(lsc.gallery, name)()
         df = sweep(target, grid, reference=args.reference, scheduler=args.scheduler, progress=not args.no_progress,
                    output=args.output, t_span=args.t_span, error_from=args.error_from, n_workers=args.workers,
-                   seed=args.seed)
+                   seed=args.seed, timeout=args.timeout)
     except (ValueError, TypeError, OSError, ImportError, NotImplementedError) as exc:
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2
