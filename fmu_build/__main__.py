@@ -408,6 +408,7 @@ def _run_cosim(args):
               "expected an SSP archive (.ssp) or a SystemStructure.ssd (see docs/cosimulation.md).", file=sys.stderr)
         return 2
     names = result.dtype.names
+    Path(args.result).parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(args.result).with_name(f".{Path(args.result).name}.tmp{os.getpid()}")
     np.savetxt(tmp, np.column_stack([result[n] for n in names]) if len(result) else np.zeros((0, len(names))),
                delimiter=",", header=",".join(names), comments="", fmt="%.17g")

@@ -167,6 +167,7 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
         kind, payload, reference, settings = _setup(target, reference, t_span, x0, workdir)
         settings["error_from"] = settings["t_span"][0] if error_from is None and settings["t_span"] else error_from
         if output is not None:
+            os.makedirs(os.path.dirname(os.path.abspath(output)), exist_ok=True)
             check_identity(output, _identity(target, payload, names, reference, settings, metrics))
         return _study(kind, payload, points, names, reference, settings, metrics, output, scheduler, n_workers,
                       progress, curves, timeout)
