@@ -161,21 +161,7 @@ def _run_fmu(fmu, point, settings, start):
         float(md.defaultExperiment.startTime or 0.0), float(md.defaultExperiment.stopTime or 1.0))
     h = float(point.get("step", settings.get("step") or (md.defaultExperiment.stepSize or (t1 - t0) / 100)))
     n_steps = steps_over(t0, t1, h)
-    values = {}
-    for name, value in point.items():
-        if name in ("step", "offset"):
-            continue
-        fmi_name = {"lam": "lambda", "method": "solver"}.get(name, name)
-        if fmi_name not in var:
-            raise ValueError(f"the FMU has no variable {fmi_name!r} to set from the grid's `{name}`")
-        if fmi_name == "solver" and isinstance(value, str):
-            value = ("RK45", "DOP853", "Radau", "BDF", "exact", "Magnus4").index(value)
-        values[fmi_name] = fmi_value(name, value, var[fmi_name].type)
-    offset = float(point.get("offset", 0.0))
-    if offset:
-        for s in states:
-            key = _start_name(s)
-            values[key] = values.get(key, float(var[key].start or 0.0)) + offset / math.sqrt(len(states))
+    values = _fmu_values(point, var, states)
 
     slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=ident, instanceName="study")
     slave.instantiate(callbacks=callbacks, loggingOn=True)
@@ -224,6 +210,29 @@ def _run_fmu(fmu, point, settings, start):
                 residual_peak=float(np.max(residual)) if residual.size else math.nan,
                 run_time=time.perf_counter() - start, steps=steps,
                 t=np.array(t_out[:x.shape[1]]), x=x, residual=residual)
+
+
+def _fmu_values(point, var, states):
+    """{FMU variable: value} a point sets: grid names mapped, values typed, the offset added to the starts."""
+    values = {}
+    for name, value in point.items():
+        if name in ("step", "offset"):
+            continue
+        fmi_name = {"lam": "lambda", "method": "solver"}.get(name, name)
+        if fmi_name not in var:
+            raise ValueError(f"the FMU has no variable {fmi_name!r} to set from the grid's `{name}`")
+        if fmi_name == "solver" and isinstance(value, str):
+            solvers = ("RK45", "DOP853", "Radau", "BDF", "exact", "Magnus4")
+            if value not in solvers:
+                raise ValueError(f"`method` must be one of {solvers}; found {value!r}")
+            value = solvers.index(value)
+        values[fmi_name] = fmi_value(name, value, var[fmi_name].type)
+    offset = float(point.get("offset", 0.0))
+    if offset:
+        for s in states:
+            key = _start_name(s)
+            values[key] = values.get(key, float(var[key].start or 0.0)) + offset / math.sqrt(len(states))
+    return values
 
 
 def steps_over(t0, t1, h):
