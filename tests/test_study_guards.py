@@ -269,3 +269,17 @@ def test_cli_sweep_refuses_a_boolean_lam(tmp_path, capsys):
     assert main(["sweep", "gallery:prescribed_path", "--grid", "lam=true", "--scheduler", "serial", "--no-progress",
                  "-o", str(tmp_path / "s.csv")]) == 2
     assert "`grid['lam']` must hold real numbers; found 'true' (str)" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("kwargs, needle", [
+    ({"t_span": (1.0, 0.0)}, r"`t_span` must be two finite times with t_span\[0\] < t_span\[1\]; found \(1.0, 0.0\)"),
+    ({"t_span": (0.0, float("inf"))}, "`t_span` must be two finite times"),
+    ({"t_span": (0.0,)}, "`t_span` must be two finite times"),
+    ({"n_workers": 0, "scheduler": None}, "`n_workers` must be a positive integer; found 0"),
+])
+def test_horizon_and_workers_are_checked_up_front(kwargs, needle):
+    from _support import deadline
+
+    kwargs = {"scheduler": "serial", **kwargs}
+    with deadline(30, "a refusal that should be immediate"), pytest.raises(ValueError, match=needle):
+        sweep(gallery.prescribed_path(), {"lam": [1.0]}, progress=False, **kwargs)

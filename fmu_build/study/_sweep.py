@@ -157,6 +157,14 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
         raise ValueError("`timeout` needs worker processes (a Dask scheduler), not scheduler='serial'.")
     if output is not None:
         check_output(output)
+    if t_span is not None:
+        span = tuple(t_span) if np.ndim(t_span) == 1 else ()
+        if len(span) != 2 or not all(isinstance(t, (int, float, np.integer, np.floating)) and math.isfinite(t)
+                                     for t in span) or not span[0] < span[1]:
+            raise ValueError(f"`t_span` must be two finite times with t_span[0] < t_span[1]; found {t_span!r}.")
+    if scheduler is None and not (isinstance(n_workers, (int, np.integer)) and not isinstance(n_workers, bool)
+                                  and n_workers >= 1):
+        raise ValueError(f"`n_workers` must be a positive integer; found {n_workers!r}.")
     points, names = _points(grid, seed)
     metrics = dict(metrics or {})
     for name in metrics:
