@@ -23,9 +23,9 @@ commands:
   ecos      run the ecos host shipped with ecospy, with that environment
               lsc-fmu ecos simulate --path out/PrescribedPath.fmu --stopTime 10
   cosim     co-simulate FMUs connected in an SSP file (or .ssd) with a fixed macro step
-              lsc-fmu cosim system.ssp --stop-time 10 --step-size 0.01 -o result.csv --plot
+              lsc-fmu cosim out/loop.ssp --stop-time 10 --step-size 0.01 -o out/result.csv --plot
   sweep     run a parameter study (lambda, steps, tolerances, parameters) on Dask
-              lsc-fmu sweep out/PrescribedPath.fmu --grid lam=1,2,5,10 -o study.csv --plot study.png
+              lsc-fmu sweep out/PrescribedPath.fmu --grid lam=1,2,5,10 -o out/study.csv --plot out/study.png
 
 Run `lsc-fmu COMMAND --help` for the options of one command.
 """
@@ -82,70 +82,126 @@ def _add_simulate(sub):
         "simulate", help="run an FMU in fmpy and write its outputs as CSV (and a PNG)",
         description="Simulate an FMU in fmpy over its default experiment (or --stop-time) and write every "
                     "output to a CSV file. An input CSV has a header row 'time,<input>,...' and one row per "
-                    "time; fmpy interpolates it linearly.",
+                    "time; fmpy interpolates it linearly. It is checked before the run: times finite and "
+                    "strictly increasing, every value a finite number, every column an input of the FMU, "
+                    "every input a column or given a start value.",
         epilog="example: lsc-fmu simulate out/PathInput.fmu --input path.csv --step 0.01 --plot -o out/run.csv",
     )
     p.add_argument("fmu", help="path of the .fmu file")
     p.add_argument("--input", metavar="CSV", help="input signals: columns 'time' and one per FMU input")
-    p.add_argument("-o", "--output", metavar="CSV", help="result file (default: <model>.csv in the current folder)")
+    p.add_argument("-o", "--output", metavar="CSV",
+                   help="result file, or a folder to write <model>.csv into (default: <model>.csv in the current folder)")
     p.add_argument("--plot", action="store_true", help="also plot the outputs to the result's name with .png")
     p.add_argument("--start-time", type=float, help="start time (default: the FMU's default experiment)")
     p.add_argument("--stop-time", type=float, help="stop time (default: the FMU's default experiment)")
     p.add_argument("--step", type=float, help="communication step (default: the FMU's default experiment)")
     p.add_argument("--set", metavar="NAME=VALUE", action="append", default=[],
                    help="a start value, e.g. --set lambda=10 (repeatable)")
+    p.add_argument("--force", action="store_true", help="replace an existing output file that is not a result")
 
 
-def _read_input_csv(path):
-    import numpy as np
+def _experiment(args, md):
+    """(start, stop, step) from the options and the FMU's default experiment, each checked."""
+    from ._cli_checks import check_span, check_step, check_time
 
-    data = np.genfromtxt(path, delimiter=",", names=True, dtype=float, deletechars="")
-    if data.dtype.names is None or data.dtype.names[0] != "time":
-        raise ValueError(f"`--input` {path}: the first column must be 'time', found {data.dtype.names}")
-    return np.atleast_1d(data)
+    experiment = md.defaultExperiment
+    default = (lambda name: float(getattr(experiment, name)) if experiment is not None
+               and getattr(experiment, name) is not None else None)
+    start = check_time(args.start_time, "--start-time")
+    stop = check_time(args.stop_time, "--stop-time")
+    step = check_step(args.step, "--step")
+    start = start if start is not None else check_time(default("startTime"), "startTime of the FMU") or 0.0
+    stop = stop if stop is not None else check_time(default("stopTime"), "stopTime of the FMU")
+    if stop is None:
+        stop = start + 1.0  # fmpy's default when the FMU states none
+    step = step if step is not None else check_step(default("stepSize"), "stepSize of the FMU")
+    check_span(start, stop, step if step is not None else (stop - start) / 500, "--stop-time", "--step")
+    return start, stop, step
+
+
+def _simulate_output(args, md):
+    """The result file: -o, -o FOLDER/<model>.csv, or <model>.csv; checked against the inputs."""
+    from ._cli_checks import check_output
+
+    out = Path(args.output) if args.output else Path(f"{md.modelName}.csv")
+    if out.is_dir():
+        out = out / f"{md.modelName}.csv"
+    outputs = [v.name for v in md.modelVariables if v.causality == "output"]
+    for path in [out] + ([out.with_suffix(".png")] if args.plot else []):
+        check_output(path, [args.fmu, args.input], "-o", args.force, columns=outputs)
+    return out, outputs
 
 
 def _run_simulate(args):
-    import numpy as np
     from fmpy import read_model_description, simulate_fmu
-    from fmpy.util import write_csv
+
+    from ._cli_checks import check_fmu_file, check_input_csv
+
+    logs = []
+
+    def logger(env, instance, status, category, message):  # keep the FMU's warnings and errors for the reason
+        if status >= 1:
+            logs.append(message.decode("utf-8", "replace"))
 
     try:
-        start = _assignments(args.set, "--set", "NAME=VALUE")
-        signals = _read_input_csv(args.input) if args.input else None
+        check_fmu_file(args.fmu)
         md = read_model_description(args.fmu)
-        outputs = [v.name for v in md.modelVariables if v.causality == "output"]
-        step = args.step if args.step is not None else (float(md.defaultExperiment.stepSize)
-                                                        if md.defaultExperiment and md.defaultExperiment.stepSize else None)
-        result = simulate_fmu(args.fmu, start_time=args.start_time, stop_time=args.stop_time, output_interval=step,
-                              start_values=start, input=signals, output=outputs)
+        start_values = _assignments(args.set, "--set", "NAME=VALUE")
+        start, stop, step = _experiment(args, md)
+        out, outputs = _simulate_output(args, md)
+        signals = None
+        if args.input:
+            inputs = {v.name: v.start for v in md.modelVariables if v.causality == "input"}
+            signals = check_input_csv(args.input, inputs, start_values)
+        result = simulate_fmu(args.fmu, start_time=start, stop_time=stop, output_interval=step,
+                              start_values=start_values, input=signals, output=outputs, logger=logger,
+                              debug_logging=True)
     except Exception as exc:  # fmpy raises bare Exception; report any failure as one line
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2
-    out = Path(args.output) if args.output else Path(f"{md.modelName}.csv")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_csv(out, result)
+    _write_result(out, result)
     print(out)
     if args.plot:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, axes = plt.subplots(len(outputs), 1, sharex=True, figsize=(7, 1.6 * len(outputs) + 1), squeeze=False)
-        for ax, name in zip(axes[:, 0], outputs):
-            ax.plot(result["time"], result[name])
-            ax.set_ylabel(name)
-            if name == "constraint_residual" and np.all(result[name] > 0):
-                ax.set_yscale("log")
-        axes[-1, 0].set_xlabel("time")
-        fig.suptitle(f"{md.modelName} in fmpy")
-        fig.tight_layout()
-        png = out.with_suffix(".png")
-        fig.savefig(png, dpi=100)
-        plt.close(fig)
-        print(png)
+        print(_plot_simulation(out, result, outputs, md.modelName))
+    reached = result["time"][-1] if len(result) else start
+    if not reached >= stop - 1e-9 * max(1.0, abs(stop)):
+        reason = logs[-1] if logs else "the FMU gave no reason"
+        print(f"lsc-fmu: error: the run stopped at t = {reached:g} before the stop time {stop:g}: {reason}",
+              file=sys.stderr)
+        return 1
     return 0
+
+
+def _write_result(out, result):
+    """fmpy's CSV, written to a temporary file then renamed (no half-written result)."""
+    from fmpy.util import write_csv
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.tmp{os.getpid()}")
+    write_csv(tmp, result)
+    os.replace(tmp, out)
+
+
+def _plot_simulation(out, result, outputs, name):
+    import matplotlib
+    import numpy as np
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(outputs), 1, sharex=True, figsize=(7, 1.6 * len(outputs) + 1), squeeze=False)
+    for ax, output in zip(axes[:, 0], outputs):
+        ax.plot(result["time"], result[output])
+        ax.set_ylabel(output)
+        if output == "constraint_residual" and np.all(result[output] > 0):
+            ax.set_yscale("log")
+    axes[-1, 0].set_xlabel("time")
+    fig.suptitle(f"{name} in fmpy")
+    fig.tight_layout()
+    png = out.with_suffix(".png")
+    fig.savefig(png, dpi=100)
+    plt.close(fig)
+    return png
 
 
 def _add_env(sub):
@@ -218,8 +274,15 @@ def _native_options(args):
 
 
 def _add_sweep(sub):
-    sweep = sub.add_parser("sweep", help="run a parameter study (lam, steps, tolerances, parameters) on Dask",
-                           description="Run one simulation per point of a grid on Dask and write one row per run.")
+    sweep = sub.add_parser(
+        "sweep", help="run a parameter study (lam, steps, tolerances, parameters) on Dask",
+        description="Run one simulation per point of a grid (or a Latin hypercube sample) in Dask worker "
+                    "processes and write one row per run: the inputs, success, message, error against the "
+                    "reference, residuals, run time, steps. Needs the sweep extra (pip install -e \".[sweep]\"). "
+                    "An existing output of the same study is resumed; the study's identity is kept in "
+                    "OUTPUT.study.json and a file of another study is refused.",
+        epilog="example: lsc-fmu sweep out/PrescribedPath.fmu --grid lam=1,2,5,10 --t-span 0 2 -o out/study.csv "
+               "--plot out/study.png")
     sweep.add_argument("target", help="an .fmu, a .toml spec, an SSP scenario, or gallery:NAME (an lsc.gallery problem)")
     sweep.add_argument("--grid", action="append", default=[], metavar="NAME=V1,V2,...",
                        help="values of one input (repeat: every combination is run)")
@@ -236,6 +299,8 @@ def _add_sweep(sub):
     sweep.add_argument("--recommend", type=float, metavar="ERROR", help="print the cheapest point reaching this error")
     sweep.add_argument("--cost", default="run_time", choices=["run_time", "steps"], help="cost the recommendation minimizes")
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
+    sweep.add_argument("--timeout", type=float, metavar="SECONDS",
+                       help="end a run that takes longer (its worker is restarted; recorded as failed)")
 
 
 def _value(text):
@@ -280,7 +345,7 @@ def _run_sweep(args):
             target = getattr(lsc.gallery, name)()
         df = sweep(target, grid, reference=args.reference, scheduler=args.scheduler, progress=not args.no_progress,
                    output=args.output, t_span=args.t_span, error_from=args.error_from, n_workers=args.workers,
-                   seed=args.seed)
+                   seed=args.seed, timeout=args.timeout)
     except (ValueError, TypeError, OSError, ImportError, NotImplementedError) as exc:
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2
@@ -293,7 +358,12 @@ def _run_sweep(args):
     return 0
 
 def _add_cosim(sub):
-    cosim = sub.add_parser("cosim", help="co-simulate FMUs connected by an SSP file (.ssp/.ssd)")
+    cosim = sub.add_parser(
+        "cosim", help="co-simulate FMUs connected by an SSP file (.ssp/.ssd)",
+        description="Co-simulate the FMUs of an SSP system (an .ssp archive or a SystemStructure.ssd) with a "
+                    "fixed macro step in fmpy, and write the recorded variables as CSV (columns 'time' and "
+                    "'component.variable'). A run that stops early writes what it computed and exits 1.",
+        epilog="example: lsc-fmu cosim out/loop.ssp --stop-time 10 --step-size 0.01 -o out/result.csv --plot")
     cosim.add_argument("system", help="the .ssp or .ssd file")
     cosim.add_argument("--stop-time", type=float, required=True, help="end time")
     cosim.add_argument("--step-size", type=float, required=True, help="macro step")
@@ -304,6 +374,7 @@ def _add_cosim(sub):
     cosim.add_argument("--output", action="append", metavar="COMP.VAR", help="a variable to record (repeatable)")
     cosim.add_argument("-o", "--result", default="result.csv", help="CSV file to write (default: result.csv)")
     cosim.add_argument("--plot", action="store_true", help="also write a PNG next to the CSV")
+    cosim.add_argument("--force", action="store_true", help="replace an existing output file that is not a result")
 
 
 def _run_cosim(args):
@@ -313,10 +384,21 @@ def _run_cosim(args):
 
     import numpy as np
 
+    from ._cli_checks import check_output, check_span, check_step, check_system_file, check_time
     from .cosim import cosimulate
 
     try:
+        check_span(0.0, check_time(args.stop_time, "--stop-time"), check_step(args.step_size, "--step-size"),
+                   "--stop-time", "--step-size")
+        outputs = [Path(args.result)] + ([Path(args.result).with_suffix(".png")] if args.plot else [])
+        for path in outputs:
+            check_output(path, [args.system], "-o", args.force, columns=args.output)
+        check_system_file(args.system)
         start = _assignments(args.start, "--start", "COMP.VAR=VALUE")
+    except ValueError as exc:
+        print(f"lsc-fmu: error: {exc}", file=sys.stderr)
+        return 2
+    try:
         with warnings.catch_warnings():
             warnings.simplefilter("always")
             result = cosimulate(args.system, args.stop_time, args.step_size, algorithm=args.algorithm,
@@ -325,9 +407,16 @@ def _run_cosim(args):
     except (ValueError, TypeError, OSError) as exc:
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2
+    except Exception as exc:  # a corrupt archive or description: BadZipFile, XMLSyntaxError, ...
+        print(f"lsc-fmu: error: could not read the system {args.system!r} ({type(exc).__name__}: {exc}); "
+              "expected an SSP archive (.ssp) or a SystemStructure.ssd (see docs/cosimulation.md).", file=sys.stderr)
+        return 2
     names = result.dtype.names
-    np.savetxt(args.result, np.column_stack([result[n] for n in names]) if len(result) else np.zeros((0, len(names))),
+    Path(args.result).parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(args.result).with_name(f".{Path(args.result).name}.tmp{os.getpid()}")
+    np.savetxt(tmp, np.column_stack([result[n] for n in names]) if len(result) else np.zeros((0, len(names))),
                delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+    os.replace(tmp, args.result)
     if args.plot:
         import matplotlib
 
@@ -358,13 +447,28 @@ COMMANDS = {
 }
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(prog="lsc-fmu", description=DESCRIPTION,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+def parser():
+    """The argument parser of ``lsc-fmu``: one subcommand per entry of COMMANDS."""
+    main_parser = argparse.ArgumentParser(prog="lsc-fmu", description=DESCRIPTION,
+                                          formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = main_parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add, _ in COMMANDS.values():
         add(sub)
-    args = parser.parse_args(argv)
+    return main_parser
+
+
+def main(argv=None):
+    """Run ``lsc-fmu`` with `argv` (default: the command line); return the exit status.
+
+    ``--markdown`` alone prints the command-line reference (docs/cli.md).
+    """
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv == ["--markdown"]:
+        from ._cli_docs import markdown
+
+        print(markdown(parser()), end="")
+        return 0
+    args = parser().parse_args(argv)
     return COMMANDS[args.command][1](args)
 
 

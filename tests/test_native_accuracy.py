@@ -141,7 +141,7 @@ def test_input_derivatives_not_sent_are_estimated(path_input):
 _STUDY_RUNS = """
 import json, sys
 import numpy as np
-from fmu_build._study_runs import run_fmu
+from fmu_build.study._runs import run_fmu
 out = {}
 for key, fmu in json.loads(sys.argv[1]):
     r = run_fmu(fmu, {"lam": 2.0}, {"t_span": (0.0, 0.5), "step": 0.01})

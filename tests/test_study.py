@@ -20,6 +20,7 @@ distributed = pytest.importorskip("distributed")
 from lsc import gallery  # noqa: E402
 from fmu_build import build_fmu, recommend, sweep  # noqa: E402
 from fmu_build import study  # noqa: E402
+from fmu_build.study import _grid, _runs, _sweep  # noqa: E402
 
 SPECS = os.path.join(os.path.dirname(__file__), os.pardir, "examples", "specs")
 T_SPAN = (0.0, 2.0)
@@ -83,9 +84,9 @@ def _killer_plugin():
         name = "kill-at-lam-3"
 
         def setup(self, worker):
-            from fmu_build import _study_runs
+            from fmu_build.study import _runs
 
-            original = _study_runs._run_fmu
+            original = _runs._run_fmu
 
             def run(fmu, point, settings, start):
                 if point.get("lam") == 3.0:
@@ -94,7 +95,7 @@ def _killer_plugin():
                     os.kill(os.getpid(), signal.SIGKILL)
                 return original(fmu, point, settings, start)
 
-            _study_runs._run_fmu = run
+            _runs._run_fmu = run
 
     return KillAtLam3()
 
@@ -130,8 +131,8 @@ def test_an_interrupted_study_resumes_with_only_the_missing_rows(tmp_path, monke
     # interrupted after 3 rows, in the middle of writing the 4th
     output.write_text("".join(lines[:4]) + lines[4][: len(lines[4]) // 2])
     calls = []
-    original = study.run_dae
-    monkeypatch.setattr(study, "run_dae", lambda *a: calls.append(a[1]) or original(*a))
+    original = _sweep.run_dae
+    monkeypatch.setattr(_sweep, "run_dae", lambda *a: calls.append(a[1]) or original(*a))
     resumed = sweep(problem, grid, scheduler="serial", progress=False, output=output)
     assert calls == [{"lam": lam, "offset": off} for lam in (2.0, 4.0, 8.0) for off in (0.0, 0.1)][1:]
     assert len(calls) == 5
@@ -194,7 +195,7 @@ def test_residual_rule_across_the_gallery(make):
 
 
 def test_latin_hypercube_points():
-    points, names = study._points((16, {"lam": (0.5, 50.0), "c": (0.1, 0.9)}), seed=3)
+    points, names = _grid._points((16, {"lam": (0.5, 50.0), "c": (0.1, 0.9)}), seed=3)
     assert names == ["lam", "c"] and len(points) == 16
     lam = np.log(np.array([p["lam"] for p in points]) / 0.5) / np.log(100.0)  # log-uniform in lam
     c = (np.array([p["c"] for p in points]) - 0.1) / 0.8
@@ -265,12 +266,11 @@ def test_parquet_output(tmp_path):
 def test_ssp_target_maps_the_point_onto_cosimulate(tmp_path, monkeypatch):
     """An SSP target calls cosimulate(scenario, stop, step, start_time=..., start_values=..., output=...)."""
     import fmu_build
-    from fmu_build import _study_runs
 
     scenario = tmp_path / "scenario.ssp"
     scenario.write_bytes(b"")
     layout = (["dae.x2", "plant.w"], ["dae.constraint_residual"], ["dae"])
-    monkeypatch.setattr(_study_runs, "ssp_layout", lambda s: layout)
+    monkeypatch.setattr(_runs, "ssp_layout", lambda s: layout)
     calls = []
 
     def cosimulate(system, stop_time, step_size, *, start_time=0.0, start_values=None, output=None, progress=None,

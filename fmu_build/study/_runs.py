@@ -90,8 +90,12 @@ def _run_dae(problem, point, settings, start):
                 run_time=time.perf_counter() - start, steps=steps, t=result.t, x=result.x, residual=residual)
 
 
-def _extract(fmu):
-    """The extraction folder of an FMU given as bytes (cached per process) or a path."""
+def _extract(fmu, workdir=None):
+    """The extraction folder of an FMU given as bytes (cached per process) or a path.
+
+    Inside the study's `workdir` when this process can see it (the study
+    removes it at the end), else in a folder of the system's temporary one.
+    """
     import hashlib
     import os
     import tempfile
@@ -103,7 +107,8 @@ def _extract(fmu):
     key = hashlib.sha256(fmu).hexdigest()
     folder = _EXTRACTED.get(key)
     if folder is None or not os.path.isdir(folder):
-        folder = tempfile.mkdtemp(prefix=f"lsc_study_{key[:12]}_")
+        parent = workdir if workdir and os.path.isdir(workdir) else None
+        folder = tempfile.mkdtemp(prefix=f"lsc_study_{key[:12]}_", dir=parent)
         archive = os.path.join(folder, "model.fmu")
         with open(archive, "wb") as fh:
             fh.write(fmu)
@@ -119,97 +124,37 @@ def run_fmu(fmu, point, settings):
 
 
 def _run_fmu(fmu, point, settings, start):
-    import os
-    from ctypes import byref
+    from fmpy.fmi2 import FMU2Slave
 
-    from fmpy import read_model_description
-    from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
-    from fmpy.logging import addLoggerProxy
-
-    folder = _extract(fmu)
-    unzipped = os.path.join(folder, "unzipped")
-    md = _DESCRIPTIONS.get(folder)
-    if md is None:
-        md = _DESCRIPTIONS[folder] = read_model_description(unzipped)
-    ident = md.coSimulation.modelIdentifier
-    # only pythonfmu FMUs clash by identifier (a native FMU's library shares nothing with the others)
-    if os.path.exists(os.path.join(unzipped, "resources", "slavemodule.txt")):
-        if _LOADED.get(ident, md.guid) != md.guid:
-            return _failed(f"another FMU with model identifier {ident!r} (a different GUID) was loaded by this worker "
-                           "process; a pythonfmu FMU would silently run that one's code: give the model another name",
-                           start)
-        _LOADED[ident] = md.guid
+    md, unzipped, refusal = _load_description(fmu, settings)
+    if refusal:
+        return _failed(refusal, start)
     var = {v.name: v for v in md.modelVariables}
     states = [v.name for v in md.modelVariables if v.causality == "output" and _start_name(v.name) in var]
     residual_var = var.get("constraint_residual")
-
     logs = []
-
-    def logger(env, instance, status, category, message):
-        logs.append(message.decode("utf-8", "replace"))
-
-    callbacks = fmi2CallbackFunctions()
-    callbacks.logger = fmi2CallbackLoggerTYPE(logger)
-    callbacks.allocateMemory = defaultCallbacks.allocateMemory
-    callbacks.freeMemory = defaultCallbacks.freeMemory
-    addLoggerProxy(byref(callbacks))
+    callbacks = _logging_callbacks(logs)
 
     t0, t1 = settings["t_span"] if settings.get("t_span") else (
         float(md.defaultExperiment.startTime or 0.0), float(md.defaultExperiment.stopTime or 1.0))
     h = float(point.get("step", settings.get("step") or (md.defaultExperiment.stepSize or (t1 - t0) / 100)))
-    n_steps = max(int(round((t1 - t0) / h)), 1)
-    values = {}
-    for name, value in point.items():
-        if name in ("step", "offset"):
-            continue
-        fmi_name = {"lam": "lambda", "method": "solver"}.get(name, name)
-        if fmi_name not in var:
-            raise ValueError(f"the FMU has no variable {fmi_name!r} to set from the grid's `{name}`")
-        if fmi_name == "solver" and isinstance(value, str):
-            value = ("RK45", "DOP853", "Radau", "BDF", "exact", "Magnus4").index(value)
-        values[fmi_name] = value
-    offset = float(point.get("offset", 0.0))
-    if offset:
-        for s in states:
-            key = _start_name(s)
-            values[key] = values.get(key, float(var[key].start or 0.0)) + offset / math.sqrt(len(states))
+    n_steps = steps_over(t0, t1, h)
+    values = _fmu_values(point, var, states)
 
-    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=ident, instanceName="study")
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName="study")
     slave.instantiate(callbacks=callbacks, loggingOn=True)
     read_vrs = [var[s].valueReference for s in states] + ([residual_var.valueReference] if residual_var else [])
-    t_out, x_out, r_out = [t0], [], []
-    steps, success, message = 0, True, "the run reached the end of the horizon"
     try:
         slave.setupExperiment(startTime=t0, stopTime=t1)
         slave.enterInitializationMode()
         for name, value in values.items():
             v = var[name]
-            if v.type == "Real":
-                slave.setReal([v.valueReference], [float(value)])
-            elif v.type == "Integer":
-                slave.setInteger([v.valueReference], [int(value)])
-            else:
-                slave.setBoolean([v.valueReference], [bool(value)])
+            setter = {"Real": slave.setReal, "Integer": slave.setInteger, "Boolean": slave.setBoolean}[v.type]
+            setter([v.valueReference], [value])
         slave.exitInitializationMode()
-
-        def read():
-            out = slave.getReal(read_vrs)
-            x_out.append(out[:len(states)])
-            r_out.append(out[len(states)] if residual_var else math.nan)
-
-        read()
-        for i in range(n_steps):
-            t = t0 + i * h
-            try:
-                slave.doStep(currentCommunicationPoint=t, communicationStepSize=h)
-            except Exception as exc:
-                success = False
-                reason = logs[-1] if logs else f"{type(exc).__name__}: {exc}"
-                message = f"doStep at t={t!r} failed: {reason}"
-                break
-            steps += 1
-            t_out.append(t + h)
-            read()
+        t_out, x_out, r_out, steps, success, message = _step_through(
+            slave, read_vrs, len(states), residual_var is not None, t0, h, n_steps, logs)
         try:
             slave.terminate()
         except Exception:
@@ -225,6 +170,136 @@ def _run_fmu(fmu, point, settings, start):
                 residual_peak=float(np.max(residual)) if residual.size else math.nan,
                 run_time=time.perf_counter() - start, steps=steps,
                 t=np.array(t_out[:x.shape[1]]), x=x, residual=residual)
+
+
+def _load_description(fmu, settings):
+    """``(model description, unzipped folder, refusal or None)`` of a study's FMU in this worker."""
+    import os
+
+    from fmpy import read_model_description
+
+    folder = _extract(fmu, settings.get("workdir"))
+    unzipped = os.path.join(folder, "unzipped")
+    md = _DESCRIPTIONS.get(folder)
+    if md is None:
+        md = _DESCRIPTIONS[folder] = read_model_description(unzipped)
+    ident = md.coSimulation.modelIdentifier
+    # only pythonfmu FMUs clash by identifier (a native FMU's library shares nothing with the others)
+    if os.path.exists(os.path.join(unzipped, "resources", "slavemodule.txt")):
+        if _LOADED.get(ident, md.guid) != md.guid:
+            return md, unzipped, (f"another FMU with model identifier {ident!r} (a different GUID) was loaded by this "
+                                  "worker process; a pythonfmu FMU would silently run that one's code: give the model "
+                                  "another name")
+        _LOADED[ident] = md.guid
+    return md, unzipped, None
+
+
+def _logging_callbacks(logs):
+    """FMI 2.0 callbacks whose logger appends each message to `logs`."""
+    from ctypes import byref
+
+    from fmpy.fmi2 import defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+    from fmpy.logging import addLoggerProxy
+
+    def logger(env, instance, status, category, message):
+        logs.append(message.decode("utf-8", "replace"))
+
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+    callbacks.allocateMemory = defaultCallbacks.allocateMemory
+    callbacks.freeMemory = defaultCallbacks.freeMemory
+    addLoggerProxy(byref(callbacks))
+    return callbacks
+
+
+def _step_through(slave, read_vrs, n_states, has_residual, t0, h, n_steps, logs):
+    """Step `n_steps` of length `h` from `t0`, reading the states (and residual) after each step."""
+    t_out, x_out, r_out = [t0], [], []
+    steps, success, message = 0, True, "the run reached the end of the horizon"
+
+    def read():
+        out = slave.getReal(read_vrs)
+        x_out.append(out[:n_states])
+        r_out.append(out[n_states] if has_residual else math.nan)
+
+    read()
+    for i in range(n_steps):
+        t = t0 + i * h
+        try:
+            slave.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+        except Exception as exc:
+            success = False
+            reason = logs[-1] if logs else f"{type(exc).__name__}: {exc}"
+            message = f"doStep at t={t!r} failed: {reason}"
+            break
+        steps += 1
+        t_out.append(t + h)
+        read()
+    return t_out, x_out, r_out, steps, success, message
+
+
+def _fmu_values(point, var, states):
+    """{FMU variable: value} a point sets: grid names mapped, values typed, the offset added to the starts."""
+    values = {}
+    for name, value in point.items():
+        if name in ("step", "offset"):
+            continue
+        fmi_name = {"lam": "lambda", "method": "solver"}.get(name, name)
+        if fmi_name not in var:
+            raise ValueError(f"the FMU has no variable {fmi_name!r} to set from the grid's `{name}`")
+        if fmi_name == "solver" and isinstance(value, str):
+            solvers = ("RK45", "DOP853", "Radau", "BDF", "exact", "Magnus4")
+            if value not in solvers:
+                raise ValueError(f"`method` must be one of {solvers}; found {value!r}")
+            value = solvers.index(value)
+        values[fmi_name] = fmi_value(name, value, var[fmi_name].type)
+    offset = float(point.get("offset", 0.0))
+    if offset:
+        for s in states:
+            key = _start_name(s)
+            values[key] = values.get(key, float(var[key].start or 0.0)) + offset / math.sqrt(len(states))
+    return values
+
+
+def steps_over(t0, t1, h):
+    """The number of steps `h` from `t0` to `t1`; a ValueError if they do not end on `t1`."""
+    n = int(round((t1 - t0) / h))
+    if n < 1 or abs(t0 + n * h - t1) > 1e-9 * max(abs(t1 - t0), abs(t1), 1e-300):
+        raise ValueError(f"`step` {h!r} does not divide the horizon [{t0!r}, {t1!r}]: the run would end at "
+                         f"{t0 + max(n, 1) * h!r}; choose a step that divides it")
+    return n
+
+
+_TRUE, _FALSE = ("true", "1"), ("false", "0")
+
+
+def fmi_value(name, value, kind):
+    """`value` of the grid's `name` as the FMI type `kind` ('Real', 'Integer', 'Boolean'), or a TypeError.
+
+    Texts are read, never passed through ``bool()``: "false" and "0" are False.
+    """
+    def refuse():
+        raise TypeError(f"`{name}` sets a {kind} variable; found {value!r} ({type(value).__name__}).")
+
+    if isinstance(value, str):
+        text = value.strip().lower()
+        if kind == "Boolean" and text in _TRUE + _FALSE:
+            return text in _TRUE
+        try:
+            value = int(text) if kind == "Integer" else float(text)
+        except ValueError:
+            refuse()
+    if kind == "Boolean":
+        if isinstance(value, (bool, np.bool_)) or (isinstance(value, (int, np.integer)) and value in (0, 1)):
+            return bool(value)
+        refuse()
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        refuse()
+    if kind == "Integer":
+        if float(value) != int(value):
+            refuse()
+        return int(value)
+    return float(value)
 
 
 def _start_name(name):
@@ -265,7 +340,7 @@ def ssp_layout(scenario):
 
     from fmpy import read_model_description
 
-    from .cosim import read_system
+    from ..cosim import read_system
 
     key = (os.fspath(scenario), os.path.getmtime(scenario)) if not isinstance(scenario, dict) else None
     if key is not None and key in _SSP_LAYOUT:
@@ -295,6 +370,7 @@ def _run_ssp(cosimulate, scenario, point, settings, start):
         raise ValueError("an SSP target needs `t_span` (the start and stop time of the co-simulation)")
     if "step" not in point:
         raise ValueError("an SSP target needs `step` (the macro step) in the grid")
+    steps_over(float(t_span[0]), float(t_span[1]), float(point["step"]))
     outputs, residuals, with_lambda = ssp_layout(scenario)
     start_values, options = {}, {}
     for name, value in point.items():
