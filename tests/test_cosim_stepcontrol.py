@@ -100,3 +100,31 @@ def test_step_control_arguments_fail_early(kwargs, message):
 
     with pytest.raises((ValueError, TypeError), match=message):
         cosimulate({"components": {}, "connections": []}, 1.0, 0.1, **kwargs)
+
+
+@pytest.fixture(scope="module")
+def native_loop(tmp_path_factory):
+    import scenarios
+
+    return scenarios.build_loop_system(tmp_path_factory.mktemp("sc_native"), g=0.2, plant="c", dae="native",
+                                       name="loop_native")
+
+
+def test_lambda_follows_the_macro_step(native_loop):
+    """lambda_per_step = c: lambda = c / H for every step taken (fixed: the same run as the start value
+    1 / H; controlled: the recorded lambda at each point is c over the step that reached it)."""
+    out, _ = run(RUN + f"""
+a = cosimulate({str(native_loop)!r}, 0.5, 0.01, algorithm="jacobi", extrapolation=2, output=["plant.w", "dae.x2"],
+               lambda_per_step=1.0)
+b = cosimulate({str(native_loop)!r}, 0.5, 0.01, algorithm="jacobi", extrapolation=2, output=["plant.w", "dae.x2"],
+               start_values={{"dae.lambda": 100.0}})
+c = cosimulate({str(native_loop)!r}, 2.0, 0.01, algorithm="jacobi", extrapolation=2, output=["dae.lambda", "plant.w"],
+               lambda_per_step=2.0, step_control=True, rtol=1e-4)
+print(json.dumps({{"same": bool(np.array_equal(a["plant.w"], b["plant.w"]) and np.array_equal(a["dae.x2"], b["dae.x2"])),
+                  "t": c["time"].tolist(), "lam": c["dae.lambda"].tolist(), "ok": bool(c.success), "msg": c.message}}))
+""")
+    assert out["same"]
+    assert out["ok"], out["msg"]
+    t, lam = np.array(out["t"]), np.array(out["lam"])
+    assert np.allclose(lam[1:], 2.0 / np.diff(t), rtol=1e-9)
+    assert np.ptp(lam[1:]) > 1.0  # the step, and lambda with it, changed
