@@ -215,9 +215,13 @@ def test_non_finite_output_stops_with_partial_results(tmp_path):
     system = {"components": {"plant": str(plant), "dae": str(follower)},
               "connections": [("plant.w", "dae.w"), ("dae.x2", "plant.u")]}
     out, _ = run(f"""
-r = cosimulate({system!r}, 3.0, 0.1, algorithm="jacobi")
-print(json.dumps({{"success": bool(r.success), "message": r.message, "last": float(r["time"][-1])}}))
+r = cosimulate({system!r}, 3.0, 0.1, algorithm="jacobi", max_growth=float("inf"))
+d = cosimulate({system!r}, 3.0, 0.1, algorithm="jacobi")
+print(json.dumps({{"success": bool(r.success), "message": r.message, "last": float(r["time"][-1]),
+                  "default": [bool(d.success), d.message, float(d["time"][-1])]}}))
 """)
+    assert not out["default"][0] and "the coupling diverged: |plant.w|" in out["default"][1]
+    assert out["default"][2] < 0.2  # the growth criterion stops it long before the overflow
     assert not out["success"]
     assert "plant.w" in out["message"] and "non-finite" in out["message"]
     assert 1.5 < out["last"] < 2.0  # exp(400 t) overflows near t = 1.77: the rows before are kept
@@ -260,19 +264,22 @@ def test_differentiated_input_loop_with_derivatives_converges_at_order_p(exact_l
 
     out, _ = run(f"""
 res = {{}}
-for p in (1, 2):
+for p, m in ((1, 1), (1, None), (2, None)):
     for H in (0.02, 0.01):
-        r = cosimulate({str(exact_loops[0.2])!r}, 1.0, H, algorithm="jacobi", extrapolation=p, output=["plant.w", "dae.x2"])
-        res[f"{{p}} {{H}}"] = [r["time"].tolist(), r["plant.w"].tolist(), r["dae.x2"].tolist()]
+        r = cosimulate({str(exact_loops[0.2])!r}, 1.0, H, algorithm="jacobi", extrapolation=p, output=["plant.w", "dae.x2"],
+                       max_input_order=m)
+        assert r.success, r.message
+        res[f"{{p}} {{m}} {{H}}"] = [r["time"].tolist(), r["plant.w"].tolist(), r["dae.x2"].tolist()]
 print(json.dumps(res))
 """)
-    for p in (1, 2):
+    # p = 1 with every order the master has: the plant's exact second derivative is sent too (order 2)
+    for p, m, order in ((1, 1, 1), (1, None, 2), (2, None, 2)):
         errs = []
         for H in (0.02, 0.01):
-            t, w, x2 = (np.array(a) for a in out[f"{p} {H}"])
+            t, w, x2 = (np.array(a) for a in out[f"{p} {m} {H}"])
             we, _, x2e = scenarios.loop_reference(t, 0.2)
             errs.append(max(np.abs(w - we).max(), np.abs(x2 - x2e).max()))
-        assert abs(np.log2(errs[0] / errs[1]) - p) < 0.2, (p, errs)
+        assert abs(np.log2(errs[0] / errs[1]) - order) < 0.2, (p, m, errs)
 
 
 def test_differentiated_input_loop_diverges_beyond_unit_gain(exact_loops):
@@ -280,12 +287,17 @@ def test_differentiated_input_loop_diverges_beyond_unit_gain(exact_loops):
     out, _ = run(f"""
 res = []
 for H in (0.02, 0.01):
-    r = cosimulate({str(exact_loops[1.1])!r}, 2.0, H, algorithm="jacobi", extrapolation=1, output=["plant.w"])
-    res.append(float(np.max(np.abs(r["plant.w"] - np.exp(-r["time"] / 2.1)))))
-print(json.dumps({{"errs": res}}))
+    r = cosimulate({str(exact_loops[1.1])!r}, 2.0, H, algorithm="jacobi", extrapolation=1, output=["plant.w"],
+                   max_input_order=1, max_growth=float("inf"))
+    d = cosimulate({str(exact_loops[1.1])!r}, 2.0, H, algorithm="jacobi", extrapolation=1, output=["plant.w"],
+                   max_input_order=1)
+    res.append([float(np.max(np.abs(r["plant.w"] - np.exp(-r["time"] / 2.1)))), bool(d.success), d.message])
+print(json.dumps({{"res": res}}))
 """)
-    e = out["errs"]
+    e = [r[0] for r in out["res"]]
     assert e[1] > 10 * e[0] and e[1] > 1.0, e
+    # with the default divergence criterion the finer run says so instead of returning the garbage
+    assert not out["res"][1][1] and "the coupling diverged" in out["res"][1][2], out["res"][1]
 
 
 def test_cli_writes_csv(path_ssp, tmp_path):
@@ -323,15 +335,15 @@ def native_loops(tmp_path_factory):
             for g in (0.2, 1.1)}
 
 
-def _native_loop_errors(ssp, g, p, lam_h, steps=(0.02, 0.01), stop=1.0):
+def _native_loop_errors(ssp, g, p, lam_h, steps=(0.02, 0.01), stop=1.0, options=""):
     """End-time errors of w and x2 for each H, the DAE FMU's lambda = lam_h / H (or 10)."""
     out, _ = run(f"""
 res = []
 for H in {list(steps)!r}:
     lam = {lam_h!r} / H if {lam_h!r} else 10.0
     r = cosimulate({str(ssp)!r}, {stop!r}, H, algorithm="jacobi", extrapolation={p}, output=["plant.w", "dae.x2"],
-                   start_values={{"dae.lambda": lam}})
-    res.append([r.success, r["time"][-1], r["plant.w"][-1], r["dae.x2"][-1]])
+                   start_values={{"dae.lambda": lam}}{options})
+    res.append([bool(r.success), r["time"][-1], r["plant.w"][-1], r["dae.x2"][-1]])
 print(json.dumps({{"res": res}}))
 """)
     errs = []
@@ -350,14 +362,14 @@ def scenarios_reference(t, g):
 @pytest.mark.parametrize("p", [1, 2])
 def test_native_dae_fmu_in_the_loop_converges_at_order_p_with_lambda_h_fixed(native_loops, p):
     """g = 0.2 < 1, derivatives passed, the native DAE FMU's lambda = 2 / H: order p."""
-    errs = _native_loop_errors(native_loops[0.2], 0.2, p, 2.0)
+    errs = _native_loop_errors(native_loops[0.2], 0.2, p, 2.0, options=f", max_input_order={p}")
     assert abs(np.log2(errs[0] / errs[1]) - p) < 0.25, errs
     assert errs[1] < (5e-3 if p == 1 else 2e-4), errs
 
 
 def test_native_dae_fmu_with_fixed_lambda_loses_one_order(native_loops):
     """lambda fixed (10) while H shrinks: x2 lags -w' by O(w''/lambda) with p = 1: no convergence."""
-    errs = _native_loop_errors(native_loops[0.2], 0.2, 1, None)
+    errs = _native_loop_errors(native_loops[0.2], 0.2, 1, None, options=", max_input_order=1")
     assert abs(np.log2(errs[0] / errs[1])) < 0.3 and errs[1] > 5e-3, errs
 
 
@@ -412,7 +424,8 @@ print(json.dumps({{"res": res}}))
 def test_native_dae_fmu_beyond_unit_gain_p1_stable_iff_lambda_h_below_bound(native_loops):
     """g = 1.1, p = 1: the root e^{-lam H} (1 + g) - g is inside the unit circle iff
     lam H < ln((g + 1)/(g - 1)) = 3.04: lam H = 2 converges at order 1, lam H = 4 diverges."""
-    inside = _native_loop_errors(native_loops[1.1], 1.1, 1, 2.0, stop=2.0)
-    outside = _native_loop_errors(native_loops[1.1], 1.1, 1, 4.0, stop=2.0)
+    inside = _native_loop_errors(native_loops[1.1], 1.1, 1, 2.0, stop=2.0, options=", max_input_order=1")
+    outside = _native_loop_errors(native_loops[1.1], 1.1, 1, 4.0, stop=2.0,
+                                  options=", max_input_order=1, max_growth=float('inf')")
     assert abs(np.log2(inside[0] / inside[1]) - 1) < 0.2 and inside[1] < 5e-3, inside
     assert outside[1] > 10 * outside[0] and outside[1] > 1.0, outside

@@ -283,3 +283,36 @@ def test_horizon_and_workers_are_checked_up_front(kwargs, needle):
     kwargs = {"scheduler": "serial", **kwargs}
     with deadline(30, "a refusal that should be immediate"), pytest.raises(ValueError, match=needle):
         sweep(gallery.prescribed_path(), {"lam": [1.0]}, progress=False, **kwargs)
+
+
+# -- the logger a serial study gives fmpy outlives the study ------------------------------------
+def test_fmu_message_after_a_serial_study_does_not_crash_the_process(tmp_path):
+    """fmpy's logger proxy keeps a pointer to the last logger registered: a serial FMU study must not
+    leave it pointing at a freed function (a later FMU message in the same process: SIGSEGV)."""
+    from fmu_build import build_fmu
+
+    fmu = build_fmu(os.path.join(SPECS, "prescribed_path.toml"), tmp_path, target="native", fix_parameters=True)
+    script = textwrap.dedent(f"""
+        import gc
+        from fmu_build import sweep
+        df = sweep({str(fmu)!r}, {{"lam": [1.0]}}, t_span=(0.0, 0.1), reference=None, scheduler="serial",
+                   progress=False)
+        assert bool(df["success"].all()), df["message"].tolist()
+        del df
+        gc.collect()
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+        md = read_model_description({str(fmu)!r})
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=extract({str(fmu)!r}),
+                          modelIdentifier=md.coSimulation.modelIdentifier, instanceName="later")
+        slave.instantiate(loggingOn=True)
+        try:
+            slave.setReal([424242], [0.0])  # the FMU logs the bad reference through fmpy's default callbacks
+        except Exception as exc:
+            print("refused:", exc)
+        slave.freeInstance()
+        print("alive")
+    """)
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, (proc.returncode, proc.stderr[-2000:])
+    assert "alive" in proc.stdout and "424242" in proc.stdout + proc.stderr

@@ -191,3 +191,73 @@ def write_ssp(path, name, components, connections):
             zf.write(fmu, f"resources/{comp}.fmu")
     os.replace(partial, path)
     return path
+
+
+_COUNTER = '''
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
+
+
+class Counter(Fmi2Slave):
+    """count = round(t / period) (Integer), odd = count is odd (Boolean), at each communication point."""
+
+    author = "lsc examples"
+    description = "an Integer and a Boolean output (pythonfmu)"
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.period = 0.1
+        self.count = 0
+        self.odd = False
+        self.register_variable(Real("period", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
+        self.register_variable(Integer("count", causality=Fmi2Causality.output, variability=Fmi2Variability.discrete))
+        self.register_variable(Boolean("odd", causality=Fmi2Causality.output, variability=Fmi2Variability.discrete))
+
+    def do_step(self, current_time, step_size):
+        self.count = int(round((current_time + step_size) / self.period))
+        self.odd = self.count % 2 == 1
+        return True
+
+
+class Sink(Fmi2Slave):
+    """y = 10 n + (1 if b else 0) + (100 if on else 0) from the inputs held over the step (Real output)."""
+
+    author = "lsc examples"
+    description = "Integer and Boolean inputs, a Boolean parameter (pythonfmu)"
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.n = 0
+        self.b = False
+        self.on = True
+        self.y = 0.0
+        self.register_variable(Integer("n", causality=Fmi2Causality.input, variability=Fmi2Variability.discrete))
+        self.register_variable(Boolean("b", causality=Fmi2Causality.input, variability=Fmi2Variability.discrete))
+        self.register_variable(Boolean("on", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
+        self.register_variable(Real("y", causality=Fmi2Causality.output, variability=Fmi2Variability.continuous))
+
+    def do_step(self, current_time, step_size):
+        self.y = 10.0 * self.n + (1.0 if self.b else 0.0) + (100.0 if self.on else 0.0)
+        return True
+'''
+
+
+def build_typed_pair(dest):
+    """Two pythonfmu FMUs exchanging an Integer and a Boolean: ``Counter`` (outputs ``count``, ``odd``)
+    and ``Sink`` (inputs ``n``, ``b``, Boolean parameter ``on``, Real output ``y``); returns their paths."""
+    from pythonfmu.builder import FmuBuilder
+
+    dest = Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    paths = {}
+    for name in ("Counter", "Sink"):
+        with tempfile.TemporaryDirectory() as tmp:
+            script = Path(tmp) / f"{name}.py"
+            head, counter, sink = _COUNTER.partition("\n\nclass Sink")[0].partition("class Counter")[0], \
+                "class Counter" + _COUNTER.split("class Counter", 1)[1].split("\n\nclass Sink")[0], \
+                "class Sink" + _COUNTER.split("class Sink", 1)[1]
+            body = head + (counter if name == "Counter" else sink)
+            script.write_text(textwrap.dedent(body))
+            paths[name] = Path(FmuBuilder.build_FMU(script, dest=dest, canGetAndSetFMUstate=True,
+                                                    canSerializeFMUstate=True))
+        sys.modules.pop(name, None)
+    return paths["Counter"], paths["Sink"]

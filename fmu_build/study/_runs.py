@@ -12,6 +12,8 @@ from functools import partial
 
 import numpy as np
 
+from ..cosim._callbacks import attach, callbacks as process_callbacks
+
 # Names of the grid that set how a run is computed rather than the model.
 NUMERICAL = ("lam", "step", "rtol", "atol", "method")
 
@@ -132,8 +134,6 @@ def _run_fmu(fmu, point, settings, start):
     var = {v.name: v for v in md.modelVariables}
     states = [v.name for v in md.modelVariables if v.causality == "output" and _start_name(v.name) in var]
     residual_var = var.get("constraint_residual")
-    logs = []
-    callbacks = _logging_callbacks(logs)
 
     t0, t1 = settings["t_span"] if settings.get("t_span") else (
         float(md.defaultExperiment.startTime or 0.0), float(md.defaultExperiment.stopTime or 1.0))
@@ -143,8 +143,18 @@ def _run_fmu(fmu, point, settings, start):
 
     slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
                       instanceName="study")
-    slave.instantiate(callbacks=callbacks, loggingOn=True)
     read_vrs = [var[s].valueReference for s in states] + ([residual_var.valueReference] if residual_var else [])
+    # the master's process-wide callbacks: fmpy's logger proxy keeps a pointer to the last logger it was
+    # given, so a logger dropped after the run would be called (freed) by the next FMU of this process
+    with attach(["study"]) as sink:
+        logs = sink.messages.setdefault("study", [])
+        slave.instantiate(callbacks=process_callbacks(), loggingOn=True)
+        return _initialize_and_step(slave, var, values, states, residual_var, read_vrs, t0, t1, h, n_steps, logs,
+                                    start)
+
+
+def _initialize_and_step(slave, var, values, states, residual_var, read_vrs, t0, t1, h, n_steps, logs, start):
+    """Initialize the instantiated `slave` with `values`, step it over the horizon, free it: the run's row."""
     try:
         slave.setupExperiment(startTime=t0, stopTime=t1)
         slave.enterInitializationMode()
@@ -192,24 +202,6 @@ def _load_description(fmu, settings):
                                   "another name")
         _LOADED[ident] = md.guid
     return md, unzipped, None
-
-
-def _logging_callbacks(logs):
-    """FMI 2.0 callbacks whose logger appends each message to `logs`."""
-    from ctypes import byref
-
-    from fmpy.fmi2 import defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
-    from fmpy.logging import addLoggerProxy
-
-    def logger(env, instance, status, category, message):
-        logs.append(message.decode("utf-8", "replace"))
-
-    callbacks = fmi2CallbackFunctions()
-    callbacks.logger = fmi2CallbackLoggerTYPE(logger)
-    callbacks.allocateMemory = defaultCallbacks.allocateMemory
-    callbacks.freeMemory = defaultCallbacks.freeMemory
-    addLoggerProxy(byref(callbacks))
-    return callbacks
 
 
 def _step_through(slave, read_vrs, n_states, has_residual, t0, h, n_steps, logs):

@@ -1,0 +1,136 @@
+"""One FMU instance and typed access to its variables.
+
+FMI 2.0 value references are unique per type only (a Real and a Boolean may
+share reference 7): every read and write goes through the getter and setter of
+the variable's type, and a value is converted to that type by rules that
+refuse what they cannot interpret (``"false"`` is False, ``0.3`` is no
+Boolean, ``2.5`` is no Integer).
+"""
+
+import os
+
+import numpy as np
+
+from ._system import unzip
+
+# types a connection may join (Enumeration values are Integers on the wire, as in libcosim)
+WIRE = {"Real": "Real", "Integer": "Integer", "Enumeration": "Integer", "Boolean": "Boolean", "String": "String"}
+
+
+def convert(value, kind, what):
+    """``value`` as an FMI ``kind`` value, or ValueError naming ``what``.
+
+    Examples
+    --------
+    >>> convert("false", "Boolean", "x"), convert(1, "Boolean", "x"), convert("3", "Integer", "x")
+    (False, True, 3)
+    >>> convert(0.3, "Boolean", "b")
+    Traceback (most recent call last):
+    ...
+    ValueError: b: a Boolean must be True/False, 1/0 or 'true'/'false'; found 0.3.
+    """
+    if kind == "Boolean":
+        if isinstance(value, (bool, np.bool_)):
+            return bool(value)
+        if isinstance(value, str) and value.strip().lower() in ("true", "false", "1", "0"):
+            return value.strip().lower() in ("true", "1")
+        if isinstance(value, (int, float, np.integer, np.floating)) and value in (0, 1):
+            return bool(value)
+        raise ValueError(f"{what}: a Boolean must be True/False, 1/0 or 'true'/'false'; found {value!r}.")
+    if kind in ("Integer", "Enumeration"):
+        if isinstance(value, (bool, np.bool_)):
+            raise ValueError(f"{what}: an {kind} must be an integer; found the Boolean {value!r}.")
+        try:
+            number = float(value) if isinstance(value, str) else value
+            if float(number) == int(float(number)) and abs(float(number)) < 2 ** 31:
+                return int(float(number))
+        except (TypeError, ValueError, OverflowError):
+            pass
+        raise ValueError(f"{what}: an {kind} must be a whole number within 32 bits; found {value!r}.")
+    if kind == "Real":
+        if isinstance(value, (bool, np.bool_)):
+            raise ValueError(f"{what}: a Real must be a number; found the Boolean {value!r}.")
+        try:
+            return float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"{what}: a Real must be a number; found {value!r}.") from None
+    if kind == "String":
+        if not isinstance(value, str):
+            raise ValueError(f"{what}: a String must be a str; found {type(value).__name__}.")
+        return value
+    raise ValueError(f"{what}: variables of type {kind} cannot be set.")
+
+
+class Component:
+    """One FMU instance, what the master knows of it, and typed get/set by value reference."""
+
+    def __init__(self, name, path, unzipdir, callbacks, max_unpacked):
+        from fmpy import read_model_description
+        from fmpy.fmi2 import FMU2Slave
+
+        self.name, self.path = name, path
+        self.md = read_model_description(path)
+        cs = self.md.coSimulation
+        if cs is None:
+            raise ValueError(f"component {name!r}: {path} is not a Co-Simulation FMU.")
+        os.makedirs(unzipdir, exist_ok=True)
+        self.unzipdir = unzip(path, unzipdir, max_unpacked, where=f"component {name!r} ({os.path.basename(path)})")
+        self.variables = {v.name: v for v in self.md.modelVariables}
+        self.can_interpolate = bool(cs.canInterpolateInputs)
+        self.max_derivative = int(cs.maxOutputDerivativeOrder or 0)
+        self.can_rollback = bool(cs.canGetAndSetFMUstate)
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir, modelIdentifier=cs.modelIdentifier,
+                             instanceName=name)
+        # logging on: pythonfmu FMUs pass their messages (errors included) to the logger only then
+        self.fmu.instantiate(callbacks=callbacks, loggingOn=True)
+        # output -> inputs it depends on directly (None in the XML: every input)
+        inputs = [v.name for v in self.md.modelVariables if v.causality == "input"]
+        self.feedthrough = {}
+        for unknown in self.md.outputs:
+            deps = unknown.dependencies
+            self.feedthrough[unknown.variable.name] = (
+                list(inputs) if deps is None else [d.name for d in deps if d.causality == "input"])
+
+    def variable(self, name, causality=None):
+        v = self.variables.get(name)
+        if v is None:
+            raise ValueError(f"component {self.name!r} has no variable {name!r}.")
+        if causality and v.causality != causality:
+            raise ValueError(f"{self.name}.{name} must be an {causality}; it is a {v.causality}.")
+        return v
+
+    def wire(self, name):
+        """The type a variable travels as (Enumeration as Integer)."""
+        return WIRE[self.variable(name).type]
+
+    def get(self, kind, refs):
+        """Values of the value references ``refs`` of one wire type."""
+        fmu = self.fmu
+        getter = {"Real": fmu.getReal, "Integer": fmu.getInteger, "Boolean": fmu.getBoolean,
+                  "String": fmu.getString}[kind]
+        values = getter(list(refs))
+        if kind == "String":
+            return [v.decode(errors="replace") if isinstance(v, bytes) else v for v in values]
+        return [float(v) if kind == "Real" else int(v) for v in values]
+
+    def set(self, kind, refs, values):
+        fmu = self.fmu
+        if kind == "Real":
+            fmu.setReal(list(refs), [float(v) for v in values])
+        elif kind == "Integer":
+            fmu.setInteger(list(refs), [int(v) for v in values])
+        elif kind == "Boolean":
+            fmu.setBoolean(list(refs), [bool(v) for v in values])
+        else:
+            fmu.setString(list(refs), [str(v) for v in values])
+
+
+def check_types(comps, connections):
+    """Causality and type agreement of every connection (before anything runs)."""
+    for a, y, b, u in connections:
+        src, dst = comps[a].variable(y, "output"), comps[b].variable(u, "input")
+        if WIRE[src.type] != WIRE[dst.type]:
+            raise ValueError(f"connection {a}.{y} -> {b}.{u}: a {src.type} output cannot feed a {dst.type} input; "
+                             "connected variables must have the same type.")
+        if src.type == "String":
+            raise ValueError(f"connection {a}.{y} -> {b}.{u}: String connections are not exchanged by this master.")

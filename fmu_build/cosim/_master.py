@@ -1,0 +1,197 @@
+"""``cosimulate``: argument checks, loading the components, and the run's life cycle."""
+
+import logging
+import os
+import shutil
+import sys
+import tempfile
+
+import numpy as np
+
+from . import _callbacks
+from ._exchange import Component, check_types
+from ._result import CosimResult, _Progress, _Stop
+from ._run import Run
+from ._stepper import StepControl
+from ._system import MAX_UNPACKED, read_system
+
+ALGORITHMS = ("jacobi", "gauss-seidel")
+MAX_GROWTH = 1e6
+
+logger = logging.getLogger("fmu_build.cosim")
+
+
+def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrapolation=0, iterations=0,
+               start_values=None, output=None, start_time=0.0, rtol=1e-10, progress=None, exchange="ordered",
+               step_control=False, atol=None, min_step=None, max_step=None, lambda_per_step=None,
+               max_growth=MAX_GROWTH, max_input_order=None, allow_external=False, max_unpacked=MAX_UNPACKED):
+    """Co-simulate connected FMI 2.0 Co-Simulation FMUs, at a fixed or controlled macro step.
+
+    Parameters
+    ----------
+    system : str, Path or dict
+        An ``.ssp`` or ``.ssd`` file, or ``{"components": {name: fmu_path},
+        "connections": [("a.y", "b.u"), ...]}`` (validated by :func:`read_system`).
+    stop_time, step_size : float
+        End time and macro step ``H`` (> 0); with ``step_control`` the first step.
+    algorithm : {"gauss-seidel", "jacobi"}
+        Ordering of the FMUs within a macro step.
+    extrapolation : {0, 1, 2}
+        Degree of the input polynomial over a step (0: zero-order hold).
+    iterations : int
+        0: explicit coupling (algebraic loops cut and reported). ``> 0``: each
+        macro step is repeated up to this many times with rollback through
+        the FMU state (every FMU must declare ``canGetAndSetFMUstate``), and
+        algebraic loops are iterated at each exchange.
+    start_values : dict, optional
+        ``{"component.variable": value}`` set before initialization, converted
+        to the variable's type (a Boolean takes True/False, 1/0, "true"/"false").
+    output : list of str, optional
+        Distinct ``"component.variable"`` names to record, of any type
+        (default: every connected output).
+    start_time : float
+        Start of the run.
+    rtol : float
+        Relative tolerance: of the step iteration's change, and of the step
+        control's error estimate.
+    exchange : {"ordered", "simultaneous"}
+        ``"ordered"``: at a communication point, inputs are set before the
+        outputs that depend on them directly are read (consistent values).
+        ``"simultaneous"``: every connected output is read, then every input
+        set (libcosim's and ecos's fixed-step algorithms).
+    step_control : bool
+        Vary the macro step to keep the local coupling error estimate within
+        ``atol + rtol |value|`` (see docs/cosimulation.md for the estimate);
+        a rejected step is repeated smaller after rollback, or, if some FMU
+        cannot roll back, kept with a warning (the estimate is then an
+        indicator only).
+    atol : float, optional
+        Absolute tolerance of the step control (default ``rtol``).
+    min_step, max_step : float, optional
+        Bounds of the controlled step (default ``1e-6 * step_size`` and the
+        whole interval); a step the control would make smaller than
+        ``min_step`` ends the run with ``success=False``.
+    max_input_order : int, optional
+        Highest input-derivative order sent to an FMU that interpolates
+        (default: every order the master has, the sources' exact derivatives
+        included). In a loop of gain ``|g| > 1`` through a differentiated
+        input, derivatives beyond the first form a divergent loop of their
+        own: pass ``1`` there.
+    lambda_per_step : float, optional
+        Set the parameter ``lambda`` of every component that has one to
+        ``lambda_per_step / H`` before the run and after each step change
+        (λH fixed: the configuration of our DAE FMUs' theory).
+    max_growth : float
+        Divergence criterion: a Real coupling value whose magnitude exceeds
+        ``max_growth * max(1, largest |coupling value| at the start)`` ends
+        the run with ``success=False``. ``math.inf`` disables it.
+    allow_external : bool
+        Let a packed ``.ssp`` use FMUs outside the archive.
+    max_unpacked : int
+        Bytes one archive (the SSP, each FMU) may unpack to.
+    progress : bool, optional
+        Show a progress bar on stderr once a run takes more than 2 s
+        (default: when stderr is a terminal).
+
+    Returns
+    -------
+    CosimResult
+        Structured array with ``time`` and one field per output (one row per
+        communication point); ``success`` and ``message`` tell how the run
+        ended; the rows computed before a failure are kept; ``steps`` and
+        ``rejected`` count the macro steps.
+
+    Examples
+    --------
+    >>> cosimulate({"components": {}, "connections": []}, 1.0, 0.1, algorithm="newton")
+    Traceback (most recent call last):
+    ...
+    ValueError: `algorithm` must be one of ('jacobi', 'gauss-seidel'); found 'newton'.
+    """
+    _check_arguments(algorithm, extrapolation, exchange, iterations, step_size, stop_time, start_time, max_growth,
+                     lambda_per_step)
+    _check_order(max_input_order, extrapolation)
+    control = StepControl.from_options(step_control, step_size, stop_time - start_time, rtol, atol, min_step,
+                                       max_step, iterations)
+    if output is not None:
+        dup = sorted({o for o in output if list(output).count(o) > 1})
+        if dup:
+            raise ValueError(f"`output` names each variable once; found {dup} more than once.")
+    system = read_system(system, allow_external=allow_external, max_unpacked=max_unpacked)
+    workdir = tempfile.mkdtemp(prefix="lsc_cosim_fmus_")
+    comps = {}
+    try:
+        with _callbacks.attach(system.components) as sink:
+            for index, (name, path) in enumerate(system.components.items()):
+                comps[name] = Component(name, path, os.path.join(workdir, str(index)), _callbacks.callbacks(),
+                                        max_unpacked)
+            check_types(comps, system.connections)
+            run = Run(comps, system.connections, sink, algorithm=algorithm, p=extrapolation, iterations=iterations,
+                      output=output, rtol=rtol, exchange=exchange, control=control, max_growth=max_growth,
+                      lambda_per_step=lambda_per_step, max_input_order=max_input_order)
+            progress = _Progress(1, sys.stderr.isatty() if progress is None else progress)
+            return _execute(run, dict(start_values or {}), start_time, stop_time, step_size, progress)
+    finally:
+        _free(comps)
+        shutil.rmtree(workdir, ignore_errors=True)
+        system.close()
+
+
+def _check_arguments(algorithm, extrapolation, exchange, iterations, step_size, stop_time, start_time, max_growth,
+                     lambda_per_step):
+    if algorithm not in ALGORITHMS:
+        raise ValueError(f"`algorithm` must be one of {ALGORITHMS}; found {algorithm!r}.")
+    if extrapolation not in (0, 1, 2) or isinstance(extrapolation, bool):
+        raise ValueError(f"`extrapolation` must be 0, 1 or 2; found {extrapolation!r}.")
+    if exchange not in ("ordered", "simultaneous"):
+        raise ValueError(f"`exchange` must be 'ordered' or 'simultaneous'; found {exchange!r}.")
+    if not (isinstance(iterations, (int, np.integer)) and iterations >= 0):
+        raise ValueError(f"`iterations` must be an integer >= 0; found {iterations!r}.")
+    if not (np.isfinite(step_size) and step_size > 0):
+        raise ValueError(f"`step_size` must be positive and finite; found {step_size!r}.")
+    if not (np.isfinite(stop_time) and stop_time > start_time):
+        raise ValueError(f"`stop_time` must be finite and after `start_time` ({start_time!r}); found {stop_time!r}.")
+    if not max_growth > 1:
+        raise ValueError(f"`max_growth` must be > 1 (math.inf disables the check); found {max_growth!r}.")
+    if lambda_per_step is not None and not (np.isfinite(lambda_per_step) and lambda_per_step > 0):
+        raise ValueError(f"`lambda_per_step` must be positive and finite or None; found {lambda_per_step!r}.")
+
+
+def _check_order(max_input_order, extrapolation):
+    if max_input_order is None:
+        return
+    if not (isinstance(max_input_order, (int, np.integer)) and not isinstance(max_input_order, bool)
+            and max_input_order >= 0):
+        raise ValueError(f"`max_input_order` must be an integer >= 0 or None; found {max_input_order!r}.")
+
+
+def _execute(run, start_values, t0, stop_time, H, progress):
+    """Initialize, step to ``stop_time``, and assemble the result (partial on a stop)."""
+    status = {"success": True, "message": "ok"}
+    try:
+        run.initialize(start_values, t0, stop_time, H)
+        run.advance(t0, stop_time, H, progress)
+    except _Stop as stop:
+        status = {"success": False, "message": str(stop)}
+        logger.error("co-simulation stopped: %s", stop)
+    finally:
+        progress.close()
+    result = np.array(run.rows, dtype=run.result_fields).view(CosimResult)
+    result.success, result.message = status["success"], status["message"]
+    result.loops, result.order = run.loop_names, list(run.gs_order)
+    result.steps, result.rejected = run.accepted, run.rejected
+    result.error_estimates = list(run.estimates)
+    return result
+
+
+def _free(comps):
+    for c in comps.values():
+        try:
+            c.fmu.terminate()
+        except Exception:  # noqa: BLE001 -- a failed FMU may refuse; freeing it is what matters
+            pass
+        try:
+            c.fmu.freeInstance()
+        except Exception:  # noqa: BLE001
+            pass
+

@@ -1,0 +1,75 @@
+"""What a run returns and how it reports progress and stops."""
+
+import math
+import sys
+import time as _time
+
+import numpy as np
+
+
+class AlgebraicLoopWarning(UserWarning):
+    """A cycle of direct feedthrough between connected variables."""
+
+
+class CosimResult(np.ndarray):
+    """A structured array (``time`` and one field per output) with the run's status.
+
+    Attributes
+    ----------
+    success : bool
+        False when the run stopped before ``stop_time``.
+    message : str
+        Why it stopped (component, variable, time), or ``"ok"``.
+    loops : list of list of str
+        The algebraic loops found (variables as ``"component.variable"``).
+    order : list of str
+        The order in which Gauss-Seidel steps the components.
+    steps : int
+        Macro steps accepted.
+    rejected : int
+        Macro steps rejected by the step control (and repeated smaller).
+    error_estimates : list of float
+        The step control's scaled error estimate of every accepted step (empty without it).
+
+    Examples
+    --------
+    >>> r = np.zeros(2, dtype=[("time", float)]).view(CosimResult)
+    >>> r.success, r.steps, r.rejected
+    (True, 0, 0)
+    """
+
+    def __array_finalize__(self, obj):
+        for key, default in (("success", True), ("message", "ok"), ("loops", []), ("order", []), ("steps", 0),
+                             ("rejected", 0), ("error_estimates", [])):
+            setattr(self, key, getattr(obj, key, default))
+
+
+class _Progress:
+    """A one-line progress bar on stderr, shown once a run has taken more than ``after`` seconds."""
+
+    def __init__(self, total, enabled, after=2.0, unit="steps"):
+        self.total, self.enabled, self.after, self.unit = total, enabled, after, unit
+        self.start = _time.perf_counter()
+        self.shown, self.last = False, -math.inf
+
+    def update(self, done):
+        if not self.enabled:
+            return
+        now = _time.perf_counter() - self.start
+        if now < self.after or now - self.last < 0.2:
+            return
+        self.last, self.shown = now, True
+        frac = done / self.total
+        bar = "#" * int(30 * frac)
+        eta = now / max(frac, 1e-9) - now
+        sys.stderr.write(f"\rcosim [{bar:<30}] {100 * frac:5.1f}%  {done:g}/{self.total:g} {self.unit}  eta {eta:5.1f} s")
+        sys.stderr.flush()
+
+    def close(self):
+        if self.shown:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+class _Stop(Exception):
+    """Ends the run: the message names the component, the variable and the time."""

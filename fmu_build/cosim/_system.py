@@ -1,0 +1,287 @@
+"""Reading a system (.ssp, .ssd or dict) into one validated object.
+
+Rules checked before anything runs (each error names the element, the file and the rule):
+
+- component names are plain identifiers (``[A-Za-z_][A-Za-z0-9_]*``) and unique; they are
+  never used as paths: FMUs are unpacked into folders the master names;
+- every connection joins two listed components, with one source per input;
+- a packed ``.ssp`` refers only to FMUs inside the archive unless the caller passes
+  ``allow_external=True``; only the SSD and the referenced FMUs are extracted, and extraction
+  stops beyond ``max_unpacked`` bytes (archive members' real sizes, not their headers);
+- every temporary folder is removed on every exit path (a failed read included).
+"""
+
+import os
+import posixpath
+import re
+import shutil
+import tempfile
+import warnings
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+
+IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+MAX_UNPACKED = 1 << 30  # bytes one archive may unpack to (SSP or FMU)
+
+
+class System:
+    """Components, connections and the temporary folder of a system read by :func:`read_system`.
+
+    Iterating gives ``(components, connections, workdir)``; ``close()`` (or leaving a ``with``
+    block) removes the folder.
+
+    Examples
+    --------
+    >>> s = read_system({"components": {"a": "a.fmu", "b": "b.fmu"}, "connections": [("a.y", "b.u")]})
+    >>> s.connections
+    [('a', 'y', 'b', 'u')]
+    """
+
+    def __init__(self, components, connections, workdir=None, origin="`system`"):
+        self.components, self.connections, self.workdir, self.origin = components, connections, workdir, origin
+
+    def __iter__(self):
+        return iter((self.components, self.connections, self.workdir))
+
+    def close(self):
+        if self.workdir:
+            shutil.rmtree(self.workdir, ignore_errors=True)
+            self.workdir = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+
+def read_system(system, *, allow_external=False, max_unpacked=MAX_UNPACKED):
+    """Read and validate a system description.
+
+    Parameters
+    ----------
+    system : str, Path or dict
+        An ``.ssp`` file, an ``.ssd`` file (FMU sources relative to its
+        folder), or ``{"components": {name: fmu_path}, "connections":
+        [("a.y", "b.u"), ...]}``.
+    allow_external : bool
+        Let a packed ``.ssp`` refer to FMUs outside the archive (relative to
+        its folder, or absolute). Refused by default.
+    max_unpacked : int
+        Bytes the SSP's extracted members may occupy.
+
+    Returns
+    -------
+    System
+        ``components`` (name -> FMU path), ``connections`` (tuples
+        ``(source_component, source_variable, destination_component,
+        destination_variable)``) and ``workdir`` (the extracted FMUs, or None).
+
+    Examples
+    --------
+    >>> comps, conns, _ = read_system({"components": {"a": "a.fmu", "b": "b.fmu"},
+    ...                                "connections": [("a.y", "b.u")]})
+    >>> conns
+    [('a', 'y', 'b', 'u')]
+    >>> read_system({"components": {"../x": "a.fmu"}, "connections": []})
+    Traceback (most recent call last):
+    ...
+    ValueError: `system`: component name '../x' is not a plain identifier ([A-Za-z_][A-Za-z0-9_]*); names are never paths.
+    """
+    if isinstance(system, dict):
+        return _from_dict(system)
+    if not isinstance(system, (str, Path)):
+        raise TypeError(f"`system` must be an .ssp/.ssd path or a dict; found {type(system).__name__}.")
+    path = Path(system)
+    if not path.is_file():
+        raise ValueError(f"`system`: no such file {str(path)!r}.")
+    if path.suffix.lower() == ".ssd":
+        return _from_ssd(path.read_bytes(), f"`system` {path.name}", lambda src: _outside(src, path.parent))
+    return _from_ssp(path, allow_external, int(max_unpacked))
+
+
+def _from_dict(system):
+    unknown = set(system) - {"components", "connections"}
+    if unknown or "components" not in system:
+        raise ValueError(f"`system` as a dict must have the keys 'components' and 'connections'; found {sorted(system)}.")
+    components = {}
+    for name, fmu in system["components"].items():
+        _check_name(name, "`system`")
+        components[name] = str(fmu)
+    pairs = []
+    for pair in system.get("connections", []):
+        if len(pair) != 2:
+            raise ValueError(f"a connection must be a pair ('comp.out', 'comp.in'); found {pair!r}.")
+        pairs.append((*_split(pair[0], components), *_split(pair[1], components)))
+    return System(components, _check_connections(pairs, "`system`"), None)
+
+
+def _from_ssp(path, allow_external, max_unpacked):
+    where = f"`system` {path.name}"
+    workdir = tempfile.mkdtemp(prefix="lsc_cosim_ssp_")
+    try:
+        with zipfile.ZipFile(path) as zf:
+            members = set(zf.namelist())
+            if "SystemStructure.ssd" not in members:
+                raise ValueError(f"{where}: no SystemStructure.ssd at the archive's root.")
+            budget = [max_unpacked]
+            ssd = _read_member(zf, "SystemStructure.ssd", budget, where)
+
+            def locate(source, index):
+                member = _member(source)
+                if member is None:
+                    if not allow_external:
+                        raise ValueError(f"{where}: component source {source!r} points outside the archive; "
+                                         "refused (pass allow_external=True to allow it).")
+                    return _outside(source, path.parent)
+                if member not in members:
+                    raise ValueError(f"{where}: component source {source!r} is not in the archive.")
+                dest = Path(workdir) / f"component{index}.fmu"
+                dest.write_bytes(_read_member(zf, member, budget, where))
+                return str(dest)
+
+            system = _from_ssd(ssd, where, locate)
+        system.workdir = workdir
+        return system
+    except BaseException:
+        shutil.rmtree(workdir, ignore_errors=True)
+        raise
+
+
+def _read_member(zf, member, budget, where):
+    """The bytes of ``member``, counting what is really inflated against ``budget[0]``."""
+    chunks = []
+    with zf.open(member) as f:
+        while True:
+            chunk = f.read(1 << 20)
+            if not chunk:
+                break
+            budget[0] -= len(chunk)
+            if budget[0] < 0:
+                raise ValueError(f"{where}: unpacking {member!r} exceeds the size limit (max_unpacked); refused.")
+            chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def _member(source):
+    """The archive member a component source names, or None if it points outside the archive."""
+    if re.match(r"[A-Za-z][A-Za-z0-9+.-]*:", source) or source.startswith(("/", "\\")):
+        return None  # a URI with a scheme (file:, http:, a drive letter) or an absolute path
+    norm = posixpath.normpath(source.replace("\\", "/"))
+    if norm == ".." or norm.startswith("../"):
+        return None
+    return norm
+
+
+def _outside(source, base):
+    if source.startswith("file:"):
+        from urllib.parse import unquote, urlparse
+
+        return str(Path(unquote(urlparse(source).path)).resolve())
+    return str((Path(base) / source).resolve())
+
+
+def _from_ssd(data, where, locate):
+    """Components and connections of an SSD document; ``locate(source, index)`` gives an FMU path."""
+    try:
+        root = ET.fromstring(data)
+    except ET.ParseError as exc:
+        raise ValueError(f"{where}: SystemStructure.ssd is not valid XML ({exc}).") from None
+    system = _child(root, "System")
+    if system is None:
+        raise ValueError(f"{where}: the SSD has no System element.")
+    if any(_local(e.tag) == "ParameterBindings" for e in system.iter()):
+        warnings.warn(f"{where}: SSP parameter bindings are not applied; use `start_values`.", stacklevel=4)
+    components = {}
+    elements = _child(system, "Elements")
+    for index, element in enumerate(list(elements) if elements is not None else []):
+        kind, name = _local(element.tag), element.get("name")
+        if kind != "Component":
+            raise ValueError(f"{where}: element {name!r} is a {kind}; only Component elements (FMUs) are supported.")
+        _check_name(name, where)
+        if name in components:
+            raise ValueError(f"{where}: two components are named {name!r}; component names must be unique.")
+        source = element.get("source")
+        if not source:
+            raise ValueError(f"{where}: component {name!r} has no source.")
+        components[name] = locate(source, index)
+    connections = []
+    links = _child(system, "Connections")
+    for c in list(links) if links is not None else []:
+        a, y, b, u = (c.get(k) for k in ("startElement", "startConnector", "endElement", "endConnector"))
+        if not a or not b:
+            raise ValueError(f"{where}: connection {a}.{y} -> {b}.{u}: connections to the system's own connectors "
+                             "are not supported.")
+        if any(_local(e.tag) == "LinearTransformation" for e in c.iter()):
+            raise ValueError(f"{where}: connection {a}.{y} -> {b}.{u} has a LinearTransformation, which this "
+                             "master does not apply.")
+        for comp in (a, b):
+            if comp not in components:
+                raise ValueError(f"{where}: connection {a}.{y} -> {b}.{u}: no component {comp!r}.")
+        connections.append((a, y, b, u))
+    return System(components, _check_connections(connections, where), None, where)
+
+
+def _local(tag):
+    return tag.rsplit("}", 1)[-1]
+
+
+def _child(element, name):
+    return next((e for e in element if _local(e.tag) == name), None)
+
+
+def _check_name(name, where):
+    if not isinstance(name, str) or not IDENTIFIER.match(name):
+        raise ValueError(f"{where}: component name {name!r} is not a plain identifier ([A-Za-z_][A-Za-z0-9_]*); "
+                         "names are never paths.")
+
+
+def _check_connections(connections, where):
+    sources = {}
+    for a, y, b, u in connections:
+        if (b, u) in sources:
+            raise ValueError(f"{where}: input {b}.{u} has two sources ({sources[(b, u)]} and {a}.{y}); "
+                             "an input takes one connection.")
+        sources[(b, u)] = f"{a}.{y}"
+    return list(connections)
+
+
+def _split(name, components):
+    comp, dot, var = str(name).partition(".")
+    if not dot or comp not in components:
+        raise ValueError(f"a variable must be named 'component.variable' with a component in {sorted(components)}; found {name!r}.")
+    return comp, var
+
+
+def unzip(path, dest, max_unpacked=MAX_UNPACKED, where=None):
+    """Extract the archive ``path`` into the folder ``dest`` (members inside it only, size-limited).
+
+    Examples
+    --------
+    >>> import io, tempfile
+    >>> buf = io.BytesIO()
+    >>> with zipfile.ZipFile(buf, "w") as zf:
+    ...     zf.writestr("../evil.txt", "x")
+    >>> unzip(buf, tempfile.mkdtemp())
+    Traceback (most recent call last):
+    ...
+    ValueError: archive: member '../evil.txt' would be written outside its folder; refused.
+    """
+    where = where or "archive"
+    budget = [int(max_unpacked)]
+    dest = os.path.realpath(dest)
+    with zipfile.ZipFile(path) as zf:
+        for info in zf.infolist():
+            member = _member(info.filename)
+            if member is None or member.startswith("./") or member == ".":
+                raise ValueError(f"{where}: member {info.filename!r} would be written outside its folder; refused.")
+            target = os.path.join(dest, member)
+            if info.is_dir():
+                os.makedirs(target, exist_ok=True)
+                continue
+            os.makedirs(os.path.dirname(target), exist_ok=True)
+            with open(target, "wb") as f:
+                f.write(_read_member(zf, info.filename, budget, where))
+    return dest
