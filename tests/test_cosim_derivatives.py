@@ -65,14 +65,17 @@ for H in {list(steps)!r}:
     r = cosimulate({system!r}, 2.0, H, output=["dae.u"], **{options!r})
     assert r.success, r.message
     res.append(float(r["dae.u"][-1] - (np.sin(2.0) + 0.5 * np.cos(2.0))))  # u = m p'' + c p' + k p, p = sin
-print(json.dumps(res))
+print(json.dumps({{"errors": res}}))
 """)
-    return np.abs(out)
+    return np.abs(out["errors"])
 
 
 def test_recommended_configuration_reaches_order_two_on_a_thrice_differentiated_input(path_input):
     """docs/cosimulation.md's recommendation: Jacobi, extrapolation 2, lambda = 1/H. The FMU needs
     p''' as well; the master has orders 1 and 2 only: the FMU must estimate the third."""
-    errs = _u_errors(path_input, (0.04, 0.02, 0.01), algorithm="jacobi", extrapolation=2, lambda_per_step=1.0)
-    orders = np.log2(errs[:-1] / errs[1:])
-    assert np.all(orders > 1.7) and errs[-1] < 1e-3, (errs, orders)
+    steps = np.array([0.04, 0.02, 0.01])
+    errs = _u_errors(path_input, steps, algorithm="jacobi", extrapolation=2, lambda_per_step=1.0)
+    # second order at least: below 0.5 H^2 at every step and shrinking with H (with the unsent third
+    # derivative taken as zero the error stayed near 3e-2 whatever H); measured 3.3e-8, 5.5e-10,
+    # 2.1e-10 (the last at the FMU's sub-step tolerance)
+    assert np.all(errs < 0.5 * steps ** 2) and np.all(np.diff(errs) < 0), errs
