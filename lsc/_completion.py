@@ -116,6 +116,11 @@ class _Factors:
         """``X @ F^(d)``."""
         return X @ self.jets.F[d]
 
+    @property
+    def rounding_scale(self):
+        """``||F|| / sigma_min(J)``: entries of ``G = J^+ F`` that cancel are left at rounding relative to it."""
+        return np.linalg.norm(self.jets.F[0], 2) / self.s[self.rank - 1]
+
     def times_L(self, X, d):
         """``X @ Lg[d]``: the d-th derivative's forcing map (or value)."""
         return X @ self.Lg[d]

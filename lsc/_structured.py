@@ -288,6 +288,12 @@ class StructuredFactors:
         self.cg = self.times_L(self.Z2.T, 0)
         self._C_svd = None
 
+    @property
+    def rounding_scale(self):
+        """``||B|| ||P||``, P the first rows of ``J^+``: what ``G`` is computed from (the dense factors'
+        ``||F|| / sigma_min(J)`` without an SVD of ``J``)."""
+        return np.linalg.norm(self.B0, 2) * np.linalg.norm(self.first_rows, 2)
+
     def times_F(self, X, d):
         """``X @ F^(d)`` with ``F = [B; 0; ...]`` (constant, so ``F' = 0``)."""
         if d:
