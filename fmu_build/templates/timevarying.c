@@ -1,0 +1,155 @@
+/* Time-varying coefficients: G(t) = G0(t) + lambda G1(t), g(t) = g0(t) + lambda g1(t) and the residual's
+ * Gram form from piecewise Chebyshev tables over the horizon [TV_T0, TV_T1] (model.h), evaluated by
+ * Clenshaw's recurrence; Co-Simulation steps by the fourth-order Magnus method on the augmented system
+ * y = [x; 1], with step doubling as the error estimate (sub-steps h / 2^level until it is below
+ * tol (1 + |x|)). Compiled only when model.h defines LSC_TIME_VARYING; part of the one translation unit
+ * of fmi2Functions.c. No allocation: work arrays on the stack, sized by model.h. */
+
+#define TV_M (NX + 1) /* order of the augmented system */
+#define TV_TIME_SLACK(t) (TIME_ULPS * DBL_EPSILON * fmax(fabs(t), 1.0))
+
+/* Entries v0 .. v1-1 of the tables at t into out[0 .. v1-v0-1]; 0, or -1 outside the horizon */
+static int tv_eval(double t, int v0, int v1, double *out) {
+    int lo = 0, hi = TV_NPIECE - 1, k, v;
+    double s, b1[TV_NV], b2[TV_NV];
+    if (!(t >= TV_T0 - TV_TIME_SLACK(TV_T0) && t <= TV_T1 + TV_TIME_SLACK(TV_T1))) return -1;
+    while (lo < hi) { /* the piece p with TV_BREAKS[p] <= t < TV_BREAKS[p + 1] (the last one closed) */
+        const int mid = (lo + hi + 1) / 2;
+        if (TV_BREAKS[mid] <= t) lo = mid; else hi = mid - 1;
+    }
+    s = (2.0 * t - TV_BREAKS[lo] - TV_BREAKS[lo + 1]) / (TV_BREAKS[lo + 1] - TV_BREAKS[lo]);
+    s = s < -1.0 ? -1.0 : (s > 1.0 ? 1.0 : s);
+    for (v = v0; v < v1; v++) b1[v] = b2[v] = 0.0;
+    for (k = TV_DEG[lo]; k >= 1; k--) {
+        const double *ck = TV_COEF + TV_OFF[lo] + (long)k * TV_NV;
+        for (v = v0; v < v1; v++) {
+            const double b = ck[v] + 2.0 * s * b1[v] - b2[v];
+            b2[v] = b1[v];
+            b1[v] = b;
+        }
+    }
+    for (v = v0; v < v1; v++) out[v - v0] = TV_COEF[TV_OFF[lo] + v] + s * b1[v] - b2[v];
+    return 0;
+}
+
+/* the augmented matrix [[G, g], [0, 0]] at t and the current lambda into a (TV_M x TV_M); 0 or -1 */
+static int tv_augmented(const Instance *c, double t, double *a) {
+    double v[TV_NDYN];
+    int i, j;
+    if (tv_eval(t, 0, TV_NDYN, v) != 0) return -1;
+    for (i = 0; i < TV_M * TV_M; i++) a[i] = 0.0;
+    for (i = 0; i < NX; i++) {
+        for (j = 0; j < NX; j++) a[i * TV_M + j] = v[i * NX + j] + c->s.lam * v[NX * NX + i * NX + j];
+        a[i * TV_M + NX] = v[2 * NX * NX + i] + c->s.lam * v[2 * NX * NX + NX + i];
+    }
+    return 0;
+}
+
+/* dx = G(t) x + g(t); 0, or -1 outside the horizon */
+static int tv_rhs(const Instance *c, double t, const double *x, double *dx) {
+    double a[TV_M * TV_M];
+    int i, j;
+    if (tv_augmented(c, t, a) != 0) return -1;
+    for (i = 0; i < NX; i++) {
+        double v = a[i * TV_M + NX];
+        for (j = 0; j < NX; j++) v += a[i * TV_M + j] * x[j];
+        dx[i] = v;
+    }
+    return 0;
+}
+
+/* |Z2^T (F x - g)| from the Gram form x^T M x - 2 m^T x + s (NAN outside the horizon) */
+static double tv_residual(double t, const double *x) {
+    double v[TV_NV - TV_NDYN], q = 0.0;
+    int i, j;
+    if (tv_eval(t, TV_NDYN, TV_NV, v) != 0) return NAN;
+    for (i = 0; i < NX; i++) {
+        double r = -2.0 * v[NX * NX + i];
+        for (j = 0; j < NX; j++) r += v[i * NX + j] * x[j];
+        q += r * x[i];
+    }
+    q += v[NX * NX + NX];
+    return sqrt(q > 0.0 ? q : 0.0);
+}
+
+/* y <- exp(Omega) y, Omega the Magnus4 exponent over [t, t + h] (two Gauss points); 0 or -1 */
+static int tv_magnus(Instance *c, double t, double h, double *y) {
+    const double r3 = sqrt(3.0);
+    double a1[TV_M * TV_M], a2[TV_M * TV_M], z[TV_M];
+    double *om = c->Mb, *e = c->E; /* the constant-coefficient caches, unused here, are the work space */
+    int i, j, l;
+    if (tv_augmented(c, t + (0.5 - r3 / 6.0) * h, a1) != 0 || tv_augmented(c, t + (0.5 + r3 / 6.0) * h, a2) != 0)
+        return -1;
+    for (i = 0; i < TV_M; i++) {
+        for (j = 0; j < TV_M; j++) {
+            double comm = 0.0; /* [A2, A1] */
+            for (l = 0; l < TV_M; l++) comm += a2[i * TV_M + l] * a1[l * TV_M + j] - a1[i * TV_M + l] * a2[l * TV_M + j];
+            om[i * TV_M + j] = 0.5 * h * (a1[i * TV_M + j] + a2[i * TV_M + j]) + r3 / 12.0 * h * h * comm;
+        }
+    }
+    if (lsc_expm(e, om, TV_M, c->work, c->piv) != 0) return -1;
+    for (i = 0; i < TV_M; i++) {
+        double v = 0.0;
+        for (j = 0; j < TV_M; j++) v += e[i * TV_M + j] * y[j];
+        z[i] = v;
+    }
+    for (i = 0; i < NX; i++) {
+        if (!isfinite(z[i])) return -1;
+        y[i] = z[i];
+    }
+    return 0;
+}
+
+/* Co-Simulation step from c->s.t = t to t + h: 0 done, 1 discard (the step may succeed shorter or with other
+ * values), 2 discard for good (past the horizon). Deterministic in the state: a restored state steps the same. */
+static int tv_do_step(Instance *c, double t, double h) {
+    double x[TV_M], big[TV_M], half[TV_M];
+    int i, level = 0;
+    long idx = 0;
+    if (t + h > TV_T1 + TV_TIME_SLACK(TV_T1) + 1e-12 * h || t < TV_T0 - TV_TIME_SLACK(TV_T0)) {
+        logmsg(c, fmi2Error, "fmi2DoStep: the step from %.17g to %.17g leaves the horizon [%.17g, %.17g] the "
+               "time-varying coefficients were tabulated on at build time (build with a longer experiment stop)",
+               t, t + h, TV_T0, TV_T1);
+        return 2;
+    }
+    memcpy(x, c->s.x, sizeof(double) * NX);
+    x[NX] = 1.0;
+    while (idx < (1L << level)) {
+        const double H = ldexp(h, -level), ts = t + (double)idx * H;
+        double est = 0.0, size = 0.0;
+        memcpy(big, x, sizeof big);
+        memcpy(half, x, sizeof half);
+        if (tv_magnus(c, ts, H, big) != 0 || tv_magnus(c, ts, 0.5 * H, half) != 0
+            || tv_magnus(c, ts + 0.5 * H, 0.5 * H, half) != 0) {
+            logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the step matrices are not finite", ts);
+            return 1;
+        }
+        for (i = 0; i < NX; i++) {
+            est = fmax(est, fabs(half[i] - big[i]) / 15.0); /* Richardson: two half steps of order 4 */
+            size = fmax(size, fabs(x[i]));
+        }
+        if (!(est <= c->s.tol * (1.0 + size))) {
+            if (level + 1 > MAX_LEVEL || !isfinite(est)) {
+                logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: estimated error %g with 2^%d sub-steps; take "
+                       "smaller communication steps", t, est, level);
+                return 1;
+            }
+            level++;
+            idx <<= 1;
+            continue;
+        }
+        memcpy(x, half, sizeof(double) * NX);
+        idx++;
+    }
+    memcpy(c->s.x, x, sizeof(double) * NX);
+    return 0;
+}
+
+/* x and x' = G x + g at the current time into c->xd (higher orders are not offered: NAN) */
+static void tv_state_derivatives(Instance *c, const double *x) {
+    int i;
+    memcpy(c->xd, x, sizeof(double) * NX);
+    for (i = NX; i < (NQ + 2) * NX; i++) c->xd[i] = NAN;
+    if (tv_rhs(c, c->s.t, x, c->xd + NX) != 0)
+        for (i = 0; i < NX; i++) c->xd[NX + i] = NAN;
+}
