@@ -156,6 +156,8 @@ def header_section(tab):
     degs = [c.shape[0] - 1 for _, _, c in pieces]
     offs = np.concatenate([[0], np.cumsum([(d + 1) * nv for d in degs])[:-1]]).astype(int)
     coef = np.concatenate([c.reshape(-1) for _, _, c in pieces])
+    ng = tab["n"] * tab["n"] + tab["n"]  # G and g combined at one lambda (the C runtime's cache)
+    coffs = np.concatenate([[0], np.cumsum([(d + 1) * ng for d in degs])[:-1]]).astype(int)
     fmt = lambda vals: ", ".join(repr(float(v)) for v in vals)  # noqa: E731 - local formatter
     return "\n".join([
         "/* time-varying coefficients: piecewise Chebyshev tables over the horizon (templates/timevarying.c) */",
@@ -166,6 +168,8 @@ def header_section(tab):
         f"static const double TV_BREAKS[{len(breaks)}] = {{{fmt(breaks)}}};",
         f"static const int TV_DEG[{len(degs)}] = {{{', '.join(map(str, degs))}}};",
         f"static const long TV_OFF[{len(offs)}] = {{{', '.join(map(str, offs))}}};",
+        f"#define TV_NG {ng}", f"#define TV_NCOMB {int(sum(d + 1 for d in degs) * ng)}",
+        f"static const long TV_COFF[{len(degs)}] = {{{', '.join(map(str, coffs))}}};",
         f"/* coefficient k of entry v on piece p: TV_COEF[TV_OFF[p] + k * TV_NV + v] */",
         f"static const double TV_COEF[{coef.size}] = {{{fmt(coef)}}};", ""])
 

@@ -8,45 +8,70 @@
 #define TV_M (NX + 1) /* order of the augmented system */
 #define TV_TIME_SLACK(t) (TIME_ULPS * DBL_EPSILON * fmax(fabs(t), 1.0))
 
-/* Entries v0 .. v1-1 of the tables at t into out[0 .. v1-v0-1]; 0, or -1 outside the horizon */
-static int tv_eval(double t, int v0, int v1, double *out) {
-    int lo = 0, hi = TV_NPIECE - 1, k, v;
-    double s, b1[TV_NV], b2[TV_NV];
+/* The piece of t and its local variable s in [-1, 1]; -1 outside the horizon */
+static int tv_piece(double t, double *s) {
+    int lo = 0, hi = TV_NPIECE - 1;
     if (!(t >= TV_T0 - TV_TIME_SLACK(TV_T0) && t <= TV_T1 + TV_TIME_SLACK(TV_T1))) return -1;
     while (lo < hi) { /* the piece p with TV_BREAKS[p] <= t < TV_BREAKS[p + 1] (the last one closed) */
         const int mid = (lo + hi + 1) / 2;
         if (TV_BREAKS[mid] <= t) lo = mid; else hi = mid - 1;
     }
-    s = (2.0 * t - TV_BREAKS[lo] - TV_BREAKS[lo + 1]) / (TV_BREAKS[lo + 1] - TV_BREAKS[lo]);
-    s = s < -1.0 ? -1.0 : (s > 1.0 ? 1.0 : s);
+    *s = (2.0 * t - TV_BREAKS[lo] - TV_BREAKS[lo + 1]) / (TV_BREAKS[lo + 1] - TV_BREAKS[lo]);
+    *s = *s < -1.0 ? -1.0 : (*s > 1.0 ? 1.0 : *s);
+    return lo;
+}
+
+/* Clenshaw: sum over k <= deg of coef[k * stride + v] T_k(s) for v0 <= v < v1, into out[v - v0] */
+static void tv_clenshaw(const double *coef, int stride, int deg, double s, int v0, int v1, double *out) {
+    double b1[TV_NV], b2[TV_NV];
+    int k, v;
     for (v = v0; v < v1; v++) b1[v] = b2[v] = 0.0;
-    for (k = TV_DEG[lo]; k >= 1; k--) {
-        const double *ck = TV_COEF + TV_OFF[lo] + (long)k * TV_NV;
+    for (k = deg; k >= 1; k--) {
+        const double *ck = coef + (long)k * stride;
         for (v = v0; v < v1; v++) {
             const double b = ck[v] + 2.0 * s * b1[v] - b2[v];
             b2[v] = b1[v];
             b1[v] = b;
         }
     }
-    for (v = v0; v < v1; v++) out[v - v0] = TV_COEF[TV_OFF[lo] + v] + s * b1[v] - b2[v];
-    return 0;
+    for (v = v0; v < v1; v++) out[v - v0] = coef[v] + s * b1[v] - b2[v];
+}
+
+/* the coefficients of G = G0 + lambda G1 and g = g0 + lambda g1 at the current lambda (formed once per lambda) */
+static const double *tv_combined(Instance *c) {
+    int p, k, e;
+    if (c->tv_ready && c->tv_lam == c->s.lam) return c->tv_coef;
+    for (p = 0; p < TV_NPIECE; p++) {
+        for (k = 0; k <= TV_DEG[p]; k++) {
+            const double *src = TV_COEF + TV_OFF[p] + (long)k * TV_NV;
+            double *dst = c->tv_coef + TV_COFF[p] + (long)k * TV_NG;
+            for (e = 0; e < NX * NX; e++) dst[e] = src[e] + c->s.lam * src[NX * NX + e];
+            for (e = 0; e < NX; e++) dst[NX * NX + e] = src[2 * NX * NX + e] + c->s.lam * src[2 * NX * NX + NX + e];
+        }
+    }
+    c->tv_lam = c->s.lam;
+    c->tv_ready = 1;
+    return c->tv_coef;
 }
 
 /* the augmented matrix [[G, g], [0, 0]] at t and the current lambda into a (TV_M x TV_M); 0 or -1 */
-static int tv_augmented(const Instance *c, double t, double *a) {
-    double v[TV_NDYN];
+static int tv_augmented(Instance *c, double t, double *a) {
+    double v[TV_NG], s;
+    const double *coef = tv_combined(c);
+    const int p = tv_piece(t, &s);
     int i, j;
-    if (tv_eval(t, 0, TV_NDYN, v) != 0) return -1;
+    if (p < 0) return -1;
+    tv_clenshaw(coef + TV_COFF[p], TV_NG, TV_DEG[p], s, 0, TV_NG, v);
     for (i = 0; i < TV_M * TV_M; i++) a[i] = 0.0;
     for (i = 0; i < NX; i++) {
-        for (j = 0; j < NX; j++) a[i * TV_M + j] = v[i * NX + j] + c->s.lam * v[NX * NX + i * NX + j];
-        a[i * TV_M + NX] = v[2 * NX * NX + i] + c->s.lam * v[2 * NX * NX + NX + i];
+        for (j = 0; j < NX; j++) a[i * TV_M + j] = v[i * NX + j];
+        a[i * TV_M + NX] = v[NX * NX + i];
     }
     return 0;
 }
 
 /* dx = G(t) x + g(t); 0, or -1 outside the horizon */
-static int tv_rhs(const Instance *c, double t, const double *x, double *dx) {
+static int tv_rhs(Instance *c, double t, const double *x, double *dx) {
     double a[TV_M * TV_M];
     int i, j;
     if (tv_augmented(c, t, a) != 0) return -1;
@@ -60,9 +85,11 @@ static int tv_rhs(const Instance *c, double t, const double *x, double *dx) {
 
 /* |Z2^T (F x - g)| from the Gram form x^T M x - 2 m^T x + s (NAN outside the horizon) */
 static double tv_residual(double t, const double *x) {
-    double v[TV_NV - TV_NDYN], q = 0.0;
+    double v[TV_NV - TV_NDYN], s, q = 0.0;
+    const int p = tv_piece(t, &s);
     int i, j;
-    if (tv_eval(t, TV_NDYN, TV_NV, v) != 0) return NAN;
+    if (p < 0) return NAN;
+    tv_clenshaw(TV_COEF + TV_OFF[p], TV_NV, TV_DEG[p], s, TV_NDYN, TV_NV, v);
     for (i = 0; i < NX; i++) {
         double r = -2.0 * v[NX * NX + i];
         for (j = 0; j < NX; j++) r += v[i * NX + j] * x[j];
@@ -87,11 +114,29 @@ static int tv_magnus(Instance *c, double t, double h, double *y) {
             om[i * TV_M + j] = 0.5 * h * (a1[i * TV_M + j] + a2[i * TV_M + j]) + r3 / 12.0 * h * h * comm;
         }
     }
-    if (lsc_expm(e, om, TV_M, c->work, c->piv) != 0) return -1;
-    for (i = 0; i < TV_M; i++) {
-        double v = 0.0;
-        for (j = 0; j < TV_M; j++) v += e[i * TV_M + j] * y[j];
-        z[i] = v;
+    if (lsc_norm1(om, TV_M) <= 1.0) {
+        /* exp(Omega) y by its Taylor series on the vector: matrix-vector products only (terms below
+         * 1e-17 of the sum from k = 18 on, as 1/18! < 2e-16 for |Omega| <= 1) */
+        double term[TV_M], next[TV_M], tn = 0.0, yn = 0.0;
+        int k;
+        for (i = 0; i < TV_M; i++) { z[i] = term[i] = y[i]; yn = fmax(yn, fabs(y[i])); }
+        for (k = 1; k <= 30; k++) {
+            tn = 0.0;
+            for (i = 0; i < TV_M; i++) {
+                double v = 0.0;
+                for (j = 0; j < TV_M; j++) v += om[i * TV_M + j] * term[j];
+                next[i] = v / (double)k;
+            }
+            for (i = 0; i < TV_M; i++) { term[i] = next[i]; z[i] += next[i]; tn = fmax(tn, fabs(next[i])); }
+            if (tn <= 1e-17 * yn) break;
+        }
+    } else {
+        if (lsc_expm(e, om, TV_M, c->work, c->piv) != 0) return -1;
+        for (i = 0; i < TV_M; i++) {
+            double v = 0.0;
+            for (j = 0; j < TV_M; j++) v += e[i * TV_M + j] * y[j];
+            z[i] = v;
+        }
     }
     for (i = 0; i < NX; i++) {
         if (!isfinite(z[i])) return -1;
