@@ -5,6 +5,8 @@ in sympy), among them two rotating constraints and the gallery's
 `rotating_canonical` written in sympy; each FMU runs in a subprocess
 (tests/native_runner.py, fmpy) with lsc, sympy, scipy and fmu_build blocked.
 """
+import os
+import subprocess
 import zipfile
 
 import numpy as np
@@ -64,14 +66,18 @@ def rotating_canonical_sympy(index=2):
     return A, B, Q * y, P * (E * y.diff(T) + Ab * y)  # f = A x' + B x = P (E y' + Ab y)
 
 
+PROBLEMS_SOURCES = {"Rot2": dict(A=[[1, 0, 0], [0, 1, 0], [0, 0, 0]],
+                                 B=[[0, 0, -sp.cos(T)], [0, 0, -sp.sin(T)], [sp.cos(T), sp.sin(T), 0]],
+                                 xe=[sp.cos(2 * T) + 1, sp.sin(T), sp.exp(-T)])}
+
+
 def _problems():
     c, s = sp.cos(T), sp.sin(T)
     out = {}
     # index 1, A(t) time-varying
     out["Tv1"] = _spec("Tv1", [[2 + c, 0], [0, 0]], [[1, 1], [s, 1]], [sp.exp(-T / 2) + s, sp.cos(2 * T)])
     # index 2: a point pushed along a direction n(t) that rotates, kept on the rotating line n(t).x = f3
-    out["Rot2"] = _spec("Rot2", [[1, 0, 0], [0, 1, 0], [0, 0, 0]], [[0, 0, -c], [0, 0, -s], [c, s, 0]],
-                        [sp.cos(2 * T) + 1, s, sp.exp(-T)])
+    out["Rot2"] = _spec("Rot2", **PROBLEMS_SOURCES["Rot2"])
     # index 3: positions q, velocities v, force mu along n(t); the constraint n(t).q = f5 rotates
     out["Rot3"] = _spec("Rot3", np.diag([1, 1, 1, 1, 0]).tolist(),
                         [[0, 0, -1, 0, 0], [0, 0, 0, -1, 0], [0, 0, 0, 0, -c], [0, 0, 0, 0, -s], [c, s, 0, 0, 0]],
@@ -205,3 +211,42 @@ def test_refuses_tables_beyond_the_piece_limit(tmp_path, monkeypatch):
     with pytest.raises(NativeTargetError, match="limit of 4 pieces"):
         build_fmu(PROBLEMS["Rot2"][0], tmp_path, target="native")
     assert not list(tmp_path.glob("*.fmu*"))
+
+
+@pytest.mark.parametrize("method", ["standard", "stabilized"])
+def test_other_completions_fixed_lambda(tmp_path, method):
+    d, _ = _spec("Rot2" + method.capitalize(), *[PROBLEMS_SOURCES["Rot2"][k] for k in ("A", "B", "xe")], method=method)
+    fmu = build_fmu(d, tmp_path, target="native")
+    r = run({"fmu": str(fmu), "dt": DT, "steps": 100, "outputs": _names(d)})
+    assert set(r["status"]) == {"ok"}
+    exact = np.array(PROBLEMS["Rot2"][1](np.asarray(r["time"])), dtype=float).reshape(3, -1)
+    assert rel_err(np.array(r["values"]).T, exact) < 1e-8
+
+
+def test_validates_clean(built):
+    from fmpy.validation import validate_fmu
+
+    for fmu in built.values():
+        assert validate_fmu(str(fmu)) == []
+
+
+def test_c_master_under_address_and_ub_sanitizers(built, tmp_path):
+    from test_native import _master, _unpacked
+
+    guid, vrs = _unpacked(built["Rot3"], tmp_path)
+    lib = tmp_path / "san.so"
+    proc = subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-fsanitize=address,undefined", "-g",
+                           "-fno-sanitize-recover=undefined", "-shared", "-fPIC", "-I", str(tmp_path / "sources"),
+                           "-o", str(lib), str(tmp_path / "sources" / "fmi2Functions.c"), "-lm"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    exe = _master(tmp_path, sanitize=True)
+    names = _names(PROBLEMS["Rot3"][0])
+    proc = subprocess.run([str(exe), str(lib), guid, "200", "0.01", str(len(names)), *[str(vrs[n]) for n in names],
+                           "--twice"], capture_output=True, text=True, timeout=300,
+                          env=dict(os.environ, ASAN_OPTIONS="detect_leaks=1", UBSAN_OPTIONS="halt_on_error=1"))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "runtime error" not in proc.stderr and "AddressSanitizer" not in proc.stderr
+    rows = np.array([[float(v) for v in line.split()] for line in proc.stdout.split("\n") if line.strip()])
+    # the second instance (lambda doubled, stepped in between) did not disturb the first
+    assert rel_err(rows[:, 1:].T, _exact("Rot3", rows[:, 0])) < 1e-8
