@@ -218,7 +218,7 @@ def note(spec, tab, lam_note):
     degs = [c.shape[0] - 1 for _, _, c in tab["pieces"]]
     return (f"native C, time-varying A and B tabulated on [{tab['t0']:g}, {tab['t1']:g}] (piecewise Chebyshev, "
             f"{len(degs)} piece(s) of degree {min(degs)}-{max(degs)}, coefficient tail <= {TOL:g} relative; "
-            f"Magnus4 steps with step doubling); {spec.method} completion, {lam_note}; all parameters fixed at "
+            f"sixth-order Magnus steps, the fourth-order one as error estimate); {spec.method} completion, {lam_note}; all parameters fixed at "
             "their spec values.")
 
 
