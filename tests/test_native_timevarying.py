@@ -258,3 +258,12 @@ def test_long_communication_steps_are_subdivided_to_the_tolerance(built):
     r = run({"fmu": str(built["Rot3"]), "dt": 0.25, "steps": 8, "outputs": _names(d), "block": BLOCK})
     assert set(r["status"]) == {"ok"}
     assert rel_err(np.array(r["values"]).T, _exact("Rot3", r["time"])) < 1e-8
+
+
+def test_output_derivative_is_G_x_plus_g(built):
+    d = PROBLEMS["Rot2"][0]
+    r = run({"fmu": str(built["Rot2"]), "dt": DT, "steps": 50, "outputs": _names(d), "output_derivatives": _names(d)})
+    assert len(r["derivatives"]) == 1  # maxOutputDerivativeOrder 1
+    xe = sp.Matrix(PROBLEMS_SOURCES["Rot2"]["xe"])
+    expected = np.array(xe.diff(T).subs(T, r["time"][-1]).evalf(), dtype=float).ravel()
+    assert rel_err(r["derivatives"][0], expected) < 1e-8
