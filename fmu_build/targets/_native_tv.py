@@ -26,8 +26,8 @@ import lsc
 __all__ = []
 
 TOL = 1e-12           # coefficient tail relative to the group's largest value on the horizon
-DEGREES = (8, 16, 32, 64)
-MAX_PIECES = 256      # bound of the tables: 256 pieces of degree 64 of a 10-state model are ~ 22 MB of text
+DEGREES = (8, 16)  # low degrees, more pieces: the Clenshaw sweep is most of a step's work
+MAX_PIECES = 1024     # bound of the tables: 1024 pieces of degree 16 of a 10-state model are ~ 5.8 million doubles
 MIN_PIECE = 1e-6      # of the horizon
 HORIZON_MARGIN = 0.1  # the tables reach this fraction of the experiment's length past its stop time
 _CHECK_RATES = (0.3, 7.0)

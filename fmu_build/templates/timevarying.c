@@ -54,19 +54,62 @@ static const double *tv_combined(Instance *c) {
     return c->tv_coef;
 }
 
-/* the augmented matrix [[G, g], [0, 0]] at t and the current lambda into a (TV_M x TV_M); 0 or -1 */
-static int tv_augmented(Instance *c, double t, double *a) {
-    double v[TV_NG], s;
-    const double *coef = tv_combined(c);
-    const int p = tv_piece(t, &s);
+/* G and g at three times of one piece (local variables s[0..2]) by one Clenshaw sweep: each coefficient is
+ * read once for the three (the sweep is most of a step's work) */
+static void tv_clenshaw3(const double *coef, int deg, const double *s, double *out) {
+    double b1[3][TV_NG], b2[3][TV_NG];
+    int k, v, q;
+    memset(b1, 0, sizeof b1);
+    memset(b2, 0, sizeof b2);
+    for (k = deg; k >= 1; k--) {
+        const double *ck = coef + (long)k * TV_NG;
+        for (q = 0; q < 3; q++) {
+            const double two_s = 2.0 * s[q];
+            for (v = 0; v < TV_NG; v++) {
+                const double b = ck[v] + two_s * b1[q][v] - b2[q][v];
+                b2[q][v] = b1[q][v];
+                b1[q][v] = b;
+            }
+        }
+    }
+    for (q = 0; q < 3; q++)
+        for (v = 0; v < TV_NG; v++) out[q * TV_NG + v] = coef[v] + s[q] * b1[q][v] - b2[q][v];
+}
+
+/* the augmented matrix [[G, g], [0, 0]] (TV_M x TV_M) from G and g (TV_NG values) */
+static void tv_augment(const double *v, double *a) {
     int i, j;
-    if (p < 0) return -1;
-    tv_clenshaw(coef + TV_COFF[p], TV_NG, TV_DEG[p], s, 0, TV_NG, v);
     for (i = 0; i < TV_M * TV_M; i++) a[i] = 0.0;
     for (i = 0; i < NX; i++) {
         for (j = 0; j < NX; j++) a[i * TV_M + j] = v[i * NX + j];
         a[i * TV_M + NX] = v[NX * NX + i];
     }
+}
+
+/* the augmented matrices at the three times t[0..2] and the current lambda into a[q * TV_M * TV_M]; 0 or -1 */
+static int tv_augmented3(Instance *c, const double *t, double *a) {
+    double v[3 * TV_NG], s[3];
+    const double *coef = tv_combined(c);
+    int p[3], q;
+    for (q = 0; q < 3; q++)
+        if ((p[q] = tv_piece(t[q], s + q)) < 0) return -1;
+    if (p[0] == p[1] && p[1] == p[2]) {
+        tv_clenshaw3(coef + TV_COFF[p[0]], TV_DEG[p[0]], s, v);
+    } else {
+        for (q = 0; q < 3; q++) tv_clenshaw(coef + TV_COFF[p[q]], TV_NG, TV_DEG[p[q]], s[q], 0, TV_NG, v + q * TV_NG);
+    }
+    for (q = 0; q < 3; q++) tv_augment(v + q * TV_NG, a + q * TV_M * TV_M);
+    return 0;
+}
+
+/* the augmented matrix at t and the current lambda into a (TV_M x TV_M); 0 or -1 */
+static int tv_augmented(Instance *c, double t, double *a) {
+    double v[TV_NG], s;
+    const double *coef = tv_combined(c);
+    const int p = tv_piece(t, &s);
+    if (p < 0) return -1;
+    tv_clenshaw(coef + TV_COFF[p], TV_NG, TV_DEG[p], s, 0, TV_NG, v);
+    tv_augment(v, a);
     return 0;
 }
 
@@ -150,10 +193,11 @@ static void tv_commutator(const double *a, const double *b, double *r) {
  * solution: local errors ~ h^7 and h^5). */
 static int tv_magnus(Instance *c, double t, double h, const double *y, double *y6, double *y4) {
     const double r = sqrt(15.0) / 10.0;
-    double a1[TV_M * TV_M], a2[TV_M * TV_M], a3[TV_M * TV_M], w[TV_M * TV_M], v[TV_M * TV_M], c1[TV_M * TV_M];
+    double a[3 * TV_M * TV_M], w[TV_M * TV_M], v[TV_M * TV_M], c1[TV_M * TV_M];
+    double *a1 = a, *a2 = a + TV_M * TV_M, *a3 = a + 2 * TV_M * TV_M;
+    const double ts[3] = {t + (0.5 - r) * h, t + 0.5 * h, t + (0.5 + r) * h};
     int i;
-    if (tv_augmented(c, t + (0.5 - r) * h, a1) != 0 || tv_augmented(c, t + 0.5 * h, a2) != 0
-        || tv_augmented(c, t + (0.5 + r) * h, a3) != 0) return -1;
+    if (tv_augmented3(c, ts, a) != 0) return -1;
     for (i = 0; i < TV_M * TV_M; i++) { /* alpha_1, alpha_2, alpha_3 in place of A_2, A_1, A_3 */
         const double al1 = h * a2[i], al2 = sqrt(15.0) * h / 3.0 * (a3[i] - a1[i]);
         const double al3 = 10.0 * h / 3.0 * (a3[i] - 2.0 * a2[i] + a1[i]);
