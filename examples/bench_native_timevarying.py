@@ -125,6 +125,27 @@ def per_step(fmu, work, exe, env=None, integer=None, repeats=REPEATS):
     return best, y
 
 
+def instructions_per_step(fmu, work, exe):
+    """Instructions per step under valgrind's callgrind (load-independent): runs of 1,000 and 2,000 steps
+    differ by 1,000 steps' work; None without valgrind."""
+    import re
+    import shutil
+
+    if shutil.which("valgrind") is None:
+        return None
+    folder = work / fmu.stem
+    root = ET.fromstring((folder / "modelDescription.xml").read_text())
+    vr = next(sv.get("valueReference") for sv in root.iter("ScalarVariable") if sv.get("name") == "x1")
+    lib = next((folder / "binaries").rglob("*.so"))
+    counts = []
+    for steps in (1000, 2000):
+        out = subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={work / 'cg.out'}", str(exe),
+                              str(lib), root.get("guid"), (folder / "resources").as_uri(), str(steps), str(DT), vr],
+                             capture_output=True, text=True, timeout=600)
+        counts.append(int(re.search(r"refs:\s+([\d,]+)", out.stderr).group(1).replace(",", "")))
+    return (counts[1] - counts[0]) / 1000
+
+
 def python_env():
     out = subprocess.run([sys.executable, "-m", "fmu_build", "env"], capture_output=True, text=True, check=True).stdout
     env = dict(os.environ)
@@ -157,19 +178,22 @@ def _run(out_dir, work):
             ("pythonfmu Magnus4, time-varying", tv_spec, "pythonfmu", python_env(), ("solver", 5))):
         fmu, seconds = build(d, out_dir / target / d["model"]["name"], target)
         us, y = per_step(fmu, work, exe, env, integer, 2 if target == "pythonfmu" else REPEATS)
-        rows.append((label, us, seconds, fmu.stat().st_size, y))
+        ins = instructions_per_step(fmu, work, exe) if target == "native" else None
+        rows.append((label, us, seconds, fmu.stat().st_size, y, ins))
         if label.startswith("native, time"):
             with zipfile.ZipFile(fmu) as zf:
                 header = len(zf.read("sources/model.h"))
     print(f"{STEPS} steps of {DT} of a 5-state index-3 model with a rotating constraint, best of {REPEATS} (pythonfmu: 2); "
           f"machine shared with other jobs (2 cores)\n")
-    print("| FMU | per step (us) | build (s) | FMU size (kB) | x1 at the end - exact |")
-    print("|---|---|---|---|---|")
-    for label, us, seconds, size, y in rows:
+    print("| FMU | per step (us) | instructions per step | build (s) | FMU size (kB) | x1 at the end - exact |")
+    print("|---|---|---|---|---|---|")
+    for label, us, seconds, size, y, ins in rows:
         # the constant model (frozen at t = 0.3) has another solution: no exact value to compare with
         err = "-" if "constant" in label else f"{y - x1_exact:.1e}"
-        print(f"| {label} | {us:.2f} | {seconds:.2f} | {size / 1024:.0f} | {err} |")
+        print(f"| {label} | {us:.2f} | {'-' if ins is None else f'{ins:,.0f}'} | {seconds:.2f} | {size / 1024:.0f} | {err} |")
     tv, const, py = (r[1] for r in rows)
+    if rows[0][5] and rows[1][5]:
+        print(f"\ninstructions per step, time-varying / constant native: {rows[0][5] / rows[1][5]:.1f}x")
     print(f"\ntime-varying / constant native: {tv / const:.1f}x (goal <= 3x); pythonfmu Magnus4 / time-varying "
           f"native: {py / tv:.0f}x (goal >= 100x); model.h of the time-varying FMU: {header / 1024:.0f} kB")
 
