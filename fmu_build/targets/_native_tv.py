@@ -210,6 +210,9 @@ def prepare(dae, spec, k, error):
 def finish_header(header, tab):
     """The generated header with the tables; output derivatives of order 1 only (x' = G x + g)."""
     header = header.replace(f"#define MAX_OUTPUT_DERIVATIVE_ORDER {4}", "#define MAX_OUTPUT_DERIVATIVE_ORDER 1")
+    # the first lines describe the model: its A, B are the tables at the end, not the zero G0, W0 placeholders
+    header = header.replace("; A, B constant", "; A(t), B(t) time-varying: G, g and the residual from the tables at the "
+                            "end (G0, G1, W0, W1 below are unused zeros)", 1)
     body, end = header.rsplit("#endif", 1)
     return body + header_section(tab) + "\n#endif" + end
 
