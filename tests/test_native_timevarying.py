@@ -271,9 +271,17 @@ def test_output_derivative_is_G_x_plus_g(built):
 
 @pytest.mark.parametrize("lam", [1e2, 1e4])
 def test_fast_rates_within_the_stepping_range(built, lam):
-    # lambda h up to 100: the exponential is the Pade one, the error estimate still meets 1e-11 (at lambda = 1e6
-    # with h = 0.01 it does not: the step is discarded, see docs/native_fmu.md)
+    # lambda h up to 100: the exponential is the Pade one and sub-steps bring lambda H below about pi
     d = PROBLEMS["Rot3"][0]
     r = run({"fmu": str(built["Rot3"]), "dt": DT, "steps": 100, "outputs": _names(d), "start_values": {"lambda": lam}})
     assert set(r["status"]) == {"ok"}
     assert rel_err(np.array(r["values"]).T, _exact("Rot3", r["time"])) < 1e-8
+
+
+def test_rate_beyond_the_stepping_range_is_discarded_with_a_reason(built):
+    # lambda h = 1e6: 2^14 sub-steps are not enough for the Magnus series; the FMU says so at once
+    d = PROBLEMS["Rot3"][0]
+    r = run({"fmu": str(built["Rot3"]), "dt": DT, "steps": 3, "outputs": _names(d), "start_values": {"lambda": 1e8}},
+            timeout=60)
+    assert r["status"][-1].startswith("step 0") and "discard" in r["status"][-1]
+    assert any("lambda = 1e+08" in m and "sub-steps" in m for m in r["logs"])
