@@ -33,12 +33,13 @@ from .._description import model_description
 from .._description3 import build_description3, model_description3
 from ._runtime import start_name
 from .._model import _mangled
+from . import _native_tv
 
 __all__ = ["build_native", "NativeTargetError", "C_FLAGS"]
 
 _TEMPLATES = Path(__file__).parent.parent / "templates"  # fmu_build/templates
 _FIXED_SOURCES = ("fmi2Functions.c", "lsc_fmu.h", "lsc_model.c", "fmu_state.c", "model_exchange.c", "cosimulation.c", "lsc_linalg.h",
-                  "fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+                  "timevarying.c", "fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 # FMI 3.0: a thin API layer over the same core (fmi3Functions.c includes fmi2Functions.c) and its headers
 _FMI3_SOURCES = ("fmi3Functions.c", "fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
 TAYLOR_DEGREE = 3  # the forcing over a step is its Taylor polynomial of this degree (as lsc's method='expm')
@@ -93,12 +94,12 @@ def _c_array(name, values, ctype="double"):
 
 
 def _check_expressible(spec, fix_parameters):
-    """Raise NativeTargetError for what C with constant A, B cannot hold; return the names of A/B parameters."""
+    """Raise NativeTargetError for what the native C cannot hold; return the names of the parameters fixed."""
+    if spec.t in (spec.A.free_symbols | spec.B.free_symbols):
+        return _native_tv.check_expressible(spec, fix_parameters, NativeTargetError)
     problems = []
     for mname in ("A", "B"):
         M = getattr(spec, mname)
-        if spec.t in M.free_symbols:
-            problems.append(f"{mname} depends on time t (time-varying coefficients)")
         used = sorted(str(s) for s in M.free_symbols if str(s) in spec.input_symbols)
         if used:
             problems.append(f"{mname} depends on the input(s) {', '.join(used)}")
@@ -367,10 +368,16 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     compiler = find_compiler()
     platform, suffix = _platform()
     dae = _numeric_dae(spec)
-    if not dae.is_constant:  # pragma: no cover - caught by _check_expressible
-        raise NativeTargetError("the native target needs constant A and B; build with target='pythonfmu'")
     k = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=spec.k).k
-    G0, G1, W0, W1, comp, lam_tunable = _affine_maps(dae, spec.method, spec.lam, k)
+    if dae.is_constant:
+        G0, G1, W0, W1, comp, lam_tunable = _affine_maps(dae, spec.method, spec.lam, k)
+        tv = None
+    elif fmi_version == 3:
+        raise NativeTargetError("time-varying A or B are built for FMI 2.0 only (fmi_version=2): the FMI 3.0 layer "
+                                "is not yet tested with the time-varying runtime")
+    else:  # time-varying: tables over the horizon; the constant arrays are zeros the C runtime does not read
+        tv = _native_tv.prepare(dae, spec, k, NativeTargetError)
+        G0, G1, W0, W1, comp, lam_tunable = tv["placeholders"]
     fpars = [p["name"] for p in spec.parameters if p["name"] not in kpars]
     ident = spec.name
     # the GUID is a hash of everything compiled into the binary (model.h: matrices, start values, formulas;
@@ -383,6 +390,8 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
                 "stabilized": "lambda fixed at build time (the stabilized completion is not affine in lambda)",
                 "standard": "no lambda (standard completion)"}[spec.method]
     note = f"native C{', FMI 3.0' if fmi_version == 3 else ''}, constant A and B; {spec.method} completion, {lam_note}.{fixed_note}"
+    if tv is not None:  # the tables enter the header before the GUID is its hash
+        header, note = _native_tv.finish_header(header, tv), _native_tv.note(spec, tv, lam_note)
     variables = _variables(spec, fpars=fpars, kpars=kpars, vr=info["vr"], lam_tunable=lam_tunable,
                            method=spec.method, linear=info["linear"])
     digest = hashlib.sha256()
@@ -401,7 +410,7 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
         variables=variables, source_files=["fmi2Functions.c"],
         model_exchange=dict(flags_common, completedIntegratorStepNotNeeded=False),
         co_simulation=dict(flags_common, canHandleVariableCommunicationStepSize=True, canInterpolateInputs=True,
-                           maxOutputDerivativeOrder=TAYLOR_DEGREE + 1, canRunAsynchronuously=False),
+                           maxOutputDerivativeOrder=1 if tv else TAYLOR_DEGREE + 1, canRunAsynchronuously=False),
         experiment={"startTime": float(spec.experiment["start"]), "stopTime": float(spec.experiment["stop"]),
                     "stepSize": float(spec.experiment["step"])},
         log_categories=[("logStatusError", "errors"), ("logStatusWarning", "warnings"), ("logAll", "everything")])
@@ -434,6 +443,8 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
             raise
     if not quiet:
         print(f"lsc-fmu: {target.name}: {note}", file=sys.stderr)
+        if tv is not None:
+            print(f"lsc-fmu: {target.name}: {_native_tv.report(tv, target, header)}", file=sys.stderr)
     return target
 
 

@@ -172,6 +172,13 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
      * the time of the derivatives the master sent for this step */
     if (c->s.ud_t == c->s.t) c->s.ud_t = t;
     c->s.t = t;
+#ifdef LSC_TIME_VARYING
+    switch (tv_do_step(c, t, h)) {
+    case 0: c->s.t = t + h; changed(c); return fmi2OK;
+    case 1: return discard(c, h, 0);
+    default: return discard(c, h, 1);
+    }
+#endif
     record_inputs(c, t);
     eval_f(c, t);
     for (j = 0; j < NX * NFE; j++) {

@@ -27,6 +27,9 @@
  *   all phi_j from one exponential of the block matrix [[Gh, I, 0..], [0, 0, I, ..], ..].
  */
 #include "lsc_fmu.h"
+#ifdef LSC_TIME_VARYING
+#include "timevarying.c" /* G(t), g(t), the residual from Chebyshev tables; Magnus4 steps */
+#endif
 #include "lsc_model.c"
 
 /* ---- FMI: common ---------------------------------------------------------- */

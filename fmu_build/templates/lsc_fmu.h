@@ -92,6 +92,11 @@ typedef struct {
     double uj[A1(NU) * NFE];
     double xd[(NQ + 2) * NX];
     double tmp[NX], tmp2[NX];
+#ifdef LSC_TIME_VARYING
+    int tv_ready;                /* tv_coef holds the tables combined at lambda = tv_lam */
+    double tv_lam;
+    double tv_coef[TV_NCOMB];    /* Chebyshev coefficients of G0 + lambda G1 and g0 + lambda g1, per piece */
+#endif
 } Instance;
 
 /* ---- logging ------------------------------------------------------------ */

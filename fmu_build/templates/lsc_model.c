@@ -102,6 +102,9 @@ static void eval_f(Instance *c, double t) {
 static double residual_norm(Instance *c, const double *x) {
     double s = 0.0;
     int i, j;
+#ifdef LSC_TIME_VARYING
+    return tv_residual(c->s.t, x);
+#endif
     eval_f(c, c->s.t);
     for (i = 0; i < NC; i++) {
         double r = 0.0;
@@ -115,6 +118,10 @@ static double residual_norm(Instance *c, const double *x) {
 /* x and its derivatives 0..NQ+1 at the current time into c->xd (from x' = G x + g) */
 static void state_derivatives(Instance *c) {
     int d, i, j;
+#ifdef LSC_TIME_VARYING
+    tv_state_derivatives(c, before_init(c) ? c->s.x0 : c->s.x);
+    return;
+#endif
     form_gw(c);
     eval_f(c, c->s.t);
     memcpy(c->xd, before_init(c) ? c->s.x0 : c->s.x, sizeof(double) * NX);

@@ -91,6 +91,14 @@ fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real derivatives[], size_t
         logmsg(c, fmi2Error, "fmi2GetDerivatives: nx = %lu, expected %d", (unsigned long)nx, NX);
         return fmi2Error;
     }
+#ifdef LSC_TIME_VARYING
+    if (tv_rhs(c, c->s.t, before_init(c) ? c->s.x0 : c->s.x, derivatives) != 0) {
+        logmsg(c, fmi2Error, "fmi2GetDerivatives: t = %.17g is outside the horizon [%.17g, %.17g] the time-varying "
+               "coefficients were tabulated on at build time", c->s.t, TV_T0, TV_T1);
+        return fmi2Error;
+    }
+    return fmi2OK;
+#endif
     form_gw(c);
     eval_f(c, c->s.t);
     x = before_init(c) ? c->s.x0 : c->s.x;
