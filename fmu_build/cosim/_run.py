@@ -210,7 +210,7 @@ class Run(object):
         """Input-derivative orders ``n`` accepts: 1..p at least; beyond, probed once with rollback."""
         c = self.comps[n]
         reals = [v for _, v, w in self.inputs_of[n] if w == "Real"]
-        # in a cycle every order the FMU takes is wanted: those the master lacks are sent as 0 (`_derivs_of`)
+        # in a cycle every order the FMU takes is wanted: the master sends those it lacks as 0 (`_derivs_of`)
         top = MAX_INPUT_ORDER if n in self.in_cycle else self.nder
         if not (c.can_interpolate and reals and top > self.p and c.can_rollback):
             return self.p
@@ -363,11 +363,15 @@ class Run(object):
         if not (c.can_interpolate and p > 0 and reals):
             return
         jet, has = jet_has
-        for j in range(1, min(self.nder, self.max_input_order, max(self.accepts.get(n, p), p)) + 1):
-            sent = [(s, v) for s, v in reals if has[j, s]]
+        top = min(self.nder, self.max_input_order, max(self.accepts.get(n, p), p))
+        # in a cycle the orders the master does not have are sent as 0, for the reason given in `_derivs_of`
+        last = max(top, self.accepts.get(n, 0)) if n in self.in_cycle else top
+        for j in range(1, last + 1):
+            sent = [(s, v, float(jet[j, s]) if j <= top and has[j, s] else 0.0) for s, v in reals
+                    if (j <= top and has[j, s]) or n in self.in_cycle]
             if sent:
-                self.call(n, lambda: c.fmu.setRealInputDerivatives([v for _, v in sent], [j] * len(sent),
-                                                                   [float(jet[j, s]) for s, _ in sent]),
+                self.call(n, lambda: c.fmu.setRealInputDerivatives([v for _, v, _ in sent], [j] * len(sent),
+                                                                   [x for _, _, x in sent]),
                           t_start, "fmi2SetRealInputDerivatives")
 
     # -- macro steps ---------------------------------------------------------------------------------
