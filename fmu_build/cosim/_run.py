@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 
 from ._exchange import convert
-from ._graph import _component_order, _graph, _weights
+from ._graph import _component_order, _graph, _strongly_connected, _weights
 from ._result import AlgebraicLoopWarning, _Stop
 from ._system import _split
 
@@ -59,6 +59,9 @@ class Run(object):
         direct = {a for a, y, _, _ in connections if comps[a].feedthrough.get(y)}
         self.gs_order = _component_order(self.names, connections, direct)
         self.passes = 1 + (iterations if self.loops else 0)
+        # the components on a cycle of the connection graph (a strongly connected set of two or more)
+        succ = {n: {b for a, _, b, _ in connections if a == n and b != n} for n in self.names}
+        self.in_cycle = {n for scc in _strongly_connected(succ) if len(scc) > 1 for n in scc}
 
     def _layout(self, connections, output):
         comps, names = self.comps, self.names
@@ -207,7 +210,9 @@ class Run(object):
         """Input-derivative orders ``n`` accepts: 1..p at least; beyond, probed once with rollback."""
         c = self.comps[n]
         reals = [v for _, v, w in self.inputs_of[n] if w == "Real"]
-        if not (c.can_interpolate and reals and self.nder > self.p and c.can_rollback):
+        # in a cycle every order the FMU takes is wanted: the master sends those it lacks as 0 (`_derivs_of`)
+        top = MAX_INPUT_ORDER if n in self.in_cycle else self.nder
+        if not (c.can_interpolate and reals and top > self.p and c.can_rollback):
             return self.p
         from fmpy.fmi1 import FMICallException
 
@@ -215,7 +220,7 @@ class Run(object):
         accepted = self.p
         self.sink.quiet.add(n)
         try:
-            for k in range(self.p + 1, self.nder + 1):
+            for k in range(self.p + 1, top + 1):
                 try:
                     c.fmu.setRealInputDerivatives(reals[:1], [k], [0.0])
                 except FMICallException:
@@ -280,8 +285,15 @@ class Run(object):
             self.set_values(n, self.inputs_of[n], self.value, t)
             reals = [(s, v) for s, v, w in self.inputs_of[n] if w == "Real"]
             if n in self.deriv_loop and reals:
-                for j in range(1, min(self.nder, 2, max(self.accepts.get(n, 0), 1)) + 1):
-                    der = [float(d[j - 1, s]) if np.isfinite(d[j - 1, s]) else 0.0 for s, _ in reals]
+                top = min(self.nder, 2, max(self.accepts.get(n, 0), 1))
+                # In a cycle the orders beyond are sent as 0 as well. Left unsent, the FMU estimates them from the
+                # values it received (the native FMU does), and an output derivative read here that depends on
+                # them (the Follower's x2' = -w'') feeds differences of the loop's lagged values, amplified by
+                # 1 / H^order, back through the other FMU's input derivative: the loop of docs/cosimulation.md
+                # diverges at every H. Outside cycles the FMU's estimate is the better guess and is kept.
+                last = max(top, self.accepts.get(n, 0)) if n in self.in_cycle else top
+                for j in range(1, last + 1):
+                    der = [float(d[j - 1, s]) if j <= top and np.isfinite(d[j - 1, s]) else 0.0 for s, _ in reals]
                     self.call(n, lambda: c.fmu.setRealInputDerivatives([v for _, v in reals], [j] * len(reals), der),
                               t, "fmi2SetRealInputDerivatives")
         pairs = self.derivative_outputs(n)
@@ -351,11 +363,15 @@ class Run(object):
         if not (c.can_interpolate and p > 0 and reals):
             return
         jet, has = jet_has
-        for j in range(1, min(self.nder, self.max_input_order, max(self.accepts.get(n, p), p)) + 1):
-            sent = [(s, v) for s, v in reals if has[j, s]]
+        top = min(self.nder, self.max_input_order, max(self.accepts.get(n, p), p))
+        # in a cycle the orders the master does not have are sent as 0, for the reason given in `_derivs_of`
+        last = max(top, self.accepts.get(n, 0)) if n in self.in_cycle else top
+        for j in range(1, last + 1):
+            sent = [(s, v, float(jet[j, s]) if j <= top and has[j, s] else 0.0) for s, v in reals
+                    if (j <= top and has[j, s]) or n in self.in_cycle]
             if sent:
-                self.call(n, lambda: c.fmu.setRealInputDerivatives([v for _, v in sent], [j] * len(sent),
-                                                                   [float(jet[j, s]) for s, _ in sent]),
+                self.call(n, lambda: c.fmu.setRealInputDerivatives([v for _, v, _ in sent], [j] * len(sent),
+                                                                   [x for _, _, x in sent]),
                           t_start, "fmi2SetRealInputDerivatives")
 
     # -- macro steps ---------------------------------------------------------------------------------
