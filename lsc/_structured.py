@@ -304,7 +304,8 @@ class StructuredFactors:
         """``X @ (Lam[d] kron I_n)``, block by block."""
         m = X.shape[0]
         blocks = X.reshape(m, self.k + 1, self.n)
-        return np.einsum("ij,mic->mjc", self._Lam[d], blocks).reshape(m, -1)
+        out = np.einsum("ij,mic->mjc", self._Lam[d], blocks)
+        return out.reshape(m, out.shape[1] * out.shape[2])  # explicit: m = 0 (no constraints) cannot infer -1
 
     def _c_svd(self):
         if self._C_svd is None:

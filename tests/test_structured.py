@@ -181,3 +181,10 @@ def test_ill_conditioned_transformations_fall_back_to_dense(cond, reason):
     c = complete(p.dae, "alternative", lam=2.0)
     assert c.setup == "dense" and reason in c.setup_note
     np.testing.assert_array_equal(c._G, complete(p.dae, "alternative", lam=2.0, setup="dense")._G)
+
+
+@pytest.mark.parametrize("method, lam", METHOD_LAMS)
+def test_a_problem_without_constraints_is_set_up_structured(method, lam):
+    """An ODE written as a DAE (invertible A: no constraints, a = 0): empty constraint maps, no reshape of zero rows."""
+    dense, fast = assert_same_setup(LinearDAE([[2.0, 0.0], [1.0, 1.0]], [[0.0, -1.0], [1.0, 0.5]]), method, lam)
+    assert fast.n_constraints == 0 and fast._W_c.shape[0] == 0
