@@ -374,6 +374,90 @@ int main(int argc, char **argv) {
         free(bytes);
         F(fmi3FreeInstance)(c);
         F(fmi3FreeInstance)(d);
+    } else if (!strcmp(sc, "init_values")) {
+        /* y_0 = 0.3 set in Initialization Mode: y and der(y) read there must be those of the state being set */
+        fmi3ValueReference vy0 = 1;
+        fmi3Float64 y0 = 0.3, dx[3], x0[3];
+        c = cs("a");
+        d = me("m");
+        F(fmi3EnterInitializationMode)(c, fmi3False, 0.0, 0.0, fmi3False, 0.0);
+        F(fmi3EnterInitializationMode)(d, fmi3False, 0.0, 0.0, fmi3False, 0.0);
+        SAY("set_y0_cs", F(fmi3SetFloat64)(c, &vy0, 1, &y0, 1));
+        SAY("set_y0_me", F(fmi3SetFloat64)(d, &vy0, 1, &y0, 1));
+        F(fmi3GetFloat64)(c, &vy, 1, v, 1);
+        F(fmi3GetFloat64)(c, &vder, 1, v + 1, 1);
+        VAL("init_y", v[0]);
+        VAL("init_dery", v[1]);
+        SAY("init_me_derivatives", F(fmi3GetContinuousStateDerivatives)(d, dx, 3));
+        SAY("init_me_states", F(fmi3GetContinuousStates)(d, x0, 3));
+        VAL("init_me_x0", x0[0]);
+        VAL("init_me_dx0", dx[0]);
+        F(fmi3ExitInitializationMode)(c);
+        F(fmi3ExitInitializationMode)(d);
+        F(fmi3GetFloat64)(c, &vy, 1, v, 1);
+        F(fmi3GetFloat64)(c, &vder, 1, v + 1, 1);
+        VAL("after_y", v[0]);
+        VAL("after_dery", v[1]);
+        F(fmi3GetContinuousStateDerivatives)(d, dx, 3);
+        F(fmi3GetContinuousStates)(d, x0, 3);
+        VAL("after_me_x0", x0[0]);
+        VAL("after_me_dx0", dx[0]);
+        F(fmi3FreeInstance)(c);
+        F(fmi3FreeInstance)(d);
+    } else if (!strcmp(sc, "me_hostile")) {
+        fmi3Float64 xs[4], bad3[3];
+        c = inited(me("m"));
+        SAY("me_getOutputDerivatives", F(fmi3GetOutputDerivatives)(c, &vy, 1, (order = 1, &order), v, 1));
+        SAY("me_setContinuousStates_event_mode", F(fmi3SetContinuousStates)(c, xs, 3));
+        SAY("me_completedIntegratorStep_event_mode", F(fmi3CompletedIntegratorStep)(c, 1, b, b + 1));
+        F(fmi3UpdateDiscreteStates)(c, b, b, b, b, b, v);
+        F(fmi3EnterContinuousTimeMode)(c);
+        F(fmi3GetContinuousStates)(c, xs, 3);
+        SAY("me_getStates_n0", F(fmi3GetContinuousStates)(c, xs, 0));
+        SAY("me_getStates_huge", F(fmi3GetContinuousStates)(c, xs, SIZE_MAX));
+        SAY("me_getDerivatives_n2", F(fmi3GetContinuousStateDerivatives)(c, xs, 2));
+        bad3[0] = xs[0]; bad3[1] = INFINITY; bad3[2] = xs[2];
+        SAY("me_setStates_inf", F(fmi3SetContinuousStates)(c, bad3, 3));
+        SAY("me_setTime_inf", F(fmi3SetTime)(c, INFINITY));
+        SAY("me_setTime_1e300", F(fmi3SetTime)(c, 1e300));
+        SAY("me_derivatives_at_1e300", F(fmi3GetContinuousStateDerivatives)(c, bad3, 3));
+        printf("value me_dx_1e300_finite %d\n", isfinite(bad3[0]) && isfinite(bad3[1]) && isfinite(bad3[2]));
+        SAY("me_setTime_back", F(fmi3SetTime)(c, 0.0));
+        SAY("me_set_lambda_ct", F(fmi3SetFloat64)(c, &vlam, 1, (v[0] = 5.0, v), 1));
+        SAY("me_enterEventMode", F(fmi3EnterEventMode)(c));
+        SAY("me_set_lambda_event", F(fmi3SetFloat64)(c, &vlam, 1, (v[0] = 5.0, v), 1));
+        SAY("me_set_lambda_nan_event", F(fmi3SetFloat64)(c, &vlam, 1, (v[0] = NAN, v), 1));
+        SAY("me_updateDiscreteStates_after_nan", F(fmi3UpdateDiscreteStates)(c, b, b, b, b, b, v));
+        SAY("me_enterCT_after_nan", F(fmi3EnterContinuousTimeMode)(c));
+        SAY("me_derivatives_after_nan", F(fmi3GetContinuousStateDerivatives)(c, bad3, 3));
+        printf("value me_dx_after_nan_finite %d\n", isfinite(bad3[0]) && isfinite(bad3[1]) && isfinite(bad3[2]));
+        F(fmi3FreeInstance)(c);
+    } else if (!strcmp(sc, "reset_everywhere")) {
+        /* fmi3Reset from each state, then a full run: the same numbers as a fresh instance */
+        double ref, y;
+        d = inited(cs("ref"));
+        step(d, 0.0, 0.1);
+        F(fmi3GetFloat64)(d, &vy, 1, &ref, 1);
+        for (i = 0; i < 5; i++) {
+            char label[32];
+            c = cs("r");
+            if (i >= 1) F(fmi3EnterInitializationMode)(c, fmi3False, 0.0, 1.0, fmi3True, 1.05);
+            if (i >= 1) F(fmi3SetFloat64)(c, &vlam, 1, (v[0] = 9.0, v), 1);
+            if (i >= 2) F(fmi3ExitInitializationMode)(c);
+            if (i >= 3) F(fmi3DoStep)(c, 1.0, 0.1, 0, &ev, &term, &early, &last); /* past stop: refused */
+            if (i >= 4) F(fmi3Terminate)(c);
+            snprintf(label, sizeof label, "reset_%lu", (unsigned long)i);
+            SAY(label, F(fmi3Reset)(c));
+            F(fmi3EnterInitializationMode)(c, fmi3False, 0.0, 0.0, fmi3False, 0.0);
+            F(fmi3ExitInitializationMode)(c);
+            snprintf(label, sizeof label, "step_after_reset_%lu", (unsigned long)i);
+            SAY(label, step(c, 0.0, 0.1));
+            F(fmi3GetFloat64)(c, &vy, 1, &y, 1);
+            snprintf(label, sizeof label, "dy_%lu", (unsigned long)i);
+            VAL(label, y - ref);
+            F(fmi3FreeInstance)(c);
+        }
+        F(fmi3FreeInstance)(d);
     } else if (!strcmp(sc, "freed_state")) {
         c = inited(cs("a"));
         F(fmi3GetFMUState)(c, &st);
