@@ -247,6 +247,8 @@ int main(int argc, char **argv) {
             F(fmi3GetFloat64)(c, &vtime, 1, v + 1, 1);
             printf("value %s_y %.17g\nvalue %s_t %.17g\n", hn[i], v[0], hn[i], v[1]);
         }
+        SAY("step_after_terminal", step(c, 5e-324, 0.1)); /* the failure was the step size: a sane step succeeds */
+        printf("value step_after_terminal_term %d\nvalue step_after_terminal_last %.17g\n", (int)term, last);
         F(fmi3FreeInstance)(c);
         c = inited(cs("b"));
         SAY("t_nan", step(c, NAN, 0.1));
