@@ -460,6 +460,22 @@ int main(int argc, char **argv) {
             F(fmi3FreeInstance)(c);
         }
         F(fmi3FreeInstance)(d);
+    } else if (!strcmp(sc, "me_consistency")) {
+        /* after fmi3SetTime and fmi3SetContinuousStates, y, der(y) and time read by fmi3GetFloat64 are those of the
+         * states and time just set, and equal fmi3GetContinuousStateDerivatives */
+        fmi3Float64 xs[3] = {0.7, -0.2, 0.05}, dx[3], got[3];
+        fmi3ValueReference three[3] = {4, 8, 15};
+        c = inited(me("m"));
+        F(fmi3UpdateDiscreteStates)(c, b, b, b, b, b, v);
+        F(fmi3EnterContinuousTimeMode)(c);
+        SAY("setTime", F(fmi3SetTime)(c, 0.37));
+        SAY("setStates", F(fmi3SetContinuousStates)(c, xs, 3));
+        SAY("getDerivatives", F(fmi3GetContinuousStateDerivatives)(c, dx, 3));
+        SAY("getFloat64", F(fmi3GetFloat64)(c, three, 3, got, 3));
+        VAL("y_minus_x0", got[0] - xs[0]);
+        VAL("dery_minus_dx0", got[1] - dx[0]);
+        VAL("time", got[2]);
+        F(fmi3FreeInstance)(c);
     } else if (!strcmp(sc, "freed_state")) {
         c = inited(cs("a"));
         F(fmi3GetFMUState)(c, &st);

@@ -319,6 +319,13 @@ def test_fmpy_master_hostile_name_types_reset_and_foreign_states(fmus):
     assert len(out["logs"]) == 7 and "GUID hash differ" in out["logs"][3]
 
 
+def test_model_exchange_getters_follow_set_time_and_states(fmus):
+    rc, text, st, logs, v, _ = attack(fmus, "me_consistency")
+    clean(rc, text)
+    assert all(x == OK for x in st.values()) and len(st) == 4 and logs == []
+    assert v["y_minus_x0"] == 0.0 and v["dery_minus_dx0"] == 0.0 and v["time"] == 0.37
+
+
 # ---- findings: these fail until the FMU is fixed --------------------------------------------------
 
 def test_set_fmu_state_with_a_freed_state_is_refused(fmus):
