@@ -476,6 +476,33 @@ int main(int argc, char **argv) {
         VAL("dery_minus_dx0", got[1] - dx[0]);
         VAL("time", got[2]);
         F(fmi3FreeInstance)(c);
+    } else if (!strcmp(sc, "input")) {
+        /* examples/specs/path_input.toml: input p 4, output y 5 */
+        static const double ps[] = {NAN, INFINITY, -INFINITY, 1e308};
+        static const char *pn[] = {"p_nan", "p_inf", "p_minf", "p_1e308"};
+        fmi3ValueReference vp = 4, vyi = 5;
+        for (i = 0; i < 4; i++) {
+            char label[48];
+            double t0 = 0.1, y;
+            c = inited(cs("a"));
+            F(fmi3SetFloat64)(c, &vp, 1, (v[0] = 0.5, v), 1);
+            step(c, 0.0, 0.1);
+            snprintf(label, sizeof label, "%s_set", pn[i]);
+            SAY(label, F(fmi3SetFloat64)(c, &vp, 1, ps + i, 1));
+            snprintf(label, sizeof label, "%s_step", pn[i]);
+            SAY(label, step(c, t0, 0.1));
+            F(fmi3GetFloat64)(c, &vyi, 1, &y, 1);
+            snprintf(label, sizeof label, "%s_y_finite", pn[i]);
+            VAL(label, isfinite(y) ? 1 : 0);
+            snprintf(label, sizeof label, "%s_recover", pn[i]);
+            F(fmi3SetFloat64)(c, &vp, 1, (v[0] = 0.5, v), 1);
+            SAY(label, step(c, last, 0.1));
+            F(fmi3FreeInstance)(c);
+        }
+        c = inited(cs("b"));
+        F(fmi3Terminate)(c);
+        SAY("set_input_terminated", F(fmi3SetFloat64)(c, &vp, 1, (v[0] = 0.5, v), 1));
+        F(fmi3FreeInstance)(c);
     } else if (!strcmp(sc, "freed_state")) {
         c = inited(cs("a"));
         F(fmi3GetFMUState)(c, &st);

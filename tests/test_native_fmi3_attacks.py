@@ -53,9 +53,9 @@ def fmus(tmp_path_factory):
     return info
 
 
-def attack(fmus, scenario, other=None):
+def attack(fmus, scenario, other=None, main="pp"):
     extra = [fmus[other]["lib"], fmus[other]["token"]] if other else []
-    proc = subprocess.run([fmus["master"], fmus["pp"]["lib"], fmus["pp"]["token"], scenario, *extra],
+    proc = subprocess.run([fmus["master"], fmus[main]["lib"], fmus[main]["token"], scenario, *extra],
                           capture_output=True, text=True, timeout=120,
                           env={"ASAN_OPTIONS": "detect_leaks=1", "UBSAN_OPTIONS": "halt_on_error=1",
                                "PATH": "/usr/bin:/bin"})
@@ -324,6 +324,19 @@ def test_model_exchange_getters_follow_set_time_and_states(fmus):
     clean(rc, text)
     assert all(x == OK for x in st.values()) and len(st) == 4 and logs == []
     assert v["y_minus_x0"] == 0.0 and v["dery_minus_dx0"] == 0.0 and v["time"] == 0.37
+
+
+def test_non_finite_and_huge_inputs_are_refused_or_discarded(fmus):
+    """path_input.toml's input p: NaN/inf refused (the step after is discarded), 1e308 accepted and the step that
+    meets its non-finite derivative discarded; a valid p then steps again. y stays finite throughout."""
+    rc, text, st, logs, v, _ = attack(fmus, "input", main="pi")
+    clean(rc, text)
+    for name in ("p_nan", "p_inf", "p_minf"):
+        assert (st[name + "_set"], st[name + "_step"], st[name + "_recover"]) == (ERROR, DISCARD, OK)
+    assert (st["p_1e308_set"], st["p_1e308_step"], st["p_1e308_recover"]) == (OK, DISCARD, OK)
+    assert all(v[n + "_y_finite"] == 1 for n in ("p_nan", "p_inf", "p_minf", "p_1e308"))
+    assert st["set_input_terminated"] == ERROR
+    assert any("the forcing (derivative 0 of f_3) is not finite" in m for m in logs)
 
 
 # ---- findings: these fail until the FMU is fixed --------------------------------------------------
