@@ -503,6 +503,19 @@ int main(int argc, char **argv) {
         F(fmi3Terminate)(c);
         SAY("set_input_terminated", F(fmi3SetFloat64)(c, &vp, 1, (v[0] = 0.5, v), 1));
         F(fmi3FreeInstance)(c);
+    } else if (!strcmp(sc, "huge_time")) {
+        /* start time 1e17: t + h with h = 1 rounds back to t (the spacing of doubles there is 16) */
+        double t1 = 1e17, y;
+        c = cs("a");
+        SAY("enter_1e17", F(fmi3EnterInitializationMode)(c, fmi3False, 0.0, t1, fmi3False, 0.0));
+        F(fmi3ExitInitializationMode)(c);
+        F(fmi3GetFloat64)(c, &vy, 1, &y, 1);
+        SAY("step_absorbed", step(c, t1, 1.0));
+        VAL("last_minus_start", last - t1);
+        F(fmi3GetFloat64)(c, &vy, 1, v, 1);
+        VAL("y_changed", v[0] != y);
+        SAY("step_1e300_time", step(c, last, 1e292));
+        F(fmi3FreeInstance)(c);
     } else if (!strcmp(sc, "freed_state")) {
         c = inited(cs("a"));
         F(fmi3GetFMUState)(c, &st);

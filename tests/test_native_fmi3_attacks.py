@@ -389,3 +389,16 @@ def test_set_continuous_states_in_event_mode_is_refused(fmus):
     clean(rc, text)
     assert st["me_setContinuousStates_event_mode"] == ERROR
     assert any(m.startswith("3 fmi3SetContinuousStates") for m in logs), logs
+
+
+def test_step_below_the_time_resolution_is_refused(fmus):
+    # start time 1e17 (spacing of doubles 16), fmi3DoStep(1e17, 1.0): t + h == t, yet the step returns fmi3OK and
+    # advances the state by h = 1 while the FMU time stays 1e17; the next step starts from the same t, so the forcing
+    # is evaluated at a frozen time (silent wrong values with fmi3OK). It must be refused (fmi3Error or fmi3Discard
+    # with a reason), leaving the state as it was
+    rc, text, st, logs, v, _ = attack(fmus, "huge_time")
+    clean(rc, text)
+    assert st["enter_1e17"] == OK
+    assert st["step_absorbed"] in (ERROR, DISCARD), text
+    assert v["y_changed"] == 0 and v["last_minus_start"] == 0.0
+    assert any("fmi3DoStep" in m and "1e+17" in m for m in logs[:1]), logs
