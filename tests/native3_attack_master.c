@@ -81,12 +81,14 @@ int main(int argc, char **argv) {
     if (argc >= 6) { lib2 = dlopen(argv[4], RTLD_NOW | RTLD_LOCAL); token2 = argv[5]; if (!lib2) return 2; }
 
     if (!strcmp(sc, "instantiate")) {
-        printf("null_logger_wrong_token %s\n", F(fmi3InstantiateCoSimulation)("a", "{x}", NULL, 0, 0, 0, 0, NULL, 0, NULL,
-               NULL, NULL) ? "non-null" : "null");
+        printf("null_logger_wrong_token %s\n",
+               F(fmi3InstantiateCoSimulation)("a", "{x}", NULL, 0, 0, 0, 0, NULL, 0, NULL, NULL, NULL) ? "non-null" : "null");
         printf("null_name %s\n", F(fmi3InstantiateCoSimulation)(NULL, token, NULL, 0, 0, 0, 0, NULL, 0, NULL, logger,
                NULL) ? "non-null" : "null");
-        printf("null_token %s\n", F(fmi3InstantiateModelExchange)("a", NULL, NULL, 0, 0, NULL, logger) ? "non-null" : "null");
-        printf("empty_token %s\n", F(fmi3InstantiateModelExchange)("a", "", NULL, 0, 0, NULL, logger) ? "non-null" : "null");
+        printf("null_token %s\n", F(fmi3InstantiateModelExchange)("a", NULL, NULL, 0, 0, NULL, logger) ? "non-null"
+                                                                                                      : "null");
+        printf("empty_token %s\n", F(fmi3InstantiateModelExchange)("a", "", NULL, 0, 0, NULL, logger) ? "non-null"
+                                                                                                     : "null");
         printf("required_null_array %s\n", F(fmi3InstantiateCoSimulation)("a", token, NULL, 0, 0, 0, 0, NULL, 3, NULL,
                logger, NULL) ? "non-null" : "null");
         c = F(fmi3InstantiateCoSimulation)("%s%n%s%n", token, NULL, 0, fmi3True, 0, 0, NULL, 0, NULL, NULL, NULL);
@@ -272,7 +274,8 @@ int main(int argc, char **argv) {
         F(fmi3FreeInstance)(c);
     } else if (!strcmp(sc, "lambda")) {
         static const double lams[] = {NAN, -1.0, 0.0, INFINITY, 1e300, 1e12, 2.0, 1e6};
-        static const char *ln[] = {"lam_nan", "lam_neg", "lam_zero", "lam_inf", "lam_1e300", "lam_1e12", "lam_2", "lam_1e6"};
+        static const char *ln[] = {"lam_nan", "lam_neg", "lam_zero", "lam_inf", "lam_1e300", "lam_1e12", "lam_2",
+                                   "lam_1e6"};
         for (i = 0; i < sizeof lams / sizeof lams[0]; i++) {
             char label[64];
             c = inited(cs("a"));
@@ -345,13 +348,15 @@ int main(int argc, char **argv) {
                 void *(*inst2)(const char *, int, const char *, const char *, const Callbacks2 *, int, int) =
                     (void *(*)(const char *, int, const char *, const char *, const Callbacks2 *, int, int))
                     sym(lib2, "fmi2Instantiate");
-                int (*setup)(void *, int, double, double, int, double) = (int (*)(void *, int, double, double, int, double))
-                    sym(lib2, "fmi2SetupExperiment");
+                int (*setup)(void *, int, double, double, int, double) =
+                    (int (*)(void *, int, double, double, int, double))sym(lib2, "fmi2SetupExperiment");
                 int (*enter)(void *) = (int (*)(void *))sym(lib2, "fmi2EnterInitializationMode");
                 int (*exit_)(void *) = (int (*)(void *))sym(lib2, "fmi2ExitInitializationMode");
                 int (*get)(void *, void **) = (int (*)(void *, void **))sym(lib2, "fmi2GetFMUstate");
-                int (*sz)(void *, void *, size_t *) = (int (*)(void *, void *, size_t *))sym(lib2, "fmi2SerializedFMUstateSize");
-                int (*ser)(void *, void *, char *, size_t) = (int (*)(void *, void *, char *, size_t))sym(lib2, "fmi2SerializeFMUstate");
+                int (*sz)(void *, void *, size_t *) =
+                    (int (*)(void *, void *, size_t *))sym(lib2, "fmi2SerializedFMUstateSize");
+                int (*ser)(void *, void *, char *, size_t) =
+                    (int (*)(void *, void *, char *, size_t))sym(lib2, "fmi2SerializeFMUstate");
                 int (*fst)(void *, void **) = (int (*)(void *, void **))sym(lib2, "fmi2FreeFMUstate");
                 void (*fin)(void *) = (void (*)(void *))sym(lib2, "fmi2FreeInstance");
                 void *s2 = NULL;
@@ -543,11 +548,12 @@ int main(int argc, char **argv) {
         }
         for (i = 0; i < 200; i += 2) {
             step(all[i + 1], 0.0, 0.01);
-            F(fmi3GetFMUState)(all[i + 1], &st); /* left to fmi3FreeInstance? no: the host frees its states */
+            F(fmi3GetFMUState)(all[i + 1], &st); /* the host frees its states */
             F(fmi3FreeFMUState)(all[i + 1], &st);
         }
-        for (i = 0; i < 100; i++) if (F(fmi3InstantiateCoSimulation)("x", "{bad}", NULL, 0, 0, 0, 0, NULL, 0, NULL, NULL, NULL))
-            printf("bad token accepted\n");
+        for (i = 0; i < 100; i++)
+            if (F(fmi3InstantiateCoSimulation)("x", "{bad}", NULL, 0, 0, 0, 0, NULL, 0, NULL, NULL, NULL))
+                printf("bad token accepted\n");
         for (i = 0; i < 200; i++) { F(fmi3Terminate)(all[i]); F(fmi3FreeInstance)(all[i]); }
         printf("many done\n");
     } else {
