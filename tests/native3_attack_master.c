@@ -82,7 +82,8 @@ int main(int argc, char **argv) {
 
     if (!strcmp(sc, "instantiate")) {
         printf("null_logger_wrong_token %s\n",
-               F(fmi3InstantiateCoSimulation)("a", "{x}", NULL, 0, 0, 0, 0, NULL, 0, NULL, NULL, NULL) ? "non-null" : "null");
+               F(fmi3InstantiateCoSimulation)("a", "{x}", NULL, 0, 0, 0, 0, NULL, 0, NULL, NULL, NULL) ? "non-null"
+                                                                                                     : "null");
         printf("null_name %s\n", F(fmi3InstantiateCoSimulation)(NULL, token, NULL, 0, 0, 0, 0, NULL, 0, NULL, logger,
                NULL) ? "non-null" : "null");
         printf("null_token %s\n", F(fmi3InstantiateModelExchange)("a", NULL, NULL, 0, 0, NULL, logger) ? "non-null"
