@@ -541,8 +541,8 @@ fmi3Status fmi3EnterStepMode(fmi3Instance instance) {
 fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                     const fmi3Int32 orders[], fmi3Float64 values[], size_t nValues) {
     Instance *c = (Instance *)instance;
-    if (!allowed(c, "fmi3GetOutputDerivatives", ANY_ALIVE) || !scalar_sizes(c, "fmi3GetOutputDerivatives", nvr, nValues))
-        return fmi3Error;
+    if (!allowed(c, "fmi3GetOutputDerivatives", ANY_ALIVE) || wrong_type(c, "fmi3GetOutputDerivatives", fmi2CoSimulation)
+        || !scalar_sizes(c, "fmi3GetOutputDerivatives", nvr, nValues)) return fmi3Error;
     return status3(fmi2GetRealOutputDerivatives(c, vr, nvr, (const fmi2Integer *)orders, values));
 }
 
@@ -554,7 +554,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
                       fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
     Instance *c = (Instance *)instance;
     fmi2Status s;
-    if (!allowed(c, "fmi3DoStep", ANY_ALIVE)) return fmi3Error;
+    if (!allowed(c, "fmi3DoStep", ANY_ALIVE) || wrong_type(c, "fmi3DoStep", fmi2CoSimulation)) return fmi3Error;
     if (nullargs(c, "fmi3DoStep", eventHandlingNeeded, "eventHandlingNeeded", terminateSimulation, "terminateSimulation")
         || nullargs(c, "fmi3DoStep", earlyReturn, "earlyReturn", lastSuccessfulTime, "lastSuccessfulTime"))
         return fmi3Error;
