@@ -453,7 +453,19 @@ int main(int argc, char **argv) {
         printf("moved %.17g %.17g\n", r - t0, y1 - y0);
         SAY("step_resolved", F(fmi2DoStep)(c, t0, 32.0, fmi2True));
         F(fmi2GetRealStatus)(c, fmi2LastSuccessfulTime, &r);
-        printf("after %.17g\n", r - t0);
+        printf("after t %.17g\n", r - t0);
+        F(fmi2FreeInstance)(c);
+    } else if (!strcmp(sc, "me_states_event_mode")) {
+        /* fmi2SetContinuousStates belongs to Continuous-Time Mode (FMI 2.0 state machine of Model Exchange) */
+        fmi2EventInfo info;
+        double x[3] = {0.7, -0.2, 0.05}, got[3];
+        c = inited("me", fmi2ModelExchange);
+        SAY("setContinuousStates_event_mode", F(fmi2SetContinuousStates)(c, x, 3));
+        F(fmi2NewDiscreteStates)(c, &info);
+        F(fmi2EnterContinuousTimeMode)(c);
+        SAY("setContinuousStates_ct_mode", F(fmi2SetContinuousStates)(c, x, 3));
+        F(fmi2GetContinuousStates)(c, got, 3);
+        printf("states %.17g %.17g %.17g\n", got[0], got[1], got[2]);
         F(fmi2FreeInstance)(c);
     } else if (!strcmp(sc, "free_twice")) {
         c = inited("a", fmi2CoSimulation);

@@ -353,4 +353,14 @@ def test_step_below_the_time_resolution_is_refused(fmus):
     assert rc == 0 and "Sanitizer" not in text, text[-3000:]
     assert st["step_absorbed"] == ERROR and any("below the time resolution" in m for m in logs), text
     assert lines["moved"] == ["0", "0"]  # neither time nor state moved
-    assert st["step_resolved"] == 0 and lines["after"] == ["32"]  # a step the time can represent still works
+    assert st["step_resolved"] == 0 and lines["after"] == ["t", "32"]  # a step the time can represent still works
+
+
+def test_set_continuous_states_in_event_mode_is_refused(fmus):
+    # fmi2SetContinuousStates is a Continuous-Time Mode function (FMI 2.0 Model Exchange state machine); in Event Mode
+    # right after fmi2ExitInitializationMode it returned fmi2OK and overwrote the states
+    rc, text, st, logs, lines = attack(fmus, "path3", "me_states_event_mode")
+    assert rc == 0 and "Sanitizer" not in text, text[-3000:]
+    assert st == {"setContinuousStates_event_mode": ERROR, "setContinuousStates_ct_mode": 0}, text
+    assert len(logs) == 1 and "fmi2SetContinuousStates: not allowed" in logs[0], logs
+    assert [float(v) for v in lines["states"]] == [0.7, -0.2, 0.05]
