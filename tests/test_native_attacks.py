@@ -342,7 +342,8 @@ def test_fmu_state_used_after_free_is_refused(fmus):
     rc, text, st, logs, _ = attack(fmus, "path3", "freed_state")
     assert rc == 0 and "Sanitizer" not in text, text[-3000:]
     assert st == {"freeFMUstate": 0, "setFMUstate_freed": ERROR, "freeFMUstate_freed": ERROR,
-                  "getFMUstate_into_freed": ERROR, "getFMUstate_new": 0, "setFMUstate_new": 0, "freeFMUstate_new": 0}, text
+                  "getFMUstate_into_freed": ERROR, "getFMUstate_new": 0, "setFMUstate_new": 0,
+                  "freeFMUstate_new": 0}, text
     assert len(logs) == 3 and all("freed" in m for m in logs), logs
 
 

@@ -541,7 +541,8 @@ fmi3Status fmi3EnterStepMode(fmi3Instance instance) {
 fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                     const fmi3Int32 orders[], fmi3Float64 values[], size_t nValues) {
     Instance *c = (Instance *)instance;
-    if (!allowed(c, "fmi3GetOutputDerivatives", ANY_ALIVE) || wrong_type(c, "fmi3GetOutputDerivatives", fmi2CoSimulation)
+    if (!allowed(c, "fmi3GetOutputDerivatives", ANY_ALIVE)
+        || wrong_type(c, "fmi3GetOutputDerivatives", fmi2CoSimulation)
         || !scalar_sizes(c, "fmi3GetOutputDerivatives", nvr, nValues)) return fmi3Error;
     return status3(fmi2GetRealOutputDerivatives(c, vr, nvr, (const fmi2Integer *)orders, values));
 }
