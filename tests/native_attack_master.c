@@ -423,6 +423,50 @@ int main(int argc, char **argv) {
         F(fmi2GetReal)(c, xvr, 3, v);
         printf("x %.17g %.17g %.17g t %.17g\n", v[0], v[1], v[2], r);
         F(fmi2FreeInstance)(c);
+    } else if (!strcmp(sc, "freed_state")) {
+        /* fmi2SetFMUstate / fmi2FreeFMUstate / fmi2GetFMUstate with a copy of a handle already freed */
+        fmi2FMUstate st = NULL, st2, st3 = NULL;
+        c = inited("a", fmi2CoSimulation);
+        F(fmi2GetFMUstate)(c, &st);
+        st2 = st;
+        SAY("freeFMUstate", F(fmi2FreeFMUstate)(c, &st));
+        SAY("setFMUstate_freed", F(fmi2SetFMUstate)(c, st2));
+        SAY("freeFMUstate_freed", F(fmi2FreeFMUstate)(c, &st2));
+        st3 = st2;
+        SAY("getFMUstate_into_freed", F(fmi2GetFMUstate)(c, &st3));
+        st3 = NULL;
+        SAY("getFMUstate_new", F(fmi2GetFMUstate)(c, &st3));
+        SAY("setFMUstate_new", F(fmi2SetFMUstate)(c, st3));
+        SAY("freeFMUstate_new", F(fmi2FreeFMUstate)(c, &st3));
+        F(fmi2FreeInstance)(c);
+    } else if (!strcmp(sc, "huge_time")) {
+        /* start time 1e17: the spacing of doubles there is 16, so t + h == t for h = 1 */
+        double t0 = 1e17, r, y0, y1;
+        c = inst("a", fmi2CoSimulation);
+        F(fmi2SetupExperiment)(c, fmi2False, 0.0, t0, fmi2False, 0.0);
+        F(fmi2EnterInitializationMode)(c);
+        F(fmi2ExitInitializationMode)(c);
+        F(fmi2GetReal)(c, xvr, 1, &y0);
+        SAY("step_absorbed", F(fmi2DoStep)(c, t0, 1.0, fmi2True));
+        F(fmi2GetRealStatus)(c, fmi2LastSuccessfulTime, &r);
+        F(fmi2GetReal)(c, xvr, 1, &y1);
+        printf("moved %.17g %.17g\n", r - t0, y1 - y0);
+        SAY("step_resolved", F(fmi2DoStep)(c, t0, 32.0, fmi2True));
+        F(fmi2GetRealStatus)(c, fmi2LastSuccessfulTime, &r);
+        printf("after t %.17g\n", r - t0);
+        F(fmi2FreeInstance)(c);
+    } else if (!strcmp(sc, "me_states_event_mode")) {
+        /* fmi2SetContinuousStates belongs to Continuous-Time Mode (FMI 2.0 state machine of Model Exchange) */
+        fmi2EventInfo info;
+        double x[3] = {0.7, -0.2, 0.05}, got[3];
+        c = inited("me", fmi2ModelExchange);
+        SAY("setContinuousStates_event_mode", F(fmi2SetContinuousStates)(c, x, 3));
+        F(fmi2NewDiscreteStates)(c, &info);
+        F(fmi2EnterContinuousTimeMode)(c);
+        SAY("setContinuousStates_ct_mode", F(fmi2SetContinuousStates)(c, x, 3));
+        F(fmi2GetContinuousStates)(c, got, 3);
+        printf("states %.17g %.17g %.17g\n", got[0], got[1], got[2]);
+        F(fmi2FreeInstance)(c);
     } else if (!strcmp(sc, "free_twice")) {
         c = inited("a", fmi2CoSimulation);
         F(fmi2FreeInstance)(c);

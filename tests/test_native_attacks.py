@@ -334,3 +334,34 @@ def test_discard_for_good_reports_terminated(tmp_path, forcing, start, end):
     assert r["seconds"] < budget / 2 and r["log_lines"] < 20, r
     assert abs(r["end"] - end) < 1e-12, r
     assert "discarded" in r["logs"][0] and "fmi2Terminated is now true" in r["logs"][-1], r
+
+
+def test_fmu_state_used_after_free_is_refused(fmus):
+    # fmi2SetFMUstate(c, s) after fmi2FreeFMUstate(c, &s) on a copy of s read the freed block (heap-use-after-free
+    # under ASan; without ASan a block whose bytes survived was restored with fmi2OK); a second free freed it twice
+    rc, text, st, logs, _ = attack(fmus, "path3", "freed_state")
+    assert rc == 0 and "Sanitizer" not in text, text[-3000:]
+    assert st == {"freeFMUstate": 0, "setFMUstate_freed": ERROR, "freeFMUstate_freed": ERROR,
+                  "getFMUstate_into_freed": ERROR, "getFMUstate_new": 0, "setFMUstate_new": 0,
+                  "freeFMUstate_new": 0}, text
+    assert len(logs) == 3 and all("freed" in m for m in logs), logs
+
+
+def test_step_below_the_time_resolution_is_refused(fmus):
+    # at t = 1e17 (spacing of doubles 16) fmi2DoStep(t, 1.0) returned fmi2OK and moved the state by h = 1 while the
+    # FMU time stayed 1e17 (t + h == t): the forcing was evaluated at a frozen time
+    rc, text, st, logs, lines = attack(fmus, "path3", "huge_time")
+    assert rc == 0 and "Sanitizer" not in text, text[-3000:]
+    assert st["step_absorbed"] == ERROR and any("below the time resolution" in m for m in logs), text
+    assert lines["moved"] == ["0", "0"]  # neither time nor state moved
+    assert st["step_resolved"] == 0 and lines["after"] == ["t", "32"]  # a step the time can represent still works
+
+
+def test_set_continuous_states_in_event_mode_is_refused(fmus):
+    # fmi2SetContinuousStates is a Continuous-Time Mode function (FMI 2.0 Model Exchange state machine); in Event Mode
+    # right after fmi2ExitInitializationMode it returned fmi2OK and overwrote the states
+    rc, text, st, logs, lines = attack(fmus, "path3", "me_states_event_mode")
+    assert rc == 0 and "Sanitizer" not in text, text[-3000:]
+    assert st == {"setContinuousStates_event_mode": ERROR, "setContinuousStates_ct_mode": 0}, text
+    assert len(logs) == 1 and "fmi2SetContinuousStates: not allowed" in logs[0], logs
+    assert [float(v) for v in lines["states"]] == [0.7, -0.2, 0.05]

@@ -157,6 +157,11 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
                "fmi2SetupExperiment", t, t + h, c->s.t_stop);
         return fmi2Error;
     }
+    if (h > 0.0 && t + h == t) { /* the FMU time cannot advance: the state would move on at a frozen time */
+        logmsg(c, fmi2Error, "fmi2DoStep: the step h = %g from t = %.17g is below the time resolution there "
+               "(t + h == t in double precision); take larger steps or a smaller start time", h, t);
+        return fmi2Error;
+    }
     bad = first_invalid(c);
     if (bad >= 0) {
         logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: value reference %d was set to an invalid value", t, bad);

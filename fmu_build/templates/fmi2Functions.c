@@ -93,6 +93,11 @@ void fmi2FreeInstance(fmi2Component comp) {
     fmi2CallbackFreeMemory release;
     if (c == NULL) return;
     release = c->cb.freeMemory;
+    while (c->retired != NULL) {
+        StateBlock *b = c->retired;
+        c->retired = b->next;
+        release(b);
+    }
     release(c->instanceName);
     release(c);
 }

@@ -51,27 +51,38 @@ static const char *const NAMES3[][2] = {
     {"fmi2Instantiate", "fmi3Instantiate"},
 };
 
+/* the core's message with every FMI 2.0 function named by its FMI 3.0 counterpart */
+static void to_fmi3(const char *raw, char *text, size_t size) {
+    size_t n = 0, k;
+    while (*raw != '\0' && n + 1 < size) {
+        const char *to = NULL;
+        size_t len = 0;
+        if (strncmp(raw, "fmi2", 4) != 0) { text[n++] = *raw++; continue; }
+        for (k = 0; k < sizeof NAMES3 / sizeof NAMES3[0] && to == NULL; k++) {
+            len = strlen(NAMES3[k][0]);
+            if (strncmp(raw, NAMES3[k][0], len) == 0) to = NAMES3[k][1];
+        }
+        if (to == NULL) { to = "fmi3"; len = 4; } /* fmi2DoStep -> fmi3DoStep, ... */
+        for (; *to != '\0' && n + 1 < size; to++) text[n++] = *to;
+        raw += len;
+    }
+    text[n] = '\0';
+}
+
 static void forward_log(fmi2ComponentEnvironment env, fmi2String instanceName, fmi2Status status, fmi2String category,
                         fmi2String message, ...) {
     const Host3 *host = (const Host3 *)env;
     char raw[512], text[600];
-    const char *rest = raw, *name = "";
     char *p;
-    size_t k;
     va_list ap;
     (void)instanceName;
     if (host == NULL || host->log == NULL) return;
     va_start(ap, message);
     vsnprintf(raw, sizeof raw, message, ap);
     va_end(ap);
-    for (k = 0; k < sizeof NAMES3 / sizeof NAMES3[0]; k++) {
-        const size_t len = strlen(NAMES3[k][0]);
-        if (strncmp(raw, NAMES3[k][0], len) == 0) { name = NAMES3[k][1]; rest = raw + len; break; }
-    }
-    snprintf(text, sizeof text, "%s%s", name, rest);
-    if (name[0] == '\0' && strncmp(text, "fmi2", 4) == 0) text[3] = '3'; /* fmi2DoStep -> fmi3DoStep, ... */
+    to_fmi3(raw, text, sizeof text);
     for (p = strstr(text, "FMI 2.0"); p != NULL; p = strstr(p, "FMI 2.0")) p[4] = '3';
-    p = strstr(text, "fmi2Terminated is now true"); /* FMI 3.0 says it through fmi3DoStep's terminateSimulation */
+    p = strstr(text, "fmi3Terminated is now true"); /* FMI 3.0 says it through fmi3DoStep's terminateSimulation */
     if (p != NULL) snprintf(p, sizeof text - (size_t)(p - text), "terminateSimulation is now true");
     host->log(host->env, (fmi3Status)status, category, text);
 }
@@ -98,9 +109,22 @@ const char *fmi3GetVersion(void) { return fmi3Version; }
 
 static fmi3Instance instantiate(fmi3String instanceName, fmi2Type type, fmi3String token, fmi3Boolean loggingOn,
                                 fmi3InstanceEnvironment instanceEnvironment, fmi3LogMessageCallback logMessage) {
-    Host3 *host = (Host3 *)calloc(1, sizeof(Host3));
+    Host3 *host;
     fmi2CallbackFunctions cb;
     Instance *c;
+    const char *f = type == fmi2ModelExchange ? "fmi3InstantiateModelExchange" : "fmi3InstantiateCoSimulation";
+    char text[600];
+    text[0] = '\0';
+    if (instanceName == NULL || instanceName[0] == '\0')
+        snprintf(text, sizeof text, "%s: instanceName must be a non-empty string", f);
+    else if (token == NULL || strcmp(token, INSTANTIATION_TOKEN) != 0)
+        snprintf(text, sizeof text, "%s: instantiationToken %s does not match this FMU (%s)", f,
+                 token != NULL ? token : "(null)", INSTANTIATION_TOKEN);
+    if (text[0] != '\0') {
+        if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError", text);
+        return NULL;
+    }
+    host = (Host3 *)calloc(1, sizeof(Host3));
     if (host == NULL) return NULL;
     host->env = instanceEnvironment;
     host->log = logMessage;
@@ -517,8 +541,9 @@ fmi3Status fmi3EnterStepMode(fmi3Instance instance) {
 fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                     const fmi3Int32 orders[], fmi3Float64 values[], size_t nValues) {
     Instance *c = (Instance *)instance;
-    if (!allowed(c, "fmi3GetOutputDerivatives", ANY_ALIVE) || !scalar_sizes(c, "fmi3GetOutputDerivatives", nvr, nValues))
-        return fmi3Error;
+    if (!allowed(c, "fmi3GetOutputDerivatives", ANY_ALIVE)
+        || wrong_type(c, "fmi3GetOutputDerivatives", fmi2CoSimulation)
+        || !scalar_sizes(c, "fmi3GetOutputDerivatives", nvr, nValues)) return fmi3Error;
     return status3(fmi2GetRealOutputDerivatives(c, vr, nvr, (const fmi2Integer *)orders, values));
 }
 
@@ -530,7 +555,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
                       fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
     Instance *c = (Instance *)instance;
     fmi2Status s;
-    if (!allowed(c, "fmi3DoStep", ANY_ALIVE)) return fmi3Error;
+    if (!allowed(c, "fmi3DoStep", ANY_ALIVE) || wrong_type(c, "fmi3DoStep", fmi2CoSimulation)) return fmi3Error;
     if (nullargs(c, "fmi3DoStep", eventHandlingNeeded, "eventHandlingNeeded", terminateSimulation, "terminateSimulation")
         || nullargs(c, "fmi3DoStep", earlyReturn, "earlyReturn", lastSuccessfulTime, "lastSuccessfulTime"))
         return fmi3Error;

@@ -15,6 +15,7 @@ static int is_flag(int v) { return v == 0 || v == 1; }
 /* every field within its domain; the reason of a refusal in *why */
 static int state_valid(const State *s, int type, const char **why) {
     int i, k, one_phase = 0;
+    if (s->magic == STATE_FREED) { *why = "it was freed by fmi2FreeFMUstate"; return 0; }
     if (!state_header_ok(s)) { *why = "magic number, size or GUID hash differ (another FMU's state?)"; return 0; }
     if (s->type != type) {
         *why = type == fmi2ModelExchange ? "it is a Co-Simulation state, this is a Model Exchange instance"
@@ -54,23 +55,31 @@ static unsigned int state_checksum(const unsigned char *b) {
     return (unsigned int)(h ^ (h >> 32));
 }
 
+/* a block for a new state: a retired one if there is, else fresh memory; NULL (logged) when out of memory */
+static State *new_state(Instance *c, const char *f) {
+    StateBlock *b = c->retired;
+    if (b != NULL) c->retired = b->next;
+    else b = (StateBlock *)c->cb.allocateMemory(1, sizeof(StateBlock));
+    if (b == NULL) logmsg(c, fmi2Error, "%s: out of memory", f);
+    return (State *)b;
+}
+
+/* a state to overwrite: NULL (a new one is made) or a live state of this FMU */
+static int overwritable(Instance *c, const char *f, const State *s) {
+    if (s == NULL || state_header_ok(s)) return 1;
+    logmsg(c, fmi2Error, "%s: *FMUstate is not NULL and not a live state of this FMU to overwrite%s", f,
+           s->magic == STATE_FREED ? " (it was freed by fmi2FreeFMUstate)" : "");
+    return 0;
+}
+
 fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
     Instance *c = (Instance *)comp;
     State *s;
     if (!allowed(c, "fmi2GetFMUstate", ANY_ALIVE)) return fmi2Error;
     if (nullarg(c, "fmi2GetFMUstate", FMUstate, "FMUstate")) return fmi2Error;
     s = (State *)*FMUstate;
-    if (s != NULL && !state_header_ok(s)) {
-        logmsg(c, fmi2Error, "fmi2GetFMUstate: *FMUstate is not NULL and not a state of this FMU to overwrite");
-        return fmi2Error;
-    }
-    if (s == NULL) {
-        s = (State *)c->cb.allocateMemory(1, sizeof(State));
-        if (s == NULL) {
-            logmsg(c, fmi2Error, "fmi2GetFMUstate: out of memory");
-            return fmi2Error;
-        }
-    }
+    if (!overwritable(c, "fmi2GetFMUstate", s)) return fmi2Error;
+    if (s == NULL && (s = new_state(c, "fmi2GetFMUstate")) == NULL) return fmi2Error;
     memcpy(s, &c->s, sizeof(State));
     *FMUstate = s;
     return fmi2OK;
@@ -99,9 +108,21 @@ fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate FMUstate) {
 
 fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
     Instance *c = (Instance *)comp;
+    State *s;
     if (!allowed(c, "fmi2FreeFMUstate", ANY_ALIVE)) return fmi2Error;
     if (FMUstate == NULL || *FMUstate == NULL) return fmi2OK;
-    c->cb.freeMemory(*FMUstate);
+    s = (State *)*FMUstate;
+    if (s->magic == STATE_FREED) {
+        logmsg(c, fmi2Error, "fmi2FreeFMUstate: the state was freed already");
+        return fmi2Error;
+    }
+    if (state_header_ok(s)) { /* a block of this FMU (new_state): kept, marked freed */
+        s->magic = STATE_FREED;
+        ((StateBlock *)s)->next = c->retired;
+        c->retired = (StateBlock *)s;
+    } else {
+        c->cb.freeMemory(s); /* not this FMU's: given back as it is */
+    }
     *FMUstate = NULL;
     return fmi2OK;
 }
@@ -147,10 +168,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte serialized
                (unsigned long)sizeof(State));
         return fmi2Error;
     }
-    if (*FMUstate != NULL && !state_header_ok((const State *)*FMUstate)) {
-        logmsg(c, fmi2Error, "fmi2DeSerializeFMUstate: *FMUstate is not NULL and not a state of this FMU to overwrite");
-        return fmi2Error;
-    }
+    if (!overwritable(c, "fmi2DeSerializeFMUstate", (const State *)*FMUstate)) return fmi2Error;
     memcpy(&tmp, serializedState, sizeof(State));
     check = tmp.check;
     if (check != state_checksum((const unsigned char *)&tmp)) {
@@ -163,13 +181,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte serialized
         logmsg(c, fmi2Error, "fmi2DeSerializeFMUstate: not a valid state of this FMU: %s", why);
         return fmi2Error;
     }
-    if (*FMUstate == NULL) {
-        *FMUstate = c->cb.allocateMemory(1, sizeof(State));
-        if (*FMUstate == NULL) {
-            logmsg(c, fmi2Error, "fmi2DeSerializeFMUstate: out of memory");
-            return fmi2Error;
-        }
-    }
+    if (*FMUstate == NULL && (*FMUstate = new_state(c, "fmi2DeSerializeFMUstate")) == NULL) return fmi2Error;
     memcpy(*FMUstate, &tmp, sizeof(State));
     return fmi2OK;
 }

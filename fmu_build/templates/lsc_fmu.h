@@ -26,6 +26,7 @@
 #define HN (UDEG + 1)            /* input history points */
 #define STEP_RTOL 1e-10          /* step sizes this close share one set of step matrices */
 #define STATE_MAGIC 0x4c534332u  /* "LSC2" */
+#define STATE_FREED 0x4c534346u  /* "LSCF": a state given back by fmi2FreeFMUstate */
 #define STEP_TOL 1e-11            /* default bound of a sub-step's error estimate, relative to 1 + |x| */
 #define MAX_LEVEL 20              /* at most 2^20 sub-steps in one communication step */
 #define TIME_ULPS 16.0           /* a communication point may differ from the FMU time by this many ulps */
@@ -68,8 +69,17 @@ typedef struct {
     unsigned int check;          /* checksum of a serialized state (0 in memory) */
 } State;
 
+/* The block behind an FMUstate handle. A freed state is not given back to the allocator: it is marked
+ * STATE_FREED and kept on the freeing instance's list of retired blocks (reused by the next state,
+ * released by fmi2FreeInstance), so a handle used after fmi2FreeFMUstate is refused, never read freed. */
+typedef struct StateBlock {
+    State s;
+    struct StateBlock *next;
+} StateBlock;
+
 typedef struct {
     State s;
+    StateBlock *retired;         /* freed states kept for reuse (memory: at most the most states ever live) */
     fmi2CallbackFunctions cb;
     char *instanceName;
     fmi2Type type;

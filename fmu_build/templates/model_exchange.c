@@ -64,7 +64,8 @@ fmi2Status fmi2SetTime(fmi2Component comp, fmi2Real time) {
 fmi2Status fmi2SetContinuousStates(fmi2Component comp, const fmi2Real x[], size_t nx) {
     Instance *c = (Instance *)comp;
     size_t i;
-    if (!allowed(c, "fmi2SetContinuousStates", EventMode | ContinuousTimeMode) || wrong_type(c, "fmi2SetContinuousStates", fmi2ModelExchange)) return fmi2Error;
+    if (!allowed(c, "fmi2SetContinuousStates", ContinuousTimeMode)
+        || wrong_type(c, "fmi2SetContinuousStates", fmi2ModelExchange)) return fmi2Error;
     if (nullarg(c, "fmi2SetContinuousStates", x, "x")) return fmi2Error;
     if (nx != NX) {
         logmsg(c, fmi2Error, "fmi2SetContinuousStates: nx = %lu, expected %d", (unsigned long)nx, NX);
