@@ -8,6 +8,12 @@ a new time divided by the cost of one ``numpy.linalg.svd`` of the same J
 also reports the share of the coefficient evaluation (A, B, f and their
 derivatives), which is the problem's cost, not the completion's.
 
+It then measures the set-up of a run, building the Chebyshev interpolants
+of ``G(t), g(t)`` (`lsc._chebyshev.ChebyshevCoefficients`), with J factored
+by the LU warm-started from the last time (default) and by an SVD at every
+time (``warm_start = False``), side by side, CPU and wall time, and the
+largest difference of the interpolants' values.
+
 Run:  python examples/bench_timevarying.py [--docs]  (writes out/bench_timevarying.md; with --docs
 docs/_generated/bench_timevarying.md, which the benchmarks page includes)
 """
@@ -56,8 +62,37 @@ def main(sizes=(10, 50, 100)):
             print(f"{n:>4}{c.k:>3}{J.shape[0]:>8}{1e3 * svd:>10.2f}{method:>13}{1e3 * rhs:>10.2f}{rhs / svd:>9.2f}{coef / rhs:>14.0%}")
 
 
+def setup_side_by_side(cases=(("rotating_canonical(3)", lambda: gallery.rotating_canonical(3), 1e-7),
+                                ("moving_pencil(n=200)", lambda: gallery.moving_pencil(n=200, blocks=(3, 2), seed=1), 1e-9))):
+    import os
+    import time
+
+    from lsc._chebyshev import ChebyshevCoefficients
+
+    print(f"\nSet-up of a run (alternative, lam=1): Chebyshev interpolants of G(t), g(t); load average "
+          f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    header = f"{'problem':>22}{'tol':>7}{'evals':>7}{'warm cpu [s]':>14}{'SVD cpu [s]':>13}{'warm wall':>11}{'SVD wall':>10}{'ratio cpu':>11}{'max diff':>10}"
+    print(header)
+    print("-" * len(header))
+    for name, make, tol in cases:
+        p = make()
+        out = {}
+        for warm in (True, False):
+            c = lsc.complete(p.dae, "alternative", lam=1.0)
+            c.warm_start = warm
+            c0, w0 = time.process_time(), time.perf_counter()
+            ch = ChebyshevCoefficients(c, p.t_span, tol)
+            out[warm] = (time.process_time() - c0, time.perf_counter() - w0, ch)
+        ts = np.linspace(*p.t_span, 7)
+        diff = max(np.abs(np.concatenate([a.ravel() for a in out[True][2].matrices(t)])
+                          - np.concatenate([a.ravel() for a in out[False][2].matrices(t)])).max() for t in ts)
+        (cw, ww, ch), (cd, wd, _) = out[True], out[False]
+        print(f"{name:>22}{tol:>7.0e}{ch.evaluations:>7}{cw:>14.2f}{cd:>13.2f}{ww:>11.2f}{wd:>10.2f}{cd / cw:>11.2f}{diff:>10.1e}")
+
+
 if __name__ == "__main__":
     from _docs_output import printed_to_docs
 
     with printed_to_docs("bench_timevarying", "Time-varying rhs call against one SVD"):
         main()
+        setup_side_by_side()
