@@ -94,6 +94,7 @@ print(json.dumps({{"r": pack(r), "warned": [str(x.message) for x in w if "indica
     (dict(lambda_per_step=-1.0), "`lambda_per_step` must be positive"),
     (dict(max_growth=1.0), "`max_growth` must be > 1"),
     (dict(max_input_order=1.5), "`max_input_order` must be an integer"),
+    (dict(max_input_order=1, extrapolation=2), "must be at least `extrapolation`"),
 ])
 def test_step_control_arguments_fail_early(kwargs, message):
     from fmu_build import cosimulate

@@ -163,6 +163,11 @@ def _check_order(max_input_order, extrapolation):
     if not (isinstance(max_input_order, (int, np.integer)) and not isinstance(max_input_order, bool)
             and max_input_order >= 0):
         raise ValueError(f"`max_input_order` must be an integer >= 0 or None; found {max_input_order!r}.")
+    if max_input_order < extrapolation:
+        # the FMU would take the withheld orders of the extrapolation polynomial as 0 while the step control
+        # and the divergence checks see only the polynomial: wrong answers labelled success
+        raise ValueError(f"`max_input_order` ({max_input_order}) must be at least `extrapolation` ({extrapolation}): "
+                         "it would withhold orders of the extrapolation polynomial.")
 
 
 def _execute(run, start_values, t0, stop_time, H, progress):
