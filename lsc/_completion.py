@@ -33,7 +33,7 @@ from ._index import check_solvability, determine_index, k_works
 from ._linalg import default_rcond, numerical_rank, validate_rcond
 from ._problem import check_dae, column_equilibration, row_equilibration, row_scaled, unscale_columns, varying_view
 from ._rate import as_rate, lam_at
-from ._structured import StructuredFactors, StructuredFallback, constraint_svd
+from ._structured import ConstraintBasis, StructuredFactors, StructuredFallback
 from ._timefunc import TimeFunction, _shape_str
 from ._validate import check_k, check_t_span
 
@@ -65,7 +65,7 @@ def _norm2_if_above(X, tol):
     return frobenius if frobenius <= tol else np.linalg.norm(X, 2)
 
 
-class _Factors:
+class _Factors(ConstraintBasis):
     """The standard derivative array at one time, factorized once.
 
     Shared by all three methods: the constraints ``c = Z2^T (F x - g)`` are
@@ -179,22 +179,6 @@ class _Factors:
     def times_L(self, X, d):
         """``X @ Lg[d]``: the d-th derivative's forcing map (or value)."""
         return X @ self.Lg[d]
-
-    def _c_svd(self):
-        if self._C_svd is None:
-            self._C_svd = constraint_svd(self.C, self.t)
-        return self._C_svd
-
-    @property
-    def T2(self):
-        """Orthonormal basis of the homogeneous manifold ``{x : C x = 0}`` (thesis T2)."""
-        Uc, sc, Vct = self._c_svd()
-        return Vct[sc.size :].T
-
-    @property
-    def C_pinv(self):
-        Uc, sc, Vct = self._c_svd()
-        return (Vct[: sc.size].T / sc) @ Uc.T
 
     @property
     def first_rows(self):

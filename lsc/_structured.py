@@ -264,7 +264,28 @@ def constraint_svd(C, t):
     return Uc, sc, Vct
 
 
-class StructuredFactors:
+class ConstraintBasis:
+    """What both factor classes derive from their constraint matrix ``C`` (attributes ``C``, ``t``, ``_C_svd``)."""
+
+    def _c_svd(self):
+        if self._C_svd is None:
+            self._C_svd = constraint_svd(self.C, self.t)
+        return self._C_svd
+
+    @property
+    def T2(self):
+        """Orthonormal basis of the homogeneous manifold ``{x : C x = 0}`` (thesis T2)."""
+        Uc, sc, Vct = self._c_svd()
+        return Vct[sc.size :].T
+
+    @property
+    def C_pinv(self):
+        """Pseudo-inverse of ``C``."""
+        Uc, sc, Vct = self._c_svd()
+        return (Vct[: sc.size].T / sc) @ Uc.T
+
+
+class StructuredFactors(ConstraintBasis):
     """The standard derivative array's factors for constant ``A, B`` from a `StructuredArray`.
 
     Offers what a completion's ``_maps`` uses (``first_rows``, ``Z2``, ``C``,
@@ -306,21 +327,6 @@ class StructuredFactors:
         blocks = X.reshape(m, self.k + 1, self.n)
         out = np.einsum("ij,mic->mjc", self._Lam[d], blocks)
         return out.reshape(m, out.shape[1] * out.shape[2])  # explicit: m = 0 (no constraints) cannot infer -1
-
-    def _c_svd(self):
-        if self._C_svd is None:
-            self._C_svd = constraint_svd(self.C, self.t)
-        return self._C_svd
-
-    @property
-    def T2(self):
-        Uc, sc, Vct = self._c_svd()
-        return Vct[sc.size :].T
-
-    @property
-    def C_pinv(self):
-        Uc, sc, Vct = self._c_svd()
-        return (Vct[: sc.size].T / sc) @ Uc.T
 
     def index_one_solve(self, G_c, W_c, rcond, t):
         """``(G, W)`` of the alternative completion from its constraint rows ``C x' = G_c x + W_c``.
