@@ -19,9 +19,9 @@ piece shorter than `MIN_PIECE` of the horizon, is refused with a
 """
 
 import numpy as np
-import scipy.fft
 
 import lsc
+from lsc._chebyshev import _coefficients, _extreme_points as _points  # the library's Chebyshev points and DCT
 
 __all__ = []
 
@@ -32,18 +32,6 @@ MIN_PIECE = 1e-6      # of the horizon
 HORIZON_MARGIN = 0.1  # the tables reach this fraction of the experiment's length past its stop time
 _CHECK_RATES = (0.3, 7.0)
 _AFFINE_RTOL = 1e-9
-
-
-def _points(m):
-    return np.sin(np.pi * (m - 2 * np.arange(m + 1)) / (2 * m))  # cos(pi j / m), j = 0..m, exactly symmetric
-
-
-def _coefficients(values):
-    m = values.shape[0] - 1
-    c = scipy.fft.dct(values, type=1, axis=0) / m
-    c[0] /= 2
-    c[m] /= 2
-    return c
 
 
 class _Sampler:
