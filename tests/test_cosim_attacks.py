@@ -569,3 +569,80 @@ def test_two_runs_then_fmpy_with_its_default_logger_do_not_crash(fmus):
         out = len(res)
     """)
     assert got["rc"] == 0 and got["raised"] is None and got["out"] == 4, got
+
+
+# -- discrete signals, temporary folders, the CLI ------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def typed(tmp_path_factory):
+    """Counter (count = round(t / 0.1), odd) -> Sink (y = 10 n + b + 100 on), both pythonfmu."""
+    import plants
+
+    d = tmp_path_factory.mktemp("attack_typed")
+    counter, sink = plants.build_typed_pair(d)
+    ssp = plants.write_ssp(d / "typed.ssp", "typed", {"src": counter, "dst": sink}, [])
+    return {"components": {"src": str(counter), "dst": str(sink)},
+            "connections": [("src.count", "dst.n"), ("src.odd", "dst.b")], "ssp": str(ssp)}
+
+
+def test_integer_connections_are_held_in_the_start_up_steps_too(typed):
+    """Found: Jacobi with ``extrapolation=2``: the first two (start-up, rolled-back) steps give the
+    sink the Integer/Boolean values of the step END, later steps those of the step start: y =
+    0, 111, 120, 120, 131, ... (120 twice) against 0, 100, 111, 120, 131, ... with p = 0, success=True.
+    Discrete values have no polynomial: every step must hold them the same way."""
+    system = {k: typed[k] for k in ("components", "connections")}
+    got = attempt(f"""
+        out = {{}}
+        for p in (0, 2):
+            r = cosimulate({system!r}, 1.0, 0.1, algorithm='jacobi', extrapolation=p, output=['dst.y'])
+            out[p] = [bool(r.success), r['dst.y'].tolist()]
+    """)
+    assert got["raised"] is None, got
+    assert got["out"]["2"] == got["out"]["0"], got["out"]
+
+
+def test_no_temporary_folder_survives_a_failed_run(fmus, tmp_path):
+    """Verified good: instantiate failure, a discarded step, a bad step size, a refused
+    component: the master's lsc_cosim_* folders are all removed (TMPDIR private to the test)."""
+    private = tmp_path / "tmp"
+    private.mkdir()
+    (tmp_path / "bad.fmu").write_bytes(b"garbage")
+    code = f"""
+        import tempfile
+        tempfile.tempdir = {str(private)!r}
+        out = []
+        for system, step in [({{'components': {{'x': {fmus['NoInit']!r}}}, 'connections': []}}, 0.1),
+                             ({{'components': {{'x': {fmus['Bad']!r}}}, 'connections': []}}, 0.1),
+                             ({{'components': {{'p': {fmus['P']!r}}}, 'connections': []}}, 0.3),
+                             ({{'components': {{'p': {str(tmp_path / 'bad.fmu')!r}}}, 'connections': []}}, 0.1)]:
+            try:
+                out.append(bool(cosimulate(system, 1.0, step).success))
+            except Exception as exc:
+                out.append(type(exc).__name__)
+    """
+    got = attempt(code)
+    assert got["rc"] == 0 and got["raised"] is None and len(got["out"]) == 4, got
+    assert [p.name for p in private.iterdir() if p.name.startswith("lsc_cosim")] == []
+
+
+def test_cli_result_in_a_missing_folder_is_an_error_not_a_traceback(fmus, tmp_path):
+    """Found: ``lsc-fmu cosim ... -o nodir/r.csv`` runs the whole co-simulation, then dies in
+    np.savetxt with a FileNotFoundError traceback (exit 1, the result lost)."""
+    import plants
+
+    ssp = plants.write_ssp(tmp_path / "pl.ssp", "pl", {"p": fmus["P"], "l": fmus["Lag"]}, [("p.y1", "l.u")])
+    proc = subprocess.run([sys.executable, "-m", "fmu_build", "cosim", str(ssp), "--stop-time", "1", "--step-size",
+                           "0.1", "-o", str(tmp_path / "nodir" / "r.csv")], capture_output=True, text=True,
+                          timeout=60, cwd=str(tmp_path))
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr and "nodir" in proc.stderr, proc.stderr
+
+
+def test_cli_boolean_start_values_follow_the_api_rules(typed, tmp_path):
+    """Found (weak): ``--start dst.on=false`` is refused ('with a number'), though the API reads
+    'false' for a Boolean by rule; the CLI converts every value to float first."""
+    proc = subprocess.run([sys.executable, "-m", "fmu_build", "cosim", typed["ssp"], "--stop-time", "0.1",
+                           "--step-size", "0.1", "--start", "dst.on=false", "--output", "dst.y",
+                           "-o", str(tmp_path / "r.csv")], capture_output=True, text=True, timeout=60,
+                          cwd=str(tmp_path))
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "r.csv").read_text().splitlines()[-1].split(",")[-1] in ("0", "0.0")
