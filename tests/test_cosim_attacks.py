@@ -270,6 +270,33 @@ def test_time_that_cannot_advance_is_not_success(fmus):
         assert not got["out"]["success"] or got["out"]["increasing"], got
 
 
+def test_a_horizon_that_is_no_multiple_of_the_step_is_not_run_short(fmus):
+    """Found: the multiple-of-the-step check has a tolerance relative to |stop_time|, not to the
+    span: on [1e9, 1e9 + 1] with ``step_size=0.3`` it accepts 3 steps and reports success at
+    t = 1e9 + 0.9 (stopped short by 0.1 = a third of a step)."""
+    system = {"components": {"p": fmus["P"]}, "connections": []}
+    got = attempt(f"""
+        r = cosimulate({system!r}, 1e9 + 1, 0.3, start_time=1e9)
+        out = {{'success': bool(r.success), 'end': float(r['time'][-1]) - 1e9}}
+    """)
+    if got.get("raised"):
+        assert_clear_refusal(got, "multiple")
+    else:
+        assert not got["out"]["success"] or abs(got["out"]["end"] - 1.0) < 1e-6, got
+
+
+def test_step_control_at_large_times_reaches_stop_time(fmus):
+    """Found: ``step_control=True`` on [1e13, 1e13 + 3]: the loop's end test ``stop - t > 1e-12
+    max(1, |stop|)`` (= 10 here) holds from the start: success=True with ONE row, no step taken."""
+    system = {"components": {"p": fmus["P"], "l": fmus["Lag"]}, "connections": [("p.y1", "l.u")]}
+    got = attempt(f"""
+        r = cosimulate({system!r}, 1e13 + 3, 1.0, start_time=1e13, step_control=True, rtol=1e-3)
+        out = {{'success': bool(r.success), 'end': float(r['time'][-1]) - 1e13, 'rows': len(r)}}
+    """)
+    assert got["raised"] is None, got
+    assert not got["out"]["success"] or got["out"]["end"] == 3.0, got
+
+
 # -- step control ---------------------------------------------------------------------------------
 
 def test_step_control_without_rollback_that_cannot_meet_rtol_ends(fmus):
