@@ -109,6 +109,29 @@ SOURCES = {
                 self.y = math.sin(current_time + step_size)
                 return True
     ''',
+    "Str": '''
+        from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real, String
+
+
+        class Str(Fmi2Slave):
+            """label (String parameter) -> n = len(label) (Real output), echo = label (String output)."""
+
+            def __init__(self, **kwargs):
+                super().__init__(**kwargs)
+                self.label, self.n = "abc", 0.0
+                self.register_variable(String("label", causality=Fmi2Causality.parameter,
+                                              variability=Fmi2Variability.tunable))
+                self.register_variable(String("echo", causality=Fmi2Causality.output,
+                                              variability=Fmi2Variability.discrete, getter=lambda: self.label))
+                self.register_variable(Real("n", causality=Fmi2Causality.output, variability=Fmi2Variability.continuous))
+
+            def exit_initialization_mode(self):
+                self.n = float(len(self.label))
+
+            def do_step(self, current_time, step_size):
+                self.n = float(len(self.label))
+                return True
+    ''',
 }
 
 
@@ -673,3 +696,48 @@ def test_cli_boolean_start_values_follow_the_api_rules(typed, tmp_path):
                           cwd=str(tmp_path))
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "r.csv").read_text().splitlines()[-1].split(",")[-1] in ("0", "0.0")
+
+
+# -- String values -------------------------------------------------------------------------------------
+
+def test_a_string_start_value_with_a_nul_is_refused_not_truncated(fmus):
+    """Found: ``start_values={'s.label': 'ab\\x00cdef'}``: the FMU receives 'ab' (C strings end at
+    NUL); the run reports success with len = 2 and echo 'ab'."""
+    system = {"components": {"s": fmus["Str"]}, "connections": []}
+    got = attempt(RUN.format(system=system, stop=0.2, step=0.1, extra=", start_values={'s.label': 'ab\\x00cdef'}"))
+    assert_clear_refusal(got, "s.label")
+
+
+def test_a_string_start_value_that_is_no_utf8_is_refused_by_name(fmus):
+    """Found: a lone surrogate ('\\ud800') ends in ``UnicodeEncodeError`` from fmpy's setter."""
+    system = {"components": {"s": fmus["Str"]}, "connections": []}
+    got = attempt(RUN.format(system=system, stop=0.2, step=0.1, extra=", start_values={'s.label': '\\ud800'}"))
+    assert_clear_refusal(got, "s.label")
+
+
+def test_string_outputs_are_recorded(fmus):
+    """Verified good: a String output is recorded (object column) with the FMU's value."""
+    system = {"components": {"s": fmus["Str"]}, "connections": []}
+    got = attempt(f"""
+        r = cosimulate({system!r}, 0.2, 0.1, start_values={{'s.label': 'é x'}}, output=['s.echo', 's.n'])
+        out = [bool(r.success), r['s.echo'].tolist(), r['s.n'].tolist()]
+    """)
+    assert got["out"] == [True, ["é x"] * 3, [3.0] * 3], got
+
+
+def test_cli_writes_string_outputs_or_refuses_before_running(fmus, tmp_path):
+    """Found: ``lsc-fmu cosim str.ssp --output s.echo``: np.savetxt with '%.17g' on an object
+    column: TypeError traceback, and a CSV with only its header row left behind."""
+    import plants
+
+    ssp = plants.write_ssp(tmp_path / "str.ssp", "str", {"s": fmus["Str"]}, [])
+    result = tmp_path / "r.csv"
+    proc = subprocess.run([sys.executable, "-m", "fmu_build", "cosim", str(ssp), "--stop-time", "0.2", "--step-size",
+                           "0.1", "--output", "s.echo", "--output", "s.n", "-o", str(result)], capture_output=True,
+                          text=True, timeout=60, cwd=str(tmp_path))
+    assert "Traceback" not in proc.stderr, proc.stderr
+    if proc.returncode == 0:
+        rows = result.read_text().splitlines()[1:]
+        assert len(rows) == 3 and all(row.split(",")[1].strip('"') == "abc" for row in rows), rows
+    else:
+        assert proc.returncode == 2 and not result.exists(), proc.stderr
