@@ -265,11 +265,13 @@ def test_a_float_extrapolation_is_refused_up_front_or_used(fmus):
         assert got["out"]["success"], got
 
 
-def test_a_boolean_iterations_is_refused(fmus):
-    """Found: ``iterations=True`` is taken as 1 (a bool is an int); the rules refuse to guess."""
+@pytest.mark.parametrize("option, stop, extra", [("iterations", 1.0, ", iterations=True"), ("stop_time", True, "")])
+def test_a_boolean_where_a_number_is_expected_is_refused(fmus, option, stop, extra):
+    """Found: ``iterations=True`` is taken as 1, ``stop_time=True`` as 1.0 (a bool is an int):
+    success=True; the rules refuse to guess."""
     system = {"components": {"p": fmus["P"]}, "connections": []}
-    got = attempt(RUN.format(system=system, stop=1.0, step=0.1, extra=", iterations=True"))
-    assert_clear_refusal(got, "`iterations`")
+    got = attempt(RUN.format(system=system, stop=stop, step=0.1, extra=extra))
+    assert_clear_refusal(got, f"`{option}`")
 
 
 def test_a_billion_steps_end_instead_of_hanging(fmus):
@@ -741,3 +743,20 @@ def test_cli_writes_string_outputs_or_refuses_before_running(fmus, tmp_path):
         assert len(rows) == 3 and all(row.split(",")[1].strip('"') == "abc" for row in rows), rows
     else:
         assert proc.returncode == 2 and not result.exists(), proc.stderr
+
+
+# -- names from files used as paths --------------------------------------------------------------------
+
+def test_a_model_identifier_that_is_a_path_is_refused(fmus, tmp_path):
+    """Found: a modelDescription with ``modelIdentifier="../../../../../../../../<tmp>/evil/P"``
+    makes the master (through fmpy) load ``<tmp>/evil/P.so``, a library OUTSIDE the FMU, and run
+    it: success=True. The modelIdentifier is a name (a C identifier), never a path."""
+    evil = tmp_path / "evil"
+    evil.mkdir()
+    with zipfile.ZipFile(fmus["P"]) as zf:
+        (evil / "P.so").write_bytes(zf.read("binaries/linux64/P.so"))
+    ident = "../" * 12 + str(evil / "P").lstrip("/")
+    fmu = _patch_md(fmus["P"], tmp_path / "Pevil.fmu", lambda x: x.replace('modelIdentifier="P"',
+                                                                           f'modelIdentifier="{ident}"'))
+    got = attempt(RUN.format(system={"components": {"p": fmu}, "connections": []}, stop=1.0, step=0.1, extra=""))
+    assert_clear_refusal(got, "modelIdentifier")
