@@ -760,3 +760,11 @@ def test_a_model_identifier_that_is_a_path_is_refused(fmus, tmp_path):
                                                                            f'modelIdentifier="{ident}"'))
     got = attempt(RUN.format(system={"components": {"p": fmu}, "connections": []}, stop=1.0, step=0.1, extra=""))
     assert_clear_refusal(got, "modelIdentifier")
+
+
+def test_an_invalid_model_description_is_refused_naming_the_component(fmus, tmp_path):
+    """Found: two variables named y1 in one modelDescription: fmpy's bare ``Exception`` ('The
+    variable name "y1" (line 19) is not unique.'), naming neither the component nor the FMU."""
+    fmu = _patch_md(fmus["P"], tmp_path / "Pdup.fmu", lambda x: x.replace('name="y2"', 'name="y1"'))
+    got = attempt(RUN.format(system={"components": {"p": fmu}, "connections": []}, stop=1.0, step=0.1, extra=""))
+    assert_clear_refusal(got, "'p'", "Pdup.fmu", "y1")
