@@ -768,3 +768,26 @@ def test_an_invalid_model_description_is_refused_naming_the_component(fmus, tmp_
     fmu = _patch_md(fmus["P"], tmp_path / "Pdup.fmu", lambda x: x.replace('name="y2"', 'name="y1"'))
     got = attempt(RUN.format(system={"components": {"p": fmu}, "connections": []}, stop=1.0, step=0.1, extra=""))
     assert_clear_refusal(got, "'p'", "Pdup.fmu", "y1")
+
+
+def test_a_symlink_member_in_an_fmu_is_refused_by_name(fmus, tmp_path):
+    """Verified safe, weak message: an FMU whose binary is a symlink member (to a library outside)
+    is not followed (it is written as a small regular file), but the run dies with fmpy's bare
+    ``Exception: Failed to load shared library /tmp/lsc_cosim_fmus_.../P.so ... file too short``:
+    no component, no rule. Right: refused up front, naming the component and the member."""
+    import stat
+
+    outside = tmp_path / "outside.so"
+    with zipfile.ZipFile(fmus["P"]) as src, zipfile.ZipFile(tmp_path / "Psym.fmu", "w") as zf:
+        for name in src.namelist():
+            if name.endswith(".so"):
+                outside.write_bytes(src.read(name))
+                info = zipfile.ZipInfo(name)
+                info.create_system = 3
+                info.external_attr = (stat.S_IFLNK | 0o777) << 16
+                zf.writestr(info, str(outside))
+            else:
+                zf.writestr(name, src.read(name))
+    system = {"components": {"p": str(tmp_path / "Psym.fmu")}, "connections": []}
+    got = attempt(RUN.format(system=system, stop=1.0, step=0.1, extra=""))
+    assert_clear_refusal(got, "'p'", "symlink")
