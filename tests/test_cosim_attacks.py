@@ -791,3 +791,34 @@ def test_a_symlink_member_in_an_fmu_is_refused_by_name(fmus, tmp_path):
     system = {"components": {"p": str(tmp_path / "Psym.fmu")}, "connections": []}
     got = attempt(RUN.format(system=system, stop=1.0, step=0.1, extra=""))
     assert_clear_refusal(got, "'p'", "symlink")
+
+
+# -- Python arguments of the wrong shape ---------------------------------------------------------------
+
+def test_output_given_as_a_generator_records_every_variable(fmus):
+    """Found: ``output=(x for x in ['p.y1', 'p.y2'])``: the duplicate check consumes the
+    generator; the result has only the 'time' column and success=True (a partial answer)."""
+    system = {"components": {"p": fmus["P"]}, "connections": []}
+    got = attempt(f"""
+        r = cosimulate({system!r}, 1.0, 0.1, output=(x for x in ['p.y1', 'p.y2']))
+        out = [bool(r.success), list(r.dtype.names)]
+    """)
+    if got.get("raised"):
+        assert_clear_refusal(got, "`output`")
+    else:
+        assert got["out"] == [True, ["time", "p.y1", "p.y2"]] or not got["out"][0], got
+
+
+@pytest.mark.parametrize("system, extra, word", [
+    ({"components": [("p", "P")], "connections": []}, "", "components"),
+    ({"components": {"p": None}, "connections": []}, "", "'p'"),
+    ({"components": {"p": "P"}, "connections": []}, ", start_values='p.u=1'", "start_values")])
+def test_a_dict_system_or_option_of_the_wrong_type_is_named(fmus, system, extra, word):
+    """Found: components as a list: ``AttributeError: 'list' object has no attribute 'items'``;
+    an FMU path None: ``FileNotFoundError: 'None'`` (str(None) taken as a file name);
+    start_values as a string: ``dictionary update sequence element #0 has length 1``."""
+    system = {"components": ({k: (fmus["P"] if v == "P" else v) for k, v in system["components"].items()}
+                             if isinstance(system["components"], dict) else [("p", fmus["P"])]),
+              "connections": []}
+    got = attempt(RUN.format(system=system, stop=1.0, step=0.1, extra=extra))
+    assert_clear_refusal(got, word)
