@@ -822,3 +822,15 @@ def test_a_dict_system_or_option_of_the_wrong_type_is_named(fmus, system, extra,
               "connections": []}
     got = attempt(RUN.format(system=system, stop=1.0, step=0.1, extra=extra))
     assert_clear_refusal(got, word)
+
+
+def test_allow_external_is_a_boolean_not_any_truthy_value(fmus, tmp_path):
+    """Found: ``allow_external="no"`` is truthy: the packed .ssp's component outside the archive
+    is loaded and run (success=True). A security switch must take True/False only."""
+    shutil.copy(fmus["P"], tmp_path / "outside.fmu")
+    ssp = write_ssp(tmp_path / "ext.ssp", COMP_P.format(source="../outside.fmu"))
+    (tmp_path / "sub").mkdir()
+    shutil.move(ssp, tmp_path / "sub" / "ext.ssp")
+    got = attempt(RUN.format(system=str(tmp_path / "sub" / "ext.ssp"), stop=1.0, step=0.1,
+                             extra=", allow_external='no'"))
+    assert_clear_refusal(got, "allow_external")
