@@ -38,6 +38,8 @@ SOURCES = {
     "Gain": '''
         from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 
+        C, V = Fmi2Causality, Fmi2Variability
+
 
         class Gain(Fmi2Slave):
             """y = k u + c, computed when read (direct feedthrough)."""
@@ -45,10 +47,10 @@ SOURCES = {
             def __init__(self, **kwargs):
                 super().__init__(**kwargs)
                 self.k, self.c, self.u = 2.0, 1.0, 0.0
-                self.register_variable(Real("k", causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable))
-                self.register_variable(Real("c", causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable))
-                self.register_variable(Real("u", causality=Fmi2Causality.input, variability=Fmi2Variability.continuous))
-                self.register_variable(Real("y", causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
+                self.register_variable(Real("k", causality=C.parameter, variability=V.tunable))
+                self.register_variable(Real("c", causality=C.parameter, variability=V.tunable))
+                self.register_variable(Real("u", causality=C.input, variability=V.continuous))
+                self.register_variable(Real("y", causality=C.output, variability=V.continuous,
                                             getter=lambda: self.k * self.u + self.c))
 
             def do_step(self, current_time, step_size):
@@ -57,6 +59,8 @@ SOURCES = {
     "Bad": '''
         from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 
+        C, V = Fmi2Causality, Fmi2Variability
+
 
         class Bad(Fmi2Slave):
             """y = t; the step that would end after fail_at is refused (do_step returns False)."""
@@ -64,9 +68,9 @@ SOURCES = {
             def __init__(self, **kwargs):
                 super().__init__(**kwargs)
                 self.fail_at, self.y = 0.5, 0.0
-                self.register_variable(Real("fail_at", causality=Fmi2Causality.parameter,
-                                            variability=Fmi2Variability.tunable))
-                self.register_variable(Real("y", causality=Fmi2Causality.output, variability=Fmi2Variability.continuous))
+                self.register_variable(Real("fail_at", causality=C.parameter,
+                                            variability=V.tunable))
+                self.register_variable(Real("y", causality=C.output, variability=V.continuous))
 
             def do_step(self, current_time, step_size):
                 if current_time + step_size > self.fail_at + 1e-12:
@@ -77,6 +81,8 @@ SOURCES = {
     "NoInit": '''
         from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 
+        C, V = Fmi2Causality, Fmi2Variability
+
 
         class NoInit(Fmi2Slave):
             """Fails in fmi2Instantiate (except for the builder's dummy instance)."""
@@ -84,7 +90,7 @@ SOURCES = {
             def __init__(self, **kwargs):
                 super().__init__(**kwargs)
                 self.y = 0.0
-                self.register_variable(Real("y", causality=Fmi2Causality.output, variability=Fmi2Variability.continuous))
+                self.register_variable(Real("y", causality=C.output, variability=V.continuous))
                 if kwargs.get("instance_name") != "dummyInstance":
                     raise RuntimeError("licence missing")
 
@@ -96,6 +102,8 @@ SOURCES = {
 
         from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 
+        C, V = Fmi2Causality, Fmi2Variability
+
 
         class Ramp(Fmi2Slave):
             """y = sin t at communication points; cannot roll back."""
@@ -103,7 +111,7 @@ SOURCES = {
             def __init__(self, **kwargs):
                 super().__init__(**kwargs)
                 self.y = 0.0
-                self.register_variable(Real("y", causality=Fmi2Causality.output, variability=Fmi2Variability.continuous))
+                self.register_variable(Real("y", causality=C.output, variability=V.continuous))
 
             def do_step(self, current_time, step_size):
                 self.y = math.sin(current_time + step_size)
@@ -112,6 +120,8 @@ SOURCES = {
     "Str": '''
         from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real, String
 
+        C, V = Fmi2Causality, Fmi2Variability
+
 
         class Str(Fmi2Slave):
             """label (String parameter) -> n = len(label) (Real output), echo = label (String output)."""
@@ -119,11 +129,11 @@ SOURCES = {
             def __init__(self, **kwargs):
                 super().__init__(**kwargs)
                 self.label, self.n = "abc", 0.0
-                self.register_variable(String("label", causality=Fmi2Causality.parameter,
-                                              variability=Fmi2Variability.tunable))
-                self.register_variable(String("echo", causality=Fmi2Causality.output,
-                                              variability=Fmi2Variability.discrete, getter=lambda: self.label))
-                self.register_variable(Real("n", causality=Fmi2Causality.output, variability=Fmi2Variability.continuous))
+                self.register_variable(String("label", causality=C.parameter,
+                                              variability=V.tunable))
+                self.register_variable(String("echo", causality=C.output,
+                                              variability=V.discrete, getter=lambda: self.label))
+                self.register_variable(Real("n", causality=C.output, variability=V.continuous))
 
             def exit_initialization_mode(self):
                 self.n = float(len(self.label))
@@ -230,7 +240,8 @@ def assert_ends(got):
         assert got["raised"] == "ValueError", got
 
 
-RUN = "r = cosimulate({system!r}, {stop!r}, {step!r}{extra})\nout = {{'success': bool(r.success), 'message': r.message}}"
+RUN = ("r = cosimulate({system!r}, {stop!r}, {step!r}{extra})\n"
+       "out = {{'success': bool(r.success), 'message': r.message}}")
 
 
 # -- argument checks (before any FMU is loaded) ---------------------------------------------------
