@@ -845,3 +845,27 @@ def test_allow_external_is_a_boolean_not_any_truthy_value(fmus, tmp_path):
     got = attempt(RUN.format(system=str(tmp_path / "sub" / "ext.ssp"), stop=1.0, step=0.1,
                              extra=", allow_external='no'"))
     assert_clear_refusal(got, "allow_external")
+
+
+# -- the divergence criterion ----------------------------------------------------------------------------
+
+def test_a_bounded_signal_near_the_nyquist_rate_is_not_called_divergence(tmp_path):
+    """Found: an undamped oscillator x1 = cos 10 t (exact to 6.5e-8, |x1| <= 1) feeding a lag,
+    NO feedback loop, H = 0.31 (10 H = 3.1, just under pi): stopped at t = 15.5 with success=False,
+    'the coupling diverged: o.y1 oscillates from step to step with an amplitude that grew 46.3-fold
+    over the last 12 steps ... this configuration is unstable': the alternating second differences
+    of a beat grow from its node, and a feed-forward coupling cannot diverge at all."""
+    import plants
+
+    osc = plants.build_linear_plant(tmp_path, "Osc", [[0.0, 1.0], [-100.0, 0.0]], [0.0, 0.0], (1.0, 0.0),
+                                    substeps=200)
+    lag = plants.build_lag_plant(tmp_path, "Lag", g=0.2)
+    system = {"components": {"o": str(osc), "l": str(lag)}, "connections": [("o.y1", "l.u")]}
+    got = attempt(f"""
+        r = cosimulate({system!r}, 31.0, 0.31, output=['o.y1'])
+        out = [bool(r.success), r.message, float(np.abs(r['o.y1'] - np.cos(10 * r['time'])).max())]
+    """)
+    assert got["raised"] is None, got
+    success, message, err = got["out"]
+    assert success, message
+    assert err < 1e-6
