@@ -869,3 +869,27 @@ def test_a_bounded_signal_near_the_nyquist_rate_is_not_called_divergence(tmp_pat
     success, message, err = got["out"]
     assert success, message
     assert err < 1e-6
+
+
+def _enumeration(variable, type_name, count=12):
+    """modelDescription edit: ``variable`` (an Integer) becomes an Enumeration of the new type ``type_name``."""
+    def edit(xml):
+        items = "".join(f'<Item name="{type_name.lower()}{i}" value="{i}"/>' for i in range(count))
+        definition = (f'<TypeDefinitions><SimpleType name="{type_name}"><Enumeration>{items}</Enumeration>'
+                      "</SimpleType></TypeDefinitions>\n")
+        anchor = "<LogCategories>" if "<LogCategories>" in xml else "<ModelVariables>"
+        xml = xml.replace(anchor, definition + anchor, 1)
+        return re.sub(rf'(name="{variable}"[^>]*>\s*)<Integer(\s[^/>]*)?\s*/>',
+                      rf'\1<Enumeration declaredType="{type_name}"\2/>', xml)
+    return edit
+
+
+def test_an_enumeration_into_another_enumeration_type_is_refused(typed, tmp_path):
+    """Found: Counter.count declared Enumeration 'Colors' feeds Sink.n declared Enumeration
+    'Gears': exchanged as Integers, success=True. Two enumeration types mean different things
+    (red is not first gear); the connection must be refused naming both types."""
+    src = _patch_md(typed["components"]["src"], tmp_path / "CounterE.fmu", _enumeration("count", "Colors"))
+    dst = _patch_md(typed["components"]["dst"], tmp_path / "SinkE.fmu", _enumeration("n", "Gears"))
+    system = {"components": {"src": src, "dst": dst}, "connections": [("src.count", "dst.n")]}
+    got = attempt(RUN.format(system=system, stop=0.3, step=0.1, extra=""))
+    assert_clear_refusal(got, "Colors", "Gears")
