@@ -893,3 +893,33 @@ def test_an_enumeration_into_another_enumeration_type_is_refused(typed, tmp_path
     system = {"components": {"src": src, "dst": dst}, "connections": [("src.count", "dst.n")]}
     got = attempt(RUN.format(system=system, stop=0.3, step=0.1, extra=""))
     assert_clear_refusal(got, "Colors", "Gears")
+
+
+OUT_OF_RANGE = [
+    (1.0, 0.0, {}, "step_size"), (1.0, -0.1, {}, "step_size"), (1.0, "nan", {}, "step_size"),
+    (1.0, "inf", {}, "step_size"), (-1.0, 0.1, {}, "stop_time"), ("nan", 0.1, {}, "stop_time"),
+    (1.0, 0.1, {"extrapolation": 3}, "extrapolation"), (1.0, 0.1, {"extrapolation": -1}, "extrapolation"),
+    (1.0, 0.1, {"iterations": -1}, "iterations"), (1.0, 0.1, {"step_control": True, "rtol": 0.0}, "rtol"),
+    (1.0, 0.1, {"step_control": True, "rtol": -1e-3}, "rtol"),
+    (1.0, 0.1, {"step_control": True, "min_step": 0.2, "max_step": 0.05}, "min_step"),
+    (1.0, 0.1, {"step_control": True, "min_step": 0.0}, "min_step"),
+    (1.0, 0.1, {"step_control": True, "iterations": 2}, "iterations"),
+    (1.0, 0.1, {"lambda_per_step": -1.0}, "lambda_per_step"), (1.0, 0.1, {"max_input_order": -1}, "max_input_order"),
+    (1.0, 0.1, {"algorithm": "newton"}, "algorithm"), (1.0, 0.1, {"exchange": "later"}, "exchange")]
+
+
+def test_out_of_range_options_are_refused_naming_the_argument(fmus):
+    """Verified good: each out-of-range option is a ValueError naming it, before anything loads."""
+    system = {"components": {"p": fmus["P"]}, "connections": []}
+    got = attempt(f"""
+        out = []
+        for stop, step, kw, word in {OUT_OF_RANGE!r}:
+            try:
+                cosimulate({system!r}, float(stop), float(step), **kw)
+                out.append([word, None, ''])
+            except Exception as exc:
+                out.append([word, type(exc).__name__, str(exc)])
+    """)
+    assert got["raised"] is None and len(got["out"]) == len(OUT_OF_RANGE), got
+    for word, kind, message in got["out"]:
+        assert kind == "ValueError" and word in message, (word, kind, message)
