@@ -923,3 +923,18 @@ def test_out_of_range_options_are_refused_naming_the_argument(fmus):
     assert got["raised"] is None and len(got["out"]) == len(OUT_OF_RANGE), got
     for word, kind, message in got["out"]:
         assert kind == "ValueError" and word in message, (word, kind, message)
+
+
+def test_variable_names_with_dots_are_read_by_the_first_dot(tmp_path):
+    """Verified good: output names 'pos.x' and 'pos.v' (dots inside the variable name, as in
+    Modelica FMUs); 'p.pos.x' means component p, variable pos.x (component names have no dots)."""
+    import plants
+
+    fmu = plants.build_linear_plant(tmp_path, "Dots", [[0.0, 1.0], [-1.0, 0.0]], [0.0, 1.0], (1.0, 0.0),
+                                    output_names=("pos.x", "pos.v"))
+    system = {"components": {"p": str(fmu)}, "connections": [("p.pos.x", "p.u")]}
+    got = attempt(f"""
+        r = cosimulate({system!r}, 1.0, 0.1, output=['p.pos.x', 'p.pos.v'])
+        out = [bool(r.success), float(np.abs(r['p.pos.x'] - 1.0).max()), float(np.abs(r['p.pos.v']).max())]
+    """)
+    assert got["raised"] is None and got["out"][0] and got["out"][1] < 1e-12 and got["out"][2] < 1e-12, got
