@@ -6,6 +6,7 @@ another kind, a hang, a crash, or a wrong answer with ``success=True``. Every FM
 subprocess with a timeout (see ``attempt``); the host process must exit cleanly.
 """
 import json
+import math
 import re
 import shutil
 import subprocess
@@ -938,3 +939,28 @@ def test_variable_names_with_dots_are_read_by_the_first_dot(tmp_path):
         out = [bool(r.success), float(np.abs(r['p.pos.x'] - 1.0).max()), float(np.abs(r['p.pos.v']).max())]
     """)
     assert got["raised"] is None and got["out"][0] and got["out"][1] < 1e-12 and got["out"][2] < 1e-12, got
+
+
+def test_two_different_pythonfmu_fmus_with_one_model_name_are_not_confused(fmus, tmp_path):
+    """Found: a second pythonfmu FMU named Lag (w0 = 3, g = 0.9), built elsewhere, run after the
+    first in one process, or next to it in one system, silently runs the FIRST one's Python class
+    (pythonfmu caches the model module by name): w(1) = e^-1 instead of 3 e^-1, success=True.
+    Right: the right model, or a refusal naming both components / files."""
+    import plants
+
+    other = plants.build_lag_plant(tmp_path / "other", "Lag", g=0.9, w0=3.0)
+    got = attempt(f"""
+        a = cosimulate({{'components': {{'l': {fmus['Lag']!r}}}, 'connections': []}}, 1.0, 0.1, output=['l.w'])
+        b = cosimulate({{'components': {{'l': {str(other)!r}}}, 'connections': []}}, 1.0, 0.1, output=['l.w'])
+        c = cosimulate({{'components': {{'a': {fmus['Lag']!r}, 'b': {str(other)!r}}}, 'connections': []}}, 1.0, 0.1,
+                       output=['b.w'])
+        out = [[bool(a.success), float(a['l.w'][-1])], [bool(b.success), float(b['l.w'][-1])],
+               [bool(c.success), float(c['b.w'][-1])]]
+    """)
+    if got.get("raised"):
+        assert_clear_refusal(got, "Lag")
+        return
+    (sa, wa), (sb, wb), (sc, wc) = got["out"]
+    assert sa and abs(wa - math.exp(-1.0)) < 1e-12
+    assert not sb or abs(wb - 3 * math.exp(-1.0)) < 1e-12, got["out"]
+    assert not sc or abs(wc - 3 * math.exp(-1.0)) < 1e-12, got["out"]
