@@ -141,3 +141,11 @@ def test_typed_values_are_converted_by_rules(value, kind, expected):
 def test_uninterpretable_typed_values_are_refused(value, kind):
     with pytest.raises(ValueError, match="v: a"):
         cosim._exchange.convert(value, kind, "v")
+
+
+def test_a_failed_run_leaves_no_temporary_folder(tmp_path, private_tmp):
+    """An SSP whose FMU is not an FMU: the run fails while loading it; both folders are gone."""
+    ssp = write_ssp(tmp_path / "bad.ssp", [component("a", "resources/a.fmu")])
+    with pytest.raises(Exception):
+        cosim.cosimulate(ssp, 1.0, 0.1)
+    assert list(private_tmp.iterdir()) == []

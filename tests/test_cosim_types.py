@@ -2,7 +2,6 @@
 and divergence never reported as success. FMUs run in subprocesses (see test_cosim.run)."""
 import shutil
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest

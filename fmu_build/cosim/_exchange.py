@@ -7,14 +7,12 @@ refuse what they cannot interpret (``"false"`` is False, ``0.3`` is no
 Boolean, ``2.5`` is no Integer).
 """
 
-import math
 import os
 
 import numpy as np
 
 from ._system import unzip
 
-TYPES = ("Real", "Integer", "Boolean", "String", "Enumeration")
 # types a connection may join (Enumeration values are Integers on the wire, as in libcosim)
 WIRE = {"Real": "Real", "Integer": "Integer", "Enumeration": "Integer", "Boolean": "Boolean", "String": "String"}
 
@@ -136,7 +134,3 @@ def check_types(comps, connections):
                              "connected variables must have the same type.")
         if src.type == "String":
             raise ValueError(f"connection {a}.{y} -> {b}.{u}: String connections are not exchanged by this master.")
-
-
-def finite(x):
-    return not isinstance(x, float) or math.isfinite(x)

@@ -23,7 +23,41 @@ def _graph(components, connections):
             if u in deps:
                 edges[(b, u)].append((b, out))
                 edges.setdefault((b, out), [])
-    # Tarjan's strongly connected components
+    sccs = _strongly_connected(edges)
+    loops = [sorted(s) for s in sccs if len(s) > 1]
+    # cut connection edges inside a loop (the destination input then lags one exchange)
+    in_loop = {v: i for i, s in enumerate(loops) for v in s}
+    cut = set()
+    for a, y, b, u in connections:
+        if (a, y) in in_loop and in_loop.get((b, u)) == in_loop[(a, y)]:
+            cut.add(((a, y), (b, u)))
+            break_loop = in_loop.pop((a, y))
+            for v in [k for k, val in in_loop.items() if val == break_loop]:
+                in_loop.pop(v)
+    # Kahn's topological sort on the rest
+    indeg = {v: 0 for v in edges}
+    for v, ws in edges.items():
+        for w in ws:
+            if (v, w) not in cut:
+                indeg[w] += 1
+    ready = [v for v in edges if indeg[v] == 0]
+    order = []
+    while ready:
+        v = ready.pop(0)
+        order.append(v)
+        for w in edges[v]:
+            if (v, w) in cut:
+                continue
+            indeg[w] -= 1
+            if indeg[w] == 0:
+                ready.append(w)
+    if len(order) < len(edges):  # more than one cycle through one loop: fall back to any order
+        order += [v for v in edges if v not in order]
+    return loops, order, cut
+
+
+def _strongly_connected(edges):
+    """Tarjan's strongly connected components of the graph ``edges`` (node -> successors), iteratively."""
     index, low, stack, on, sccs, counter = {}, {}, [], set(), [], [0]
 
     def visit(v):
@@ -61,36 +95,7 @@ def _graph(components, connections):
     for v in list(edges):
         if v not in index:
             visit(v)
-    loops = [sorted(s) for s in sccs if len(s) > 1]
-    # cut connection edges inside a loop (the destination input then lags one exchange)
-    in_loop = {v: i for i, s in enumerate(loops) for v in s}
-    cut = set()
-    for a, y, b, u in connections:
-        if (a, y) in in_loop and in_loop.get((b, u)) == in_loop[(a, y)]:
-            cut.add(((a, y), (b, u)))
-            break_loop = in_loop.pop((a, y))
-            for v in [k for k, val in in_loop.items() if val == break_loop]:
-                in_loop.pop(v)
-    # Kahn's topological sort on the rest
-    indeg = {v: 0 for v in edges}
-    for v, ws in edges.items():
-        for w in ws:
-            if (v, w) not in cut:
-                indeg[w] += 1
-    ready = [v for v in edges if indeg[v] == 0]
-    order = []
-    while ready:
-        v = ready.pop(0)
-        order.append(v)
-        for w in edges[v]:
-            if (v, w) in cut:
-                continue
-            indeg[w] -= 1
-            if indeg[w] == 0:
-                ready.append(w)
-    if len(order) < len(edges):  # more than one cycle through one loop: fall back to any order
-        order += [v for v in edges if v not in order]
-    return loops, order, cut
+    return sccs
 
 
 def _component_order(names, connections, feedthrough=()):

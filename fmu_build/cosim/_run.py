@@ -14,7 +14,6 @@ import numpy as np
 from ._exchange import convert
 from ._graph import _component_order, _graph, _weights
 from ._result import AlgebraicLoopWarning, _Stop
-from ._stepper import taylor
 from ._system import _split
 
 logger = logging.getLogger("fmu_build.cosim")
@@ -519,11 +518,10 @@ class Run(object):
                 self._lambda(H, t)
             states = self.save(t) if self.can_rollback else None
             start_value = self.value.copy()
-            jet = self.input_jet(t)[0][:q + 1] if self.p > 0 else start_value[None, :]
-            predicted = taylor(jet, H)
             self.step_all(t, H)
+            predicted = self._predict(t, H, q, start_value)
             err, worst = control.error(self.value, predicted, self.real)
-            H_next = control.next_step(H, err, q)
+            H_next = control.next_step(H, err, max(q, 1))
             if err <= 1.0 or states is None or H <= control.min_step * (1 + 1e-12):
                 if states is not None:
                     self.release(states)
@@ -534,6 +532,18 @@ class Run(object):
             self.restore(states, t, start_value)
             self.release(states)
             H = max(H_next, control.min_step)
+
+    def _predict(self, t, H, q, start_value):
+        """What the estimate compares at ``t + H`` (docs/cosimulation.md, 'Step control'): with ``q >= 1``
+        the extrapolation of degree ``q - 1`` through the history, against ``value`` replaced by the one of
+        degree ``q`` (returned as the pair's difference added to the produced values); with ``q = 0`` the
+        held value against the value produced."""
+        if q == 0:
+            return start_value
+        ts, V = self.hist_t, np.array(self.hist_v)
+        high = _weights(ts[-(q + 1):], t + H, 0) @ V[-(q + 1):]
+        low = _weights(ts[-q:], t + H, 0) @ V[-q:]
+        return self.value - (high - low)
 
     def _judge(self, t, H, err, worst, indicator_only):
         if err <= 1.0:

@@ -1,29 +1,34 @@
 """Macro-step control: the local coupling error estimate and the next step size.
 
 Over a macro step ``[t, t + H]`` every FMU receives its inputs as the polynomial
-``P`` of degree ``q`` extrapolated from the coupling values at past
-communication points (``q`` = ``extrapolation``, lower while the history is
-short; exact source derivatives replace the polynomial's where they exist).
-The coupling error the step injects is the defect between that input and the
-output its source actually produces over the step; at the step end it is
+``P_q`` of degree ``q`` extrapolated from the coupling values at the last
+``q + 1`` communication points (``q`` = ``extrapolation``, lower while the
+history is short). Its error over the step is the interpolation remainder
 
-    d = y(t + H) - P(t + H) = y^(q+1)(xi) H^(q+1) / (q + 1)!  (one-sided Taylor remainder),
+    y(t + s) - P_q(t + s) = y[t_n, ..., t_{n-q}, t + s] * prod_i (t + s - t_i) = O(H^(q+1)),
 
 and the state error a consumer with input gain ``K`` collects over the step is
-about ``K H |d| / (q + 2)``, so per unit of time it is proportional to ``|d|``:
-keeping ``|d|`` below ``atol + rtol |y|`` on every step keeps the global
-coupling error of the order of ``K T`` times the tolerance over a run of
-length ``T`` (error per unit step, as in Schierz, Arnold and Clauss 2012,
-with the extrapolation of order ``q`` against the value produced as the
-reference). The scaled estimate ``err = max_i |d_i| / (atol + rtol |y_i|)``
-accepts a step when ``err <= 1``; the next step is
-``H * min(4, max(0.2, 0.9 * err^(-1 / (q + 1))))``, bounded by ``min_step``
+``K`` times its integral. The estimate replaces the unknown ``y`` by the
+extrapolation of one degree more through the same history and the new end
+value, which leaves the difference of the two extrapolations through the
+history (the classical estimate of Schierz, Arnold and Clauss 2012):
+
+    d = P_q(t + H) - P_(q-1)(t + H)       (q >= 1),
+    d = y(t + H) - y(t)                    (q = 0: zero-order hold, against the value produced).
+
+``d`` estimates the error of the degree-``(q - 1)`` extrapolation, so it is
+an upper estimate of the degree-``q`` one for smooth signals; it uses values at
+communication points only, so an output that jumps when an FMU receives new
+inputs (a consumer of input derivatives) does not give it a floor that no
+step could pass. ``err = max_i |d_i| / (atol + rtol |y_i|)`` over the Real
+coupling values accepts a step when ``err <= 1`` (error per unit step: the
+global coupling error stays of the order of ``K T`` times the tolerance over
+a run of length ``T``); the next step is
+``H * min(4, max(0.2, 0.9 * err^(-1 / max(q, 1))))`` (``d = O(H^max(q, 1))``), bounded by ``min_step``
 and ``max_step``. A rejected step is rolled back through the FMU states and
 repeated with that smaller step; FMUs that cannot roll back keep it (the
 estimate is an indicator: a warning says so) and the next step is adapted.
 """
-
-import math
 
 import numpy as np
 
@@ -34,7 +39,7 @@ class StepControl:
     Examples
     --------
     >>> c = StepControl.from_options(True, 0.1, 1.0, 1e-4, None, None, None, 0)
-    >>> round(c.next_step(0.1, 4.0, 1), 4)
+    >>> round(c.next_step(0.1, 4.0, 2), 4)
     0.045
     """
 
@@ -68,14 +73,7 @@ class StepControl:
         worst = int(np.argmax(d))
         return float(d[worst]), worst
 
-    def next_step(self, H, err, q):
-        factor = 4.0 if err == 0 else min(4.0, max(0.2, 0.9 * err ** (-1.0 / (q + 1))))
+    def next_step(self, H, err, k):
+        """The step after one of size ``H`` whose estimate ``err`` behaves like ``H^k``."""
+        factor = 4.0 if err == 0 else min(4.0, max(0.2, 0.9 * err ** (-1.0 / k)))
         return min(self.max_step, H * factor)
-
-
-def taylor(jet, h):
-    """Value at ``t + h`` of the polynomial whose value and derivatives at ``t`` are the rows of ``jet``."""
-    out = np.zeros(jet.shape[1])
-    for j in range(jet.shape[0]):
-        out += jet[j] * h ** j / math.factorial(j)
-    return out
