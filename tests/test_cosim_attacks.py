@@ -217,7 +217,8 @@ def attempt(code, timeout=30, cwd=None):
     except subprocess.TimeoutExpired:
         return {"timeout": True}
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
-    got = json.loads(lines[-1]) if lines else {}
+    # no JSON line: the process died (crash, abort) before reporting
+    got = json.loads(lines[-1]) if lines else {"out": None, "raised": "no result line", "message": ""}
     got.update(rc=proc.returncode, stderr=proc.stderr[-2000:], timeout=False)
     return got
 
