@@ -965,3 +965,18 @@ def test_two_different_pythonfmu_fmus_with_one_model_name_are_not_confused(fmus,
     assert sa and abs(wa - math.exp(-1.0)) < 1e-12
     assert not sb or abs(wb - 3 * math.exp(-1.0)) < 1e-12, got["out"]
     assert not sc or abs(wc - 3 * math.exp(-1.0)) < 1e-12, got["out"]
+
+
+def test_the_unpack_limit_bounds_a_whole_run_not_each_component(fmus, tmp_path):
+    """Found (weak, as documented: 'bytes one archive may unpack to'): the limit is per archive,
+    so a system of N components of one FMU unpacks N times the limit: with the default (1 GiB) a
+    1 MB .ssp listing 50 components of one zip-bomb FMU writes 50 GiB to the temporary folder.
+    Here: 3 components x 8 MiB with ``max_unpacked`` = 20 MiB are all unpacked and the run succeeds."""
+    padded = tmp_path / "Padded.fmu"
+    with zipfile.ZipFile(fmus["P"]) as src, zipfile.ZipFile(padded, "w", zipfile.ZIP_DEFLATED) as zf:
+        for name in src.namelist():
+            zf.writestr(name, src.read(name))
+        zf.writestr("resources/pad.bin", b"\0" * (8 << 20))
+    system = {"components": {n: str(padded) for n in ("a", "b", "c")}, "connections": []}
+    got = attempt(RUN.format(system=system, stop=0.2, step=0.1, extra=f", max_unpacked={20 << 20}"))
+    assert_clear_refusal(got, "size limit")
