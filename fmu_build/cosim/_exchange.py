@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-from ._system import unzip
+from ._system import IDENTIFIER, unzip
 
 # types a connection may join (Enumeration values are Integers on the wire, as in libcosim)
 WIRE = {"Real": "Real", "Integer": "Integer", "Enumeration": "Integer", "Boolean": "Boolean", "String": "String"}
@@ -79,6 +79,10 @@ class Component:
         self.can_interpolate = bool(cs.canInterpolateInputs)
         self.max_derivative = int(cs.maxOutputDerivativeOrder or 0)
         self.can_rollback = bool(cs.canGetAndSetFMUstate)
+        if not IDENTIFIER.match(cs.modelIdentifier or ""):
+            raise ValueError(f"component {name!r} ({os.path.basename(path)}): modelIdentifier "
+                             f"{cs.modelIdentifier!r} is not a plain identifier; it names the binary inside the "
+                             "FMU and is never a path.")
         self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir, modelIdentifier=cs.modelIdentifier,
                              instanceName=name)
         # logging on: pythonfmu FMUs pass their messages (errors included) to the logger only then

@@ -12,7 +12,7 @@ from . import _callbacks
 from ._exchange import Component, check_types
 from ._result import CosimResult, _Progress, _Stop
 from ._run import Run
-from ._stepper import StepControl
+from ._stepper import MAX_STEPS, StepControl
 from ._system import MAX_UNPACKED, read_system
 
 ALGORITHMS = ("jacobi", "gauss-seidel")
@@ -108,12 +108,21 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
     ...
     ValueError: `algorithm` must be one of ('jacobi', 'gauss-seidel'); found 'newton'.
     """
+    _check_numbers(step_size=step_size, stop_time=stop_time, start_time=start_time, rtol=rtol, atol=atol,
+                   min_step=min_step, max_step=max_step, max_growth=max_growth, lambda_per_step=lambda_per_step)
     _check_arguments(algorithm, extrapolation, exchange, iterations, step_size, stop_time, start_time, max_growth,
                      lambda_per_step)
     _check_order(max_input_order, extrapolation)
+    if not isinstance(step_control, (bool, np.bool_)) or not step_control:
+        _check_horizon(start_time, stop_time, step_size)
+    if not isinstance(allow_external, (bool, np.bool_)):
+        raise TypeError(f"`allow_external` must be True or False; found {allow_external!r}.")
     control = StepControl.from_options(step_control, step_size, stop_time - start_time, rtol, atol, min_step,
                                        max_step, iterations)
     if output is not None:
+        if isinstance(output, (str, bytes)):
+            raise TypeError(f"`output` must be a list of 'component.variable' names; found the string {output!r}.")
+        output = list(output)  # a generator is read once: materialized before it is checked
         dup = sorted({o for o in output if list(output).count(o) > 1})
         if dup:
             raise ValueError(f"`output` names each variable once; found {dup} more than once.")
@@ -141,20 +150,50 @@ def _check_arguments(algorithm, extrapolation, exchange, iterations, step_size, 
                      lambda_per_step):
     if algorithm not in ALGORITHMS:
         raise ValueError(f"`algorithm` must be one of {ALGORITHMS}; found {algorithm!r}.")
-    if extrapolation not in (0, 1, 2) or isinstance(extrapolation, bool):
+    if not isinstance(extrapolation, (int, np.integer)) or isinstance(extrapolation, bool) \
+            or extrapolation not in (0, 1, 2):
         raise ValueError(f"`extrapolation` must be 0, 1 or 2; found {extrapolation!r}.")
     if exchange not in ("ordered", "simultaneous"):
         raise ValueError(f"`exchange` must be 'ordered' or 'simultaneous'; found {exchange!r}.")
-    if not (isinstance(iterations, (int, np.integer)) and iterations >= 0):
+    if not (isinstance(iterations, (int, np.integer)) and not isinstance(iterations, bool) and iterations >= 0):
         raise ValueError(f"`iterations` must be an integer >= 0; found {iterations!r}.")
     if not (np.isfinite(step_size) and step_size > 0):
         raise ValueError(f"`step_size` must be positive and finite; found {step_size!r}.")
+    if not np.isfinite(start_time):
+        raise ValueError(f"`start_time` must be finite; found {start_time!r}.")
     if not (np.isfinite(stop_time) and stop_time > start_time):
         raise ValueError(f"`stop_time` must be finite and after `start_time` ({start_time!r}); found {stop_time!r}.")
     if not max_growth > 1:
         raise ValueError(f"`max_growth` must be > 1 (math.inf disables the check); found {max_growth!r}.")
     if lambda_per_step is not None and not (np.isfinite(lambda_per_step) and lambda_per_step > 0):
         raise ValueError(f"`lambda_per_step` must be positive and finite or None; found {lambda_per_step!r}.")
+
+
+def _check_numbers(**values):
+    """Each option that is a number is a real number (not a str, not a bool), or None where allowed."""
+    optional = {"atol", "min_step", "max_step", "lambda_per_step"}
+    for name, value in values.items():
+        if value is None and name in optional:
+            continue
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise TypeError(f"`{name}` must be a number; found {type(value).__name__} {value!r}.")
+
+
+def _check_horizon(start_time, stop_time, step_size):
+    """A fixed-step run: a whole number of steps, at most MAX_STEPS, each of which advances time."""
+    span = stop_time - start_time
+    n_steps = round(span / step_size)
+    if span / step_size > MAX_STEPS:
+        raise ValueError(f"`step_size` {step_size!r} over [{start_time!r}, {stop_time!r}] makes {span / step_size:.3g} "
+                         f"macro steps; at most {MAX_STEPS:.0e} are taken (a larger `step_size`, or step_control).")
+    resolution = float(np.spacing(max(abs(start_time), abs(stop_time))))
+    if step_size < 1e3 * resolution:
+        raise ValueError(f"`step_size` {step_size!r} is below 1000 times the resolution of time at "
+                         f"{max(abs(start_time), abs(stop_time))!r} ({resolution!r}): the communication points "
+                         "cannot be represented.")
+    if abs(n_steps * step_size - span) > 1e-9 * span + 4 * resolution:
+        raise ValueError(f"`stop_time` - `start_time` must be a multiple of `step_size`; found {span!r} and "
+                         f"{step_size!r}.")
 
 
 def _check_order(max_input_order, extrapolation):

@@ -471,10 +471,7 @@ class Run(object):
     def advance(self, t0, stop_time, H, progress):
         if self.control.enabled:
             return self._advance_controlled(t0, stop_time, H, progress)
-        n_steps = int(round((stop_time - t0) / H))
-        if abs(n_steps * H - (stop_time - t0)) > 1e-9 * max(1.0, abs(stop_time)):
-            raise ValueError(f"`stop_time` - `start_time` must be a multiple of `step_size`; found "
-                             f"{stop_time - t0!r} and {H!r}.")
+        n_steps = int(round((stop_time - t0) / H))  # checked by cosimulate: a whole number of steps
         # The first p steps have fewer than p + 1 past points: extrapolated, they would lose orders
         # for the whole run (one zero-order-hold step is a local O(H^2) error). When every FMU can
         # roll back, they are repeated with the inputs interpolated through the values just computed.
@@ -497,12 +494,13 @@ class Run(object):
     def _advance_controlled(self, t0, stop_time, H, progress):
         t = t0
         progress.total, progress.unit = stop_time - t0, "of the time span"
-        while stop_time - t > 1e-12 * max(1.0, abs(stop_time)):
+        while t < stop_time:
             H = min(H, stop_time - t)
             if stop_time - (t + H) < self.control.min_step:  # no sliver of a step at the end
                 H = stop_time - t
             H, H_next = self._controlled_step(t, H)
             t = stop_time if H == stop_time - t else t + H
+            self.check_time(t - H, H)
             self.check_growth(t)
             self.accepted += 1
             self.push_history(t)
@@ -522,6 +520,7 @@ class Run(object):
             predicted = self._predict(t, H, q, start_value)
             err, worst = control.error(self.value, predicted, self.real)
             H_next = control.next_step(H, err, max(q, 1))
+            self.check_time(t, H)
             if err <= 1.0 or states is None or H <= control.min_step * (1 + 1e-12):
                 if states is not None:
                     self.release(states)
@@ -532,6 +531,13 @@ class Run(object):
             self.restore(states, t, start_value)
             self.release(states)
             H = max(H_next, control.min_step)
+
+    def check_time(self, t, H):
+        """A step that does not advance time (``t + H == t``: below the resolution of doubles at ``t``)
+        would repeat forever."""
+        if not t + H > t:
+            raise _Stop(f"the macro step {H!r} does not advance time at t = {t!r} (below the resolution of "
+                        "doubles there); raise `min_step`")
 
     def _predict(self, t, H, q, start_value):
         """What the estimate compares at ``t + H`` (docs/cosimulation.md, 'Step control'): with ``q >= 1``
@@ -550,6 +556,10 @@ class Run(object):
             return
         where = "{}.{}".format(*self.sources[worst])
         if indicator_only:
+            if H <= self.control.min_step * (1 + 1e-12):
+                raise _Stop(f"the step control needs a step below min_step ({self.control.min_step!r}) at t = {t!r}: "
+                            f"the coupling error estimate of {where} is {err:.3g} times the tolerance (some FMUs "
+                            "cannot roll back: the steps were kept)")
             if not self.warned_rollback:
                 self.warned_rollback = True
                 bad = [n for n, c in self.comps.items() if not c.can_rollback]

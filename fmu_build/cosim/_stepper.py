@@ -32,6 +32,8 @@ estimate is an indicator: a warning says so) and the next step is adapted.
 
 import numpy as np
 
+MAX_STEPS = 10 ** 7  # macro steps one run may take
+
 
 class StepControl:
     """Tolerances and bounds of the macro-step control (``enabled`` False: fixed step).
@@ -56,6 +58,9 @@ class StepControl:
         if not (np.isfinite(atol) and atol > 0):
             raise ValueError(f"`atol` must be positive and finite; found {atol!r}.")
         min_step = 1e-6 * step_size if min_step is None else min_step
+        if step_control:
+            # at most MAX_STEPS steps per run: a tolerance met only by tinier steps ends the run
+            min_step = max(min_step, span / MAX_STEPS)
         max_step = span if max_step is None else max_step
         if not (0 < min_step <= step_size <= max_step) and step_control:
             raise ValueError(f"`min_step` <= `step_size` <= `max_step` must hold with 0 < `min_step`; found "

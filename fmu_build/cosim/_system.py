@@ -98,7 +98,7 @@ def read_system(system, *, allow_external=False, max_unpacked=MAX_UNPACKED):
     if not path.is_file():
         raise ValueError(f"`system`: no such file {str(path)!r}.")
     if path.suffix.lower() == ".ssd":
-        return _from_ssd(path.read_bytes(), f"`system` {path.name}", lambda src: _outside(src, path.parent))
+        return _from_ssd(path.read_bytes(), f"`system` {path.name}", lambda src, index: _outside(src, path.parent))
     return _from_ssp(path, allow_external, int(max_unpacked))
 
 
