@@ -58,13 +58,13 @@ class StepControl:
         if not (np.isfinite(atol) and atol > 0):
             raise ValueError(f"`atol` must be positive and finite; found {atol!r}.")
         min_step = 1e-6 * step_size if min_step is None else min_step
-        if step_control:
-            # at most MAX_STEPS steps per run: a tolerance met only by tinier steps ends the run
-            min_step = max(min_step, span / MAX_STEPS)
         max_step = span if max_step is None else max_step
         if not (0 < min_step <= step_size <= max_step) and step_control:
             raise ValueError(f"`min_step` <= `step_size` <= `max_step` must hold with 0 < `min_step`; found "
                              f"{min_step!r}, {step_size!r}, {max_step!r}.")
+        if step_control:
+            # at most MAX_STEPS steps per run: a tolerance met only by tinier steps ends the run
+            min_step = min(max(min_step, span / MAX_STEPS), step_size)
         if step_control and iterations:
             raise ValueError("`step_control` and `iterations` > 0 cannot be combined; choose one.")
         return cls(bool(step_control), float(rtol), float(atol), float(min_step), float(max_step))
