@@ -57,8 +57,49 @@ def convert(value, kind, what):
     if kind == "String":
         if not isinstance(value, str):
             raise ValueError(f"{what}: a String must be a str; found {type(value).__name__}.")
+        if "\0" in value:
+            raise ValueError(f"{what}: a String cannot hold a NUL character (a C string would end there); "
+                             f"found {value!r}.")
+        try:
+            value.encode("utf-8")
+        except UnicodeEncodeError as exc:
+            raise ValueError(f"{what}: a String must be encodable as UTF-8; found {value!r} ({exc.reason}).") from None
         return value
     raise ValueError(f"{what}: variables of type {kind} cannot be set.")
+
+
+# pythonfmu FMUs import their model module by name into the one Python of the process, where the
+# first module of a name stays: a second FMU with another module of that name would run the first's code
+_PYTHON_MODELS = {}
+
+
+def _check_python_model(name, path, unzipdir):
+    import hashlib
+
+    resources = os.path.join(unzipdir, "resources")
+    marker = os.path.join(resources, "slavemodule.txt")
+    if not os.path.isfile(marker):
+        return
+    with open(marker, encoding="utf-8", errors="replace") as f:
+        module = f.read().strip()
+    digest = hashlib.sha256()
+    for root, dirs, files in os.walk(resources):
+        dirs.sort()
+        for file in sorted(files):
+            if file.endswith(".py"):
+                full = os.path.join(root, file)
+                digest.update(os.path.relpath(full, resources).encode())
+                with open(full, "rb") as f:
+                    digest.update(f.read())
+    known = _PYTHON_MODELS.setdefault(module, (digest.hexdigest(), path))
+    if known[0] != digest.hexdigest():
+        raise ValueError(f"component {name!r} ({os.path.basename(path)}): its pythonfmu model module {module!r} "
+                         f"differs from the one of the same name already loaded in this process (from {known[1]}); "
+                         "pythonfmu would run the first one's code. Run it in another process.")
+
+
+def _unit(v):
+    return v.unit or (v.declaredType.unit if v.declaredType is not None else None)
 
 
 class Component:
@@ -76,6 +117,7 @@ class Component:
         os.makedirs(unzipdir, exist_ok=True)
         self.unzipdir = unzip(path, unzipdir, max_unpacked, where=f"component {name!r} ({os.path.basename(path)})")
         self.variables = {v.name: v for v in self.md.modelVariables}
+        _check_python_model(name, path, self.unzipdir)
         self.can_interpolate = bool(cs.canInterpolateInputs)
         self.max_derivative = int(cs.maxOutputDerivativeOrder or 0)
         self.can_rollback = bool(cs.canGetAndSetFMUstate)
@@ -136,5 +178,14 @@ def check_types(comps, connections):
         if WIRE[src.type] != WIRE[dst.type]:
             raise ValueError(f"connection {a}.{y} -> {b}.{u}: a {src.type} output cannot feed a {dst.type} input; "
                              "connected variables must have the same type.")
+        if src.type == "Enumeration" and dst.type == "Enumeration":
+            ta, tb = (v.declaredType.name if v.declaredType is not None else None for v in (src, dst))
+            if ta != tb:
+                raise ValueError(f"connection {a}.{y} -> {b}.{u}: enumeration type {ta!r} cannot feed enumeration "
+                                 f"type {tb!r}; their items mean different things.")
+        ua, ub = _unit(src), _unit(dst)
+        if ua and ub and ua != ub:
+            raise ValueError(f"connection {a}.{y} -> {b}.{u}: unit {ua!r} cannot feed unit {ub!r}; connected "
+                             "variables must have the same unit (or one side none).")
         if src.type == "String":
             raise ValueError(f"connection {a}.{y} -> {b}.{u}: String connections are not exchanged by this master.")

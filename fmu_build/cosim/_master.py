@@ -83,12 +83,15 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         (λH fixed: the configuration of our DAE FMUs' theory).
     max_growth : float
         Divergence criterion: a Real coupling value whose magnitude exceeds
-        ``max_growth * max(1, largest |coupling value| at the start)`` ends
-        the run with ``success=False``. ``math.inf`` disables it.
+        ``max_growth * max(1, largest |coupling value| at the start)``, or
+        one that oscillates from step to step with a growing amplitude beyond
+        every value it had before, ends the run with ``success=False``.
+        ``math.inf`` disables it.
     allow_external : bool
-        Let a packed ``.ssp`` use FMUs outside the archive.
+        Let a packed ``.ssp`` use FMUs outside the archive (True or False only).
     max_unpacked : int
-        Bytes one archive (the SSP, each FMU) may unpack to.
+        Bytes the SSP's extracted members may occupy, and (separately) bytes
+        all the FMUs of the run together may unpack to.
     progress : bool, optional
         Show a progress bar on stderr once a run takes more than 2 s
         (default: when stderr is a terminal).
@@ -128,12 +131,12 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
             raise ValueError(f"`output` names each variable once; found {dup} more than once.")
     system = read_system(system, allow_external=allow_external, max_unpacked=max_unpacked)
     workdir = tempfile.mkdtemp(prefix="lsc_cosim_fmus_")
-    comps = {}
+    comps, budget = {}, [int(max_unpacked)]  # one budget for all the FMUs of the run
     try:
         with _callbacks.attach(system.components) as sink:
             for index, (name, path) in enumerate(system.components.items()):
                 comps[name] = Component(name, path, os.path.join(workdir, str(index)), _callbacks.callbacks(),
-                                        max_unpacked)
+                                        budget)
             check_types(comps, system.connections)
             run = Run(comps, system.connections, sink, algorithm=algorithm, p=extrapolation, iterations=iterations,
                       output=output, rtol=rtol, exchange=exchange, control=control, max_growth=max_growth,

@@ -22,6 +22,7 @@ RECOMMENDED = ("docs/cosimulation.md recommends, for a loop through a differenti
                "output derivatives, the DAE FMU built native, algorithm='jacobi', extrapolation=2 and "
                "lambda_per_step=1.0 (or a smaller loop gain; see 'Divergence')")
 WINDOW = 12  # steps of growing alternating second differences that mean divergence
+PEAK_MARGIN = 1.1  # growth beyond the earlier peak that an oscillation must show to be divergence
 MAX_INPUT_ORDER = 8  # highest input-derivative order ever probed or sent
 DTYPES = {"Real": np.float64, "Integer": np.int64, "Boolean": np.bool_, "String": object}
 
@@ -42,6 +43,7 @@ class Run(object):
         self._lambda_targets()
         self.warned_rollback = False
         self.recent = []  # coupling values at the last WINDOW + 2 communication points
+        self.peak, self.recent_dropped = None, False  # largest |value| per slot before the window
 
     # -- layout --------------------------------------------------------------------------------------
 
@@ -383,7 +385,12 @@ class Run(object):
     def step_all(self, t_start, H, end_values=None):
         """One macro step of every FMU; ``end_values``: the last iterate's values at t + H (step iteration)."""
         value, p, names = self.value, self.p, self.names
-        hold = value.copy() if end_values is None else end_values
+        hold = value.copy()
+        if end_values is not None:
+            # start-up repeats: Integer and Boolean inputs hold the step-start value as in every other step
+            # (no polynomial); the step iteration (iterations > 0) converges all of them
+            mask = slice(None) if self.iterations else self.real
+            hold[mask] = end_values[mask]
         end_point = None if end_values is None else (t_start + H, end_values, None)
         jet = self.input_jet(t_start, end_point) if p > 0 else None
         if self.algorithm == "jacobi":
@@ -448,14 +455,20 @@ class Run(object):
             self._diverged(worst, t, f"|{{}}| = {mag[worst]:.3g} exceeds max_growth ({self.max_growth:.3g}) times "
                                      f"the start scale ({self.scale:.3g})")
         self.recent.append(self.value.copy())
-        del self.recent[:-(WINDOW + 2)]
+        if len(self.recent) > WINDOW + 2:
+            self.peak = np.maximum(self.peak, np.abs(self.recent[0])) if self.recent_dropped else np.abs(self.recent[0])
+            self.recent_dropped = True
+            del self.recent[0]
         if len(self.recent) < WINDOW + 2:
             return
         d2 = np.diff(np.array(self.recent), 2, axis=0)  # WINDOW rows
         alternating = np.all(d2[1:] * d2[:-1] < 0, axis=0)
         growing = np.all(np.abs(d2[1:]) > np.abs(d2[:-1]), axis=0)
         visible = np.abs(d2[-1]) > 1e-8 * self.scale
-        bad = np.flatnonzero(alternating & growing & visible & self.real)
+        # a bounded signal near the Nyquist rate (a beat) has growing alternating differences too:
+        # divergence also needs values 10 % beyond every one seen before the window
+        beyond = (np.abs(np.array(self.recent)).max(axis=0) > PEAK_MARGIN * self.peak) if self.recent_dropped else True
+        bad = np.flatnonzero(alternating & growing & visible & beyond & self.real)
         if bad.size:
             s = int(bad[0])
             self._diverged(s, t, f"{{}} oscillates from step to step with an amplitude that grew "

@@ -16,7 +16,6 @@ import posixpath
 import re
 import shutil
 import tempfile
-import warnings
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
@@ -193,7 +192,8 @@ def _from_ssd(data, where, locate):
     if system is None:
         raise ValueError(f"{where}: the SSD has no System element.")
     if any(_local(e.tag) == "ParameterBindings" for e in system.iter()):
-        warnings.warn(f"{where}: SSP parameter bindings are not applied; use `start_values`.", stacklevel=4)
+        raise ValueError(f"{where}: the SSD has ParameterBindings, which this master does not apply; refused "
+                         "(a run without them would be another model). Give the values as `start_values`.")
     components = {}
     elements = _child(system, "Elements")
     for index, element in enumerate(list(elements) if elements is not None else []):
@@ -270,7 +270,8 @@ def unzip(path, dest, max_unpacked=MAX_UNPACKED, where=None):
     ValueError: archive: member '../evil.txt' would be written outside its folder; refused.
     """
     where = where or "archive"
-    budget = [int(max_unpacked)]
+    # a one-item list is a budget shared by several archives (the FMUs of one run)
+    budget = max_unpacked if isinstance(max_unpacked, list) else [int(max_unpacked)]
     dest = os.path.realpath(dest)
     with zipfile.ZipFile(path) as zf:
         for info in zf.infolist():
