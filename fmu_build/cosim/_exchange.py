@@ -8,6 +8,7 @@ Boolean, ``2.5`` is no Integer).
 """
 
 import os
+import zipfile
 
 import numpy as np
 
@@ -110,7 +111,15 @@ class Component:
         from fmpy.fmi2 import FMU2Slave
 
         self.name, self.path = name, path
-        self.md = read_model_description(path)
+        where = f"component {name!r} ({path})"
+        if not os.path.isfile(path):
+            raise ValueError(f"{where}: no such FMU file.")
+        if not zipfile.is_zipfile(path):
+            raise ValueError(f"{where}: not an FMU (an FMU is a zip archive).")
+        try:
+            self.md = read_model_description(path)
+        except Exception as exc:  # noqa: BLE001 -- fmpy raises bare Exceptions for invalid descriptions
+            raise ValueError(f"{where}: invalid modelDescription.xml ({exc}).") from None
         cs = self.md.coSimulation
         if cs is None:
             raise ValueError(f"component {name!r}: {path} is not a Co-Simulation FMU.")
@@ -128,7 +137,11 @@ class Component:
         self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir, modelIdentifier=cs.modelIdentifier,
                              instanceName=name)
         # logging on: pythonfmu FMUs pass their messages (errors included) to the logger only then
-        self.fmu.instantiate(callbacks=callbacks, loggingOn=True)
+        try:
+            self.fmu.instantiate(callbacks=callbacks, loggingOn=True)
+        except Exception as exc:  # noqa: BLE001 -- fmpy raises a bare Exception when fmi2Instantiate fails
+            self.fmu = None
+            raise RuntimeError(f"{where}: fmi2Instantiate failed ({exc}).") from None
         # output -> inputs it depends on directly (None in the XML: every input)
         inputs = [v.name for v in self.md.modelVariables if v.causality == "input"]
         self.feedthrough = {}
@@ -171,8 +184,13 @@ class Component:
             fmu.setString(list(refs), [str(v) for v in values])
 
 
-def check_types(comps, connections):
-    """Causality and type agreement of every connection (before anything runs)."""
+def check_types(comps, connections, connectors=None, where="`system`"):
+    """Causality and type agreement of every connection and SSD connector (before anything runs)."""
+    for (c, name), kind in (connectors or {}).items():
+        v = comps[c].variables.get(name)
+        if v is not None and v.type != kind:
+            raise ValueError(f"{where}: connector {c}.{name} is declared {kind} in the SSD; the FMU's {name} is "
+                             f"{v.type}.")
     for a, y, b, u in connections:
         src, dst = comps[a].variable(y, "output"), comps[b].variable(u, "input")
         if WIRE[src.type] != WIRE[dst.type]:

@@ -78,8 +78,9 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         input, derivatives beyond the first form a divergent loop of their
         own: pass ``1`` there.
     lambda_per_step : float, optional
-        Set the parameter ``lambda`` of every component that has one to
-        ``lambda_per_step / H`` before the run and after each step change
+        Set the parameter ``lambda`` of every DAE FMU built by lsc (its
+        ``generationTool`` or ``author`` is "lsc fmu_build"; a parameter named
+        ``lambda`` of another FMU means something else) to ``lambda_per_step / H`` before the run and after each step change
         (λH fixed: the configuration of our DAE FMUs' theory).
     max_growth : float
         Divergence criterion: a Real coupling value whose magnitude exceeds
@@ -129,6 +130,9 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         dup = sorted({o for o in output if list(output).count(o) > 1})
         if dup:
             raise ValueError(f"`output` names each variable once; found {dup} more than once.")
+    if start_values is not None and not isinstance(start_values, dict):
+        raise TypeError(f"`start_values` must be a dict {{'component.variable': value}}; found "
+                        f"{type(start_values).__name__} {start_values!r}.")
     system = read_system(system, allow_external=allow_external, max_unpacked=max_unpacked)
     workdir = tempfile.mkdtemp(prefix="lsc_cosim_fmus_")
     comps, budget = {}, [int(max_unpacked)]  # one budget for all the FMUs of the run
@@ -137,7 +141,8 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
             for index, (name, path) in enumerate(system.components.items()):
                 comps[name] = Component(name, path, os.path.join(workdir, str(index)), _callbacks.callbacks(),
                                         budget)
-            check_types(comps, system.connections)
+            check_types(comps, system.connections, system.connectors, system.origin)
+            _check_start_values(comps, start_values or {})
             run = Run(comps, system.connections, sink, algorithm=algorithm, p=extrapolation, iterations=iterations,
                       output=output, rtol=rtol, exchange=exchange, control=control, max_growth=max_growth,
                       lambda_per_step=lambda_per_step, max_input_order=max_input_order)
@@ -197,6 +202,20 @@ def _check_horizon(start_time, stop_time, step_size):
     if abs(n_steps * step_size - span) > 1e-9 * span + 4 * resolution:
         raise ValueError(f"`stop_time` - `start_time` must be a multiple of `step_size`; found {span!r} and "
                          f"{step_size!r}.")
+
+
+def _check_start_values(comps, start_values):
+    """Each start value names a variable that can take one (not an output), with a value of its type."""
+    from ._exchange import convert
+    from ._system import _split
+
+    for key, value in start_values.items():
+        cname, var = _split(key, comps)
+        v = comps[cname].variable(var)
+        if v.causality == "output":
+            raise ValueError(f"`start_values`[{key!r}]: {key} is an output; an output's value is computed by its "
+                             "FMU and cannot be given.")
+        convert(value, v.type, f"`start_values`[{key!r}]")
 
 
 def _check_order(max_input_order, extrapolation):

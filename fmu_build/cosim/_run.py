@@ -21,6 +21,7 @@ logger = logging.getLogger("fmu_build.cosim")
 RECOMMENDED = ("docs/cosimulation.md recommends, for a loop through a differentiated input, a plant that gives "
                "output derivatives, the DAE FMU built native, algorithm='jacobi', extrapolation=2 and "
                "lambda_per_step=1.0 (or a smaller loop gain; see 'Divergence')")
+LSC_TOOL = "lsc fmu_build"  # generationTool (native) or author (pythonfmu) of the DAE FMUs lsc builds
 WINDOW = 12  # steps of growing alternating second differences that mean divergence
 PEAK_MARGIN = 1.1  # growth beyond the earlier peak that an oscillation must show to be divergence
 MAX_INPUT_ORDER = 8  # highest input-derivative order ever probed or sent
@@ -122,13 +123,16 @@ class Run(object):
             return
         for n, c in self.comps.items():
             v = c.variables.get("lambda")
-            if v is not None and v.causality == "parameter" and v.type == "Real":
+            # only our DAE FMUs: another FMU's `lambda` is its own parameter, with its own meaning
+            ours = LSC_TOOL in (c.md.generationTool or "") or LSC_TOOL in (getattr(c.md, "author", None) or "")
+            if ours and v is not None and v.causality == "parameter" and v.type == "Real":
                 if self.control.enabled and v.variability != "tunable":
                     raise ValueError(f"`lambda_per_step` with `step_control` needs a tunable {n}.lambda; "
                                      f"it is {v.variability}.")
                 self.lambda_refs[n] = v.valueReference
         if not self.lambda_refs:
-            raise ValueError("`lambda_per_step`: no component has a Real parameter `lambda`.")
+            raise ValueError("`lambda_per_step`: no DAE FMU built by lsc (generationTool or author "
+                             f"{LSC_TOOL!r}) has a Real parameter `lambda`.")
 
     # -- FMI calls -----------------------------------------------------------------------------------
 
@@ -476,8 +480,18 @@ class Run(object):
 
     def _diverged(self, s, t, what):
         a, y = self.sources[s]
-        raise _Stop(f"the coupling diverged: {what.format(f'{a}.{y}')} at t = {t!r}; this configuration is "
-                    f"unstable for this system: {RECOMMENDED}")
+        name = f"{a}.{y}"
+        loop = next((lp for lp in self.loop_names if name in lp), None)
+        if loop is not None:
+            advice = (f"{name} is in the algebraic loop through {', '.join(loop)}, whose gain is above 1 in "
+                      "magnitude: no step size or extrapolation helps; a loop gain below 1, or `iterations` > 0 "
+                      "(which iterates the loop and fails if it does not contract)")
+        elif self.deriv_loop:
+            advice = RECOMMENDED
+        else:
+            advice = "a smaller step size, or extrapolation=0 (see 'Divergence' in docs/cosimulation.md)"
+        raise _Stop(f"the coupling diverged: {what.format(name)} at t = {t!r}; this configuration is "
+                    f"unstable for this system: {advice}")
 
     # -- the run -------------------------------------------------------------------------------------
 
