@@ -486,10 +486,8 @@ class Run(object):
             advice = (f"{name} is in the algebraic loop through {', '.join(loop)}, whose gain is above 1 in "
                       "magnitude: no step size or extrapolation helps; a loop gain below 1, or `iterations` > 0 "
                       "(which iterates the loop and fails if it does not contract)")
-        elif self.deriv_loop:
-            advice = RECOMMENDED
         else:
-            advice = "a smaller step size, or extrapolation=0 (see 'Divergence' in docs/cosimulation.md)"
+            advice = RECOMMENDED
         raise _Stop(f"the coupling diverged: {what.format(name)} at t = {t!r}; this configuration is "
                     f"unstable for this system: {advice}")
 

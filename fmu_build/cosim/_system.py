@@ -104,7 +104,7 @@ def read_system(system, *, allow_external=False, max_unpacked=MAX_UNPACKED):
     if not path.is_file():
         raise ValueError(f"`system`: no such file {str(path)!r}.")
     if path.suffix.lower() == ".ssd":
-        return _from_ssd(path.read_bytes(), f"`system` {path.name}", lambda src, index: _outside(src, path.parent))
+        return _from_ssd(path.read_bytes(), f"`system` {path}", lambda src, index: _outside(src, path.parent))
     return _from_ssp(path, allow_external, int(max_unpacked))
 
 
@@ -130,14 +130,14 @@ def _from_dict(system):
 
 
 def _from_ssp(path, allow_external, max_unpacked):
-    where = f"`system` {path.name}"
+    where = f"`system` {path}"
     workdir = tempfile.mkdtemp(prefix="lsc_cosim_ssp_")
     try:
         try:
             archive = zipfile.ZipFile(path)
         except zipfile.BadZipFile:
-            raise ValueError(f"{where}: {str(path)!r} is not a zip archive; an .ssp is one (an .ssd is its "
-                             "XML document).") from None
+            raise ValueError(f"{where}: not an SSP archive (a zip holding SystemStructure.ssd); a plain "
+                             "SystemStructure.ssd is read from a file ending in .ssd.") from None
         with archive as zf:
             members = set(zf.namelist())
             if "SystemStructure.ssd" not in members:
