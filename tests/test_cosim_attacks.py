@@ -476,10 +476,9 @@ def test_parameter_bindings_are_applied_or_refused(fmus, tmp_path):
         r = cosimulate({ssp!r}, 1.0, 0.1, output=['p.y1'])
         out = {{'success': bool(r.success), 'y1': float(r['p.y1'][-1]) if len(r) else None}}
     """)
-    if got.get("raised"):
-        assert_clear_refusal(got, "pb.ssp", "ParameterBinding")
-    else:
-        assert not got["out"]["success"] or abs(got["out"]["y1"] - 5 * 0.5403023058681398) < 1e-6, got
+    # inline values are applied (as start values): y1(1) = x1(0) cos 1
+    assert got.get("raised") is None and got["out"]["success"], got
+    assert abs(got["out"]["y1"] - 5 * 0.5403023058681398) < 1e-6, got
 
 
 def test_an_ssd_connector_type_that_disagrees_with_the_fmu_is_refused(fmus, tmp_path):
@@ -980,3 +979,24 @@ def test_the_unpack_limit_bounds_a_whole_run_not_each_component(fmus, tmp_path):
     system = {"components": {n: str(padded) for n in ("a", "b", "c")}, "connections": []}
     got = attempt(RUN.format(system=system, stop=0.2, step=0.1, extra=f", max_unpacked={20 << 20}"))
     assert_clear_refusal(got, "size limit")
+
+
+def test_a_parameter_binding_from_an_external_file_is_refused(fmus, tmp_path):
+    """A ParameterBinding whose values live in an .ssv file (not applied by this master) is refused
+    naming the file and the component, never ignored."""
+    binding = '<ssd:ParameterBindings><ssd:ParameterBinding source="resources/x.ssv"/></ssd:ParameterBindings>'
+    comp = COMP_P.format(source="resources/P.fmu").replace("/>", ">" + binding + "</ssd:Component>")
+    ssp = write_ssp(tmp_path / "pbx.ssp", comp, members={"resources/P.fmu": fmus["P"]})
+    assert_clear_refusal(attempt(RUN.format(system=ssp, stop=1.0, step=0.1, extra="")), "pbx.ssp", "'p'",
+                         "ParameterBinding")
+
+
+def test_a_parameter_binding_of_the_wrong_type_is_refused(fmus, tmp_path):
+    """The SSD binds the Real x1_0 with an Integer value: refused naming the file and the variable."""
+    binding = ('<ssd:ParameterBindings><ssd:ParameterBinding><ssd:ParameterValues><ssv:ParameterSet '
+               'xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" version="1.0" name="x">'
+               '<ssv:Parameters><ssv:Parameter name="x1_0"><ssv:Integer value="5"/></ssv:Parameter></ssv:Parameters>'
+               '</ssv:ParameterSet></ssd:ParameterValues></ssd:ParameterBinding></ssd:ParameterBindings>')
+    comp = COMP_P.format(source="resources/P.fmu").replace("/>", ">" + binding + "</ssd:Component>")
+    ssp = write_ssp(tmp_path / "pbt.ssp", comp, members={"resources/P.fmu": fmus["P"]})
+    assert_clear_refusal(attempt(RUN.format(system=ssp, stop=1.0, step=0.1, extra="")), "pbt.ssp", "p.x1_0")

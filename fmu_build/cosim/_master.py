@@ -142,7 +142,8 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
                 comps[name] = Component(name, path, os.path.join(workdir, str(index)), _callbacks.callbacks(),
                                         budget)
             check_types(comps, system.connections, system.connectors, system.origin)
-            _check_start_values(comps, start_values or {})
+            start_values = {**_bound(comps, system), **(start_values or {})}  # given values take precedence
+            _check_start_values(comps, start_values)
             run = Run(comps, system.connections, sink, algorithm=algorithm, p=extrapolation, iterations=iterations,
                       output=output, rtol=rtol, exchange=exchange, control=control, max_growth=max_growth,
                       lambda_per_step=lambda_per_step, max_input_order=max_input_order)
@@ -202,6 +203,22 @@ def _check_horizon(start_time, stop_time, step_size):
     if abs(n_steps * step_size - span) > 1e-9 * span + 4 * resolution:
         raise ValueError(f"`stop_time` - `start_time` must be a multiple of `step_size`; found {span!r} and "
                          f"{step_size!r}.")
+
+
+def _bound(comps, system):
+    """The SSD's parameter bindings as start values, each checked against its variable's type."""
+    from ._exchange import convert
+    from ._system import _split
+
+    values = {}
+    for key, (kind, text) in system.parameters.items():
+        cname, var = _split(key, comps)
+        v = comps[cname].variables.get(var)
+        if v is None or v.type != kind or v.causality not in ("parameter", "input"):
+            found = "no such variable" if v is None else f"a {v.causality} {v.type}"
+            raise ValueError(f"{system.origin}: the ParameterBinding of {key} is a {kind}; the FMU has {found}.")
+        values[key] = convert(text, kind, f"{system.origin}: the ParameterBinding of {key}")
+    return values
 
 
 def _check_start_values(comps, start_values):

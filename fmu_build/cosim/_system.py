@@ -44,6 +44,7 @@ class System:
     def __init__(self, components, connections, workdir=None, origin="`system`"):
         self.components, self.connections, self.workdir, self.origin = components, connections, workdir, origin
         self.connectors = {}  # (component, connector) -> type declared in the SSD
+        self.parameters = {}  # "component.variable" -> value bound in the SSD (applied as a start value)
 
     def __iter__(self):
         return iter((self.components, self.connections, self.workdir))
@@ -211,9 +212,11 @@ def _from_ssd(data, where, locate):
     system = _child(root, "System")
     if system is None:
         raise ValueError(f"{where}: the SSD has no System element.")
-    if any(_local(e.tag) == "ParameterBindings" for e in system.iter()):
-        raise ValueError(f"{where}: the SSD has ParameterBindings, which this master does not apply; refused "
-                         "(a run without them would be another model). Give the values as `start_values`.")
+    if _child(system, "ParameterBindings") is not None:
+        raise ValueError(f"{where}: the System has ParameterBindings; only a Component's inline ParameterBindings "
+                         "are applied (a run without them would be another model). Give the values as "
+                         "`start_values`.")
+    parameters = {}
     components, connectors = {}, {}
     elements = _child(system, "Elements")
     for index, element in enumerate(list(elements) if elements is not None else []):
@@ -232,6 +235,7 @@ def _from_ssd(data, where, locate):
                              "supported (a nested SSP is not).")
         components[name] = locate(source, index)
         connectors.update(_connectors(element, name))
+        parameters.update(_bindings(element, name, where))
     connections = []
     links = _child(system, "Connections")
     for c in list(links) if links is not None else []:
@@ -251,8 +255,30 @@ def _from_ssd(data, where, locate):
                 raise ValueError(f"{where}: connection {a}.{y} -> {b}.{u}: no component {comp!r}.")
         connections.append((a, y, b, u))
     system = System(components, _check_connections(connections, where), None, where)
-    system.connectors = connectors
+    system.connectors, system.parameters = connectors, parameters
     return system
+
+
+def _bindings(element, name, where):
+    """``{"component.parameter": value}`` of a component's inline ParameterBindings; what this master
+    cannot apply exactly (an external .ssv, a prefix, a mapping, an Enumeration item) is refused."""
+    found = {}
+    block = _child(element, "ParameterBindings")
+    for binding in list(block) if block is not None else []:
+        what = f"{where}: component {name!r}: a ParameterBinding"
+        if binding.get("source") or binding.get("prefix") or _child(binding, "ParameterMapping") is not None:
+            raise ValueError(f"{what} with a source file, a prefix or a ParameterMapping is not applied by this "
+                             "master; refused. Give the values inline or as `start_values`.")
+        values = _child(binding, "ParameterValues")
+        sets = [e for e in (list(values) if values is not None else []) if _local(e.tag) == "ParameterSet"]
+        for parameters in (_child(ps, "Parameters") for ps in sets):
+            for parameter in list(parameters) if parameters is not None else []:
+                kinds = [e for e in parameter if _local(e.tag) in ("Real", "Integer", "Boolean", "String")]
+                if not parameter.get("name") or len(kinds) != 1 or kinds[0].get("value") is None:
+                    raise ValueError(f"{what}: parameter {parameter.get('name')!r} must have a name and one "
+                                     "Real, Integer, Boolean or String value; refused.")
+                found[f"{name}.{parameter.get('name')}"] = (_local(kinds[0].tag), kinds[0].get("value"))
+    return found
 
 
 def _connectors(element, name):
