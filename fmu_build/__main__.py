@@ -387,14 +387,14 @@ def _write_csv(path, result):
     """The result as CSV: numbers with 17 digits, Booleans as 0/1, Strings quoted where needed."""
     import csv
 
+    import numpy as np
+
     def cell(x):
         if isinstance(x, str):
             return x
         if isinstance(x, (bool, np.bool_)) or isinstance(x, (int, np.integer)):
             return str(int(x))
         return format(float(x), ".17g")
-
-    import numpy as np
 
     names = result.dtype.names
     with open(path, "w", newline="", encoding="utf-8") as f:
@@ -408,8 +408,6 @@ def _run_cosim(args):
     """``lsc-fmu cosim``: run fmu_build.cosimulate and write CSV (and a plot)."""
     import warnings
     from pathlib import Path
-
-    import numpy as np
 
     from ._cli_checks import check_output, check_span, check_step, check_system_file, check_time
     from .cosim import cosimulate
