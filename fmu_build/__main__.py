@@ -63,8 +63,9 @@ def _run_build(args):
     return 0
 
 
-def _assignments(items, option, form):
-    """``{name: float}`` from repeated ``NAME=VALUE`` options, or a ValueError naming the option."""
+def _assignments(items, option, form, text=False):
+    """``{name: float}`` from repeated ``NAME=VALUE`` options, or a ValueError naming the option;
+    ``text``: a value that is no number is kept as a string (converted by the variable's type later)."""
     values = {}
     for item in items:
         name, sep, value = item.partition("=")
@@ -73,7 +74,9 @@ def _assignments(items, option, form):
         try:
             values[name.strip()] = float(value)
         except ValueError:
-            raise ValueError(f"`{option}` expects {form} with a number; found {item!r}.") from None
+            if not text:
+                raise ValueError(f"`{option}` expects {form} with a number; found {item!r}.") from None
+            values[name.strip()] = value
     return values
 
 
@@ -380,12 +383,31 @@ def _add_cosim(sub):
     cosim.add_argument("--force", action="store_true", help="replace an existing output file that is not a result")
 
 
+def _write_csv(path, result):
+    """The result as CSV: numbers with 17 digits, Booleans as 0/1, Strings quoted where needed."""
+    import csv
+
+    import numpy as np
+
+    def cell(x):
+        if isinstance(x, str):
+            return x
+        if isinstance(x, (bool, np.bool_)) or isinstance(x, (int, np.integer)):
+            return str(int(x))
+        return format(float(x), ".17g")
+
+    names = result.dtype.names
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f, lineterminator="\n")
+        writer.writerow(names)
+        for row in result:
+            writer.writerow([cell(row[n]) for n in names])
+
+
 def _run_cosim(args):
     """``lsc-fmu cosim``: run fmu_build.cosimulate and write CSV (and a plot)."""
     import warnings
     from pathlib import Path
-
-    import numpy as np
 
     from ._cli_checks import check_output, check_span, check_step, check_system_file, check_time
     from .cosim import cosimulate
@@ -397,7 +419,9 @@ def _run_cosim(args):
         for path in outputs:
             check_output(path, [args.system], "-o", args.force, columns=args.output)
         check_system_file(args.system)
-        start = _assignments(args.start, "--start", "COMP.VAR=VALUE")
+        if not Path(args.result).resolve().parent.is_dir():
+            raise ValueError(f"`-o` {args.result}: the folder {str(Path(args.result).parent)!r} does not exist.")
+        start = _assignments(args.start, "--start", "COMP.VAR=VALUE", text=True)
     except ValueError as exc:
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2
@@ -416,10 +440,8 @@ def _run_cosim(args):
               "expected an SSP archive (.ssp) or a SystemStructure.ssd (see docs/cosimulation.md).", file=sys.stderr)
         return 2
     names = result.dtype.names
-    Path(args.result).parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(args.result).with_name(f".{Path(args.result).name}.tmp{os.getpid()}")
-    np.savetxt(tmp, np.column_stack([result[n] for n in names]) if len(result) else np.zeros((0, len(names))),
-               delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+    _write_csv(tmp, result)
     os.replace(tmp, args.result)
     if args.plot:
         import matplotlib

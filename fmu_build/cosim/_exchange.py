@@ -8,10 +8,11 @@ Boolean, ``2.5`` is no Integer).
 """
 
 import os
+import zipfile
 
 import numpy as np
 
-from ._system import unzip
+from ._system import IDENTIFIER, unzip
 
 # types a connection may join (Enumeration values are Integers on the wire, as in libcosim)
 WIRE = {"Real": "Real", "Integer": "Integer", "Enumeration": "Integer", "Boolean": "Boolean", "String": "String"}
@@ -57,8 +58,49 @@ def convert(value, kind, what):
     if kind == "String":
         if not isinstance(value, str):
             raise ValueError(f"{what}: a String must be a str; found {type(value).__name__}.")
+        if "\0" in value:
+            raise ValueError(f"{what}: a String cannot hold a NUL character (a C string would end there); "
+                             f"found {value!r}.")
+        try:
+            value.encode("utf-8")
+        except UnicodeEncodeError as exc:
+            raise ValueError(f"{what}: a String must be encodable as UTF-8; found {value!r} ({exc.reason}).") from None
         return value
     raise ValueError(f"{what}: variables of type {kind} cannot be set.")
+
+
+# pythonfmu FMUs import their model module by name into the one Python of the process, where the
+# first module of a name stays: a second FMU with another module of that name would run the first's code
+_PYTHON_MODELS = {}
+
+
+def _check_python_model(name, path, unzipdir):
+    import hashlib
+
+    resources = os.path.join(unzipdir, "resources")
+    marker = os.path.join(resources, "slavemodule.txt")
+    if not os.path.isfile(marker):
+        return
+    with open(marker, encoding="utf-8", errors="replace") as f:
+        module = f.read().strip()
+    digest = hashlib.sha256()
+    for root, dirs, files in os.walk(resources):
+        dirs.sort()
+        for file in sorted(files):
+            if file.endswith(".py"):
+                full = os.path.join(root, file)
+                digest.update(os.path.relpath(full, resources).encode())
+                with open(full, "rb") as f:
+                    digest.update(f.read())
+    known = _PYTHON_MODELS.setdefault(module, (digest.hexdigest(), path))
+    if known[0] != digest.hexdigest():
+        raise ValueError(f"component {name!r} ({os.path.basename(path)}): its pythonfmu model module {module!r} "
+                         f"differs from the one of the same name already loaded in this process (from {known[1]}); "
+                         "pythonfmu would run the first one's code. Run it in another process.")
+
+
+def _unit(v):
+    return v.unit or (v.declaredType.unit if v.declaredType is not None else None)
 
 
 class Component:
@@ -69,20 +111,37 @@ class Component:
         from fmpy.fmi2 import FMU2Slave
 
         self.name, self.path = name, path
-        self.md = read_model_description(path)
+        where = f"component {name!r} ({path})"
+        if not os.path.isfile(path):
+            raise ValueError(f"{where}: no such FMU file.")
+        if not zipfile.is_zipfile(path):
+            raise ValueError(f"{where}: not an FMU (an FMU is a zip archive).")
+        try:
+            self.md = read_model_description(path)
+        except Exception as exc:  # noqa: BLE001 -- fmpy raises bare Exceptions for invalid descriptions
+            raise ValueError(f"{where}: invalid modelDescription.xml ({exc}).") from None
         cs = self.md.coSimulation
         if cs is None:
             raise ValueError(f"component {name!r}: {path} is not a Co-Simulation FMU.")
         os.makedirs(unzipdir, exist_ok=True)
         self.unzipdir = unzip(path, unzipdir, max_unpacked, where=f"component {name!r} ({os.path.basename(path)})")
         self.variables = {v.name: v for v in self.md.modelVariables}
+        _check_python_model(name, path, self.unzipdir)
         self.can_interpolate = bool(cs.canInterpolateInputs)
         self.max_derivative = int(cs.maxOutputDerivativeOrder or 0)
         self.can_rollback = bool(cs.canGetAndSetFMUstate)
+        if not IDENTIFIER.match(cs.modelIdentifier or ""):
+            raise ValueError(f"component {name!r} ({os.path.basename(path)}): modelIdentifier "
+                             f"{cs.modelIdentifier!r} is not a plain identifier; it names the binary inside the "
+                             "FMU and is never a path.")
         self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir, modelIdentifier=cs.modelIdentifier,
                              instanceName=name)
         # logging on: pythonfmu FMUs pass their messages (errors included) to the logger only then
-        self.fmu.instantiate(callbacks=callbacks, loggingOn=True)
+        try:
+            self.fmu.instantiate(callbacks=callbacks, loggingOn=True)
+        except Exception as exc:  # noqa: BLE001 -- fmpy raises a bare Exception when fmi2Instantiate fails
+            self.fmu = None
+            raise RuntimeError(f"{where}: fmi2Instantiate failed ({exc}).") from None
         # output -> inputs it depends on directly (None in the XML: every input)
         inputs = [v.name for v in self.md.modelVariables if v.causality == "input"]
         self.feedthrough = {}
@@ -125,12 +184,26 @@ class Component:
             fmu.setString(list(refs), [str(v) for v in values])
 
 
-def check_types(comps, connections):
-    """Causality and type agreement of every connection (before anything runs)."""
+def check_types(comps, connections, connectors=None, where="`system`"):
+    """Causality and type agreement of every connection and SSD connector (before anything runs)."""
+    for (c, name), kind in (connectors or {}).items():
+        v = comps[c].variables.get(name)
+        if v is not None and v.type != kind:
+            raise ValueError(f"{where}: connector {c}.{name} is declared {kind} in the SSD; the FMU's {name} is "
+                             f"{v.type}.")
     for a, y, b, u in connections:
         src, dst = comps[a].variable(y, "output"), comps[b].variable(u, "input")
         if WIRE[src.type] != WIRE[dst.type]:
             raise ValueError(f"connection {a}.{y} -> {b}.{u}: a {src.type} output cannot feed a {dst.type} input; "
                              "connected variables must have the same type.")
+        if src.type == "Enumeration" and dst.type == "Enumeration":
+            ta, tb = (v.declaredType.name if v.declaredType is not None else None for v in (src, dst))
+            if ta != tb:
+                raise ValueError(f"connection {a}.{y} -> {b}.{u}: enumeration type {ta!r} cannot feed enumeration "
+                                 f"type {tb!r}; their items mean different things.")
+        ua, ub = _unit(src), _unit(dst)
+        if ua and ub and ua != ub:
+            raise ValueError(f"connection {a}.{y} -> {b}.{u}: unit {ua!r} cannot feed unit {ub!r}; connected "
+                             "variables must have the same unit (or one side none).")
         if src.type == "String":
             raise ValueError(f"connection {a}.{y} -> {b}.{u}: String connections are not exchanged by this master.")

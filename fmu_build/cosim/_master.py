@@ -12,7 +12,7 @@ from . import _callbacks
 from ._exchange import Component, check_types
 from ._result import CosimResult, _Progress, _Stop
 from ._run import Run
-from ._stepper import StepControl
+from ._stepper import MAX_STEPS, StepControl
 from ._system import MAX_UNPACKED, read_system
 
 ALGORITHMS = ("jacobi", "gauss-seidel")
@@ -78,17 +78,21 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         input, derivatives beyond the first form a divergent loop of their
         own: pass ``1`` there.
     lambda_per_step : float, optional
-        Set the parameter ``lambda`` of every component that has one to
-        ``lambda_per_step / H`` before the run and after each step change
+        Set the parameter ``lambda`` of every DAE FMU built by lsc (its
+        ``generationTool`` or ``author`` is "lsc fmu_build"; a parameter named
+        ``lambda`` of another FMU means something else) to ``lambda_per_step / H`` before the run and after each step change
         (λH fixed: the configuration of our DAE FMUs' theory).
     max_growth : float
         Divergence criterion: a Real coupling value whose magnitude exceeds
-        ``max_growth * max(1, largest |coupling value| at the start)`` ends
-        the run with ``success=False``. ``math.inf`` disables it.
+        ``max_growth * max(1, largest |coupling value| at the start)``, or
+        one that oscillates from step to step with a growing amplitude beyond
+        every value it had before, ends the run with ``success=False``.
+        ``math.inf`` disables it.
     allow_external : bool
-        Let a packed ``.ssp`` use FMUs outside the archive.
+        Let a packed ``.ssp`` use FMUs outside the archive (True or False only).
     max_unpacked : int
-        Bytes one archive (the SSP, each FMU) may unpack to.
+        Bytes the SSP's extracted members may occupy, and (separately) bytes
+        all the FMUs of the run together may unpack to.
     progress : bool, optional
         Show a progress bar on stderr once a run takes more than 2 s
         (default: when stderr is a terminal).
@@ -108,24 +112,38 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
     ...
     ValueError: `algorithm` must be one of ('jacobi', 'gauss-seidel'); found 'newton'.
     """
+    _check_numbers(step_size=step_size, stop_time=stop_time, start_time=start_time, rtol=rtol, atol=atol,
+                   min_step=min_step, max_step=max_step, max_growth=max_growth, lambda_per_step=lambda_per_step)
     _check_arguments(algorithm, extrapolation, exchange, iterations, step_size, stop_time, start_time, max_growth,
                      lambda_per_step)
     _check_order(max_input_order, extrapolation)
+    if not isinstance(step_control, (bool, np.bool_)) or not step_control:
+        _check_horizon(start_time, stop_time, step_size)
+    if not isinstance(allow_external, (bool, np.bool_)):
+        raise TypeError(f"`allow_external` must be True or False; found {allow_external!r}.")
     control = StepControl.from_options(step_control, step_size, stop_time - start_time, rtol, atol, min_step,
                                        max_step, iterations)
     if output is not None:
+        if isinstance(output, (str, bytes)):
+            raise TypeError(f"`output` must be a list of 'component.variable' names; found the string {output!r}.")
+        output = list(output)  # a generator is read once: materialized before it is checked
         dup = sorted({o for o in output if list(output).count(o) > 1})
         if dup:
             raise ValueError(f"`output` names each variable once; found {dup} more than once.")
+    if start_values is not None and not isinstance(start_values, dict):
+        raise TypeError(f"`start_values` must be a dict {{'component.variable': value}}; found "
+                        f"{type(start_values).__name__} {start_values!r}.")
     system = read_system(system, allow_external=allow_external, max_unpacked=max_unpacked)
     workdir = tempfile.mkdtemp(prefix="lsc_cosim_fmus_")
-    comps = {}
+    comps, budget = {}, [int(max_unpacked)]  # one budget for all the FMUs of the run
     try:
         with _callbacks.attach(system.components) as sink:
             for index, (name, path) in enumerate(system.components.items()):
                 comps[name] = Component(name, path, os.path.join(workdir, str(index)), _callbacks.callbacks(),
-                                        max_unpacked)
-            check_types(comps, system.connections)
+                                        budget)
+            check_types(comps, system.connections, system.connectors, system.origin)
+            start_values = {**_bound(comps, system), **(start_values or {})}  # given values take precedence
+            _check_start_values(comps, start_values)
             run = Run(comps, system.connections, sink, algorithm=algorithm, p=extrapolation, iterations=iterations,
                       output=output, rtol=rtol, exchange=exchange, control=control, max_growth=max_growth,
                       lambda_per_step=lambda_per_step, max_input_order=max_input_order)
@@ -141,20 +159,80 @@ def _check_arguments(algorithm, extrapolation, exchange, iterations, step_size, 
                      lambda_per_step):
     if algorithm not in ALGORITHMS:
         raise ValueError(f"`algorithm` must be one of {ALGORITHMS}; found {algorithm!r}.")
-    if extrapolation not in (0, 1, 2) or isinstance(extrapolation, bool):
+    if not isinstance(extrapolation, (int, np.integer)) or isinstance(extrapolation, bool) \
+            or extrapolation not in (0, 1, 2):
         raise ValueError(f"`extrapolation` must be 0, 1 or 2; found {extrapolation!r}.")
     if exchange not in ("ordered", "simultaneous"):
         raise ValueError(f"`exchange` must be 'ordered' or 'simultaneous'; found {exchange!r}.")
-    if not (isinstance(iterations, (int, np.integer)) and iterations >= 0):
+    if not (isinstance(iterations, (int, np.integer)) and not isinstance(iterations, bool) and iterations >= 0):
         raise ValueError(f"`iterations` must be an integer >= 0; found {iterations!r}.")
     if not (np.isfinite(step_size) and step_size > 0):
         raise ValueError(f"`step_size` must be positive and finite; found {step_size!r}.")
+    if not np.isfinite(start_time):
+        raise ValueError(f"`start_time` must be finite; found {start_time!r}.")
     if not (np.isfinite(stop_time) and stop_time > start_time):
         raise ValueError(f"`stop_time` must be finite and after `start_time` ({start_time!r}); found {stop_time!r}.")
     if not max_growth > 1:
         raise ValueError(f"`max_growth` must be > 1 (math.inf disables the check); found {max_growth!r}.")
     if lambda_per_step is not None and not (np.isfinite(lambda_per_step) and lambda_per_step > 0):
         raise ValueError(f"`lambda_per_step` must be positive and finite or None; found {lambda_per_step!r}.")
+
+
+def _check_numbers(**values):
+    """Each option that is a number is a real number (not a str, not a bool), or None where allowed."""
+    optional = {"atol", "min_step", "max_step", "lambda_per_step"}
+    for name, value in values.items():
+        if value is None and name in optional:
+            continue
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise TypeError(f"`{name}` must be a number; found {type(value).__name__} {value!r}.")
+
+
+def _check_horizon(start_time, stop_time, step_size):
+    """A fixed-step run: a whole number of steps, at most MAX_STEPS, each of which advances time."""
+    span = stop_time - start_time
+    n_steps = round(span / step_size)
+    if span / step_size > MAX_STEPS:
+        raise ValueError(f"`step_size` {step_size!r} over [{start_time!r}, {stop_time!r}] makes {span / step_size:.3g} "
+                         f"macro steps; at most {MAX_STEPS:.0e} are taken (a larger `step_size`, or step_control).")
+    resolution = float(np.spacing(max(abs(start_time), abs(stop_time))))
+    if step_size < 1e3 * resolution:
+        raise ValueError(f"`step_size` {step_size!r} is below 1000 times the resolution of time at "
+                         f"{max(abs(start_time), abs(stop_time))!r} ({resolution!r}): the communication points "
+                         "cannot be represented.")
+    if abs(n_steps * step_size - span) > 1e-9 * span + 4 * resolution:
+        raise ValueError(f"`stop_time` - `start_time` must be a multiple of `step_size`; found {span!r} and "
+                         f"{step_size!r}.")
+
+
+def _bound(comps, system):
+    """The SSD's parameter bindings as start values, each checked against its variable's type."""
+    from ._exchange import convert
+    from ._system import _split
+
+    values = {}
+    for key, (kind, text) in system.parameters.items():
+        cname, var = _split(key, comps)
+        v = comps[cname].variables.get(var)
+        if v is None or v.type != kind or v.causality not in ("parameter", "input"):
+            found = "no such variable" if v is None else f"a {v.causality} {v.type}"
+            raise ValueError(f"{system.origin}: the ParameterBinding of {key} is a {kind}; the FMU has {found}.")
+        values[key] = convert(text, kind, f"{system.origin}: the ParameterBinding of {key}")
+    return values
+
+
+def _check_start_values(comps, start_values):
+    """Each start value names a variable that can take one (not an output), with a value of its type."""
+    from ._exchange import convert
+    from ._system import _split
+
+    for key, value in start_values.items():
+        cname, var = _split(key, comps)
+        v = comps[cname].variable(var)
+        if v.causality == "output":
+            raise ValueError(f"`start_values`[{key!r}]: {key} is an output; an output's value is computed by its "
+                             "FMU and cannot be given.")
+        convert(value, v.type, f"`start_values`[{key!r}]")
 
 
 def _check_order(max_input_order, extrapolation):

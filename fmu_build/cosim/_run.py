@@ -21,7 +21,9 @@ logger = logging.getLogger("fmu_build.cosim")
 RECOMMENDED = ("docs/cosimulation.md recommends, for a loop through a differentiated input, a plant that gives "
                "output derivatives, the DAE FMU built native, algorithm='jacobi', extrapolation=2 and "
                "lambda_per_step=1.0 (or a smaller loop gain; see 'Divergence')")
+LSC_TOOL = "lsc fmu_build"  # generationTool (native) or author (pythonfmu) of the DAE FMUs lsc builds
 WINDOW = 12  # steps of growing alternating second differences that mean divergence
+PEAK_MARGIN = 1.1  # growth beyond the earlier peak that an oscillation must show to be divergence
 MAX_INPUT_ORDER = 8  # highest input-derivative order ever probed or sent
 DTYPES = {"Real": np.float64, "Integer": np.int64, "Boolean": np.bool_, "String": object}
 
@@ -42,6 +44,7 @@ class Run(object):
         self._lambda_targets()
         self.warned_rollback = False
         self.recent = []  # coupling values at the last WINDOW + 2 communication points
+        self.peak, self.recent_dropped = None, False  # largest |value| per slot before the window
 
     # -- layout --------------------------------------------------------------------------------------
 
@@ -129,13 +132,16 @@ class Run(object):
             return
         for n, c in self.comps.items():
             v = c.variables.get("lambda")
-            if v is not None and v.causality == "parameter" and v.type == "Real":
+            # only our DAE FMUs: another FMU's `lambda` is its own parameter, with its own meaning
+            ours = LSC_TOOL in (c.md.generationTool or "") or LSC_TOOL in (getattr(c.md, "author", None) or "")
+            if ours and v is not None and v.causality == "parameter" and v.type == "Real":
                 if self.control.enabled and v.variability != "tunable":
                     raise ValueError(f"`lambda_per_step` with `step_control` needs a tunable {n}.lambda; "
                                      f"it is {v.variability}.")
                 self.lambda_refs[n] = v.valueReference
         if not self.lambda_refs:
-            raise ValueError("`lambda_per_step`: no component has a Real parameter `lambda`.")
+            raise ValueError("`lambda_per_step`: no DAE FMU built by lsc (generationTool or author "
+                             f"{LSC_TOOL!r}) has a Real parameter `lambda`.")
 
     # -- FMI calls -----------------------------------------------------------------------------------
 
@@ -405,7 +411,12 @@ class Run(object):
     def step_all(self, t_start, H, end_values=None):
         """One macro step of every FMU; ``end_values``: the last iterate's values at t + H (step iteration)."""
         value, p, names = self.value, self.p, self.names
-        hold = value.copy() if end_values is None else end_values
+        hold = value.copy()
+        if end_values is not None:
+            # start-up repeats: Integer and Boolean inputs hold the step-start value as in every other step
+            # (no polynomial); the step iteration (iterations > 0) converges all of them
+            mask = slice(None) if self.iterations else self.real
+            hold[mask] = end_values[mask]
         end_point = None if end_values is None else (t_start + H, end_values, None)
         jet = self.input_jet(t_start, end_point) if p > 0 else None
         if self.algorithm == "jacobi":
@@ -470,14 +481,20 @@ class Run(object):
             self._diverged(worst, t, f"|{{}}| = {mag[worst]:.3g} exceeds max_growth ({self.max_growth:.3g}) times "
                                      f"the start scale ({self.scale:.3g})")
         self.recent.append(self.value.copy())
-        del self.recent[:-(WINDOW + 2)]
+        if len(self.recent) > WINDOW + 2:
+            self.peak = np.maximum(self.peak, np.abs(self.recent[0])) if self.recent_dropped else np.abs(self.recent[0])
+            self.recent_dropped = True
+            del self.recent[0]
         if len(self.recent) < WINDOW + 2:
             return
         d2 = np.diff(np.array(self.recent), 2, axis=0)  # WINDOW rows
         alternating = np.all(d2[1:] * d2[:-1] < 0, axis=0)
         growing = np.all(np.abs(d2[1:]) > np.abs(d2[:-1]), axis=0)
         visible = np.abs(d2[-1]) > 1e-8 * self.scale
-        bad = np.flatnonzero(alternating & growing & visible & self.real)
+        # a bounded signal near the Nyquist rate (a beat) has growing alternating differences too:
+        # divergence also needs values 10 % beyond every one seen before the window
+        beyond = (np.abs(np.array(self.recent)).max(axis=0) > PEAK_MARGIN * self.peak) if self.recent_dropped else True
+        bad = np.flatnonzero(alternating & growing & visible & beyond & self.real)
         if bad.size:
             s = int(bad[0])
             self._diverged(s, t, f"{{}} oscillates from step to step with an amplitude that grew "
@@ -485,18 +502,23 @@ class Run(object):
 
     def _diverged(self, s, t, what):
         a, y = self.sources[s]
-        raise _Stop(f"the coupling diverged: {what.format(f'{a}.{y}')} at t = {t!r}; this configuration is "
-                    f"unstable for this system: {RECOMMENDED}")
+        name = f"{a}.{y}"
+        loop = next((lp for lp in self.loop_names if name in lp), None)
+        if loop is not None:
+            advice = (f"{name} is in the algebraic loop through {', '.join(loop)}, whose gain is above 1 in "
+                      "magnitude: no step size or extrapolation helps; a loop gain below 1, or `iterations` > 0 "
+                      "(which iterates the loop and fails if it does not contract)")
+        else:
+            advice = RECOMMENDED
+        raise _Stop(f"the coupling diverged: {what.format(name)} at t = {t!r}; this configuration is "
+                    f"unstable for this system: {advice}")
 
     # -- the run -------------------------------------------------------------------------------------
 
     def advance(self, t0, stop_time, H, progress):
         if self.control.enabled:
             return self._advance_controlled(t0, stop_time, H, progress)
-        n_steps = int(round((stop_time - t0) / H))
-        if abs(n_steps * H - (stop_time - t0)) > 1e-9 * max(1.0, abs(stop_time)):
-            raise ValueError(f"`stop_time` - `start_time` must be a multiple of `step_size`; found "
-                             f"{stop_time - t0!r} and {H!r}.")
+        n_steps = int(round((stop_time - t0) / H))  # checked by cosimulate: a whole number of steps
         # The first p steps have fewer than p + 1 past points: extrapolated, they would lose orders
         # for the whole run (one zero-order-hold step is a local O(H^2) error). When every FMU can
         # roll back, they are repeated with the inputs interpolated through the values just computed.
@@ -519,12 +541,13 @@ class Run(object):
     def _advance_controlled(self, t0, stop_time, H, progress):
         t = t0
         progress.total, progress.unit = stop_time - t0, "of the time span"
-        while stop_time - t > 1e-12 * max(1.0, abs(stop_time)):
+        while t < stop_time:
             H = min(H, stop_time - t)
             if stop_time - (t + H) < self.control.min_step:  # no sliver of a step at the end
                 H = stop_time - t
             H, H_next = self._controlled_step(t, H)
             t = stop_time if H == stop_time - t else t + H
+            self.check_time(t - H, H)
             self.check_growth(t)
             self.accepted += 1
             self.push_history(t)
@@ -544,6 +567,7 @@ class Run(object):
             predicted = self._predict(t, H, q, start_value)
             err, worst = control.error(self.value, predicted, self.real)
             H_next = control.next_step(H, err, max(q, 1))
+            self.check_time(t, H)
             if err <= 1.0 or states is None or H <= control.min_step * (1 + 1e-12):
                 if states is not None:
                     self.release(states)
@@ -554,6 +578,13 @@ class Run(object):
             self.restore(states, t, start_value)
             self.release(states)
             H = max(H_next, control.min_step)
+
+    def check_time(self, t, H):
+        """A step that does not advance time (``t + H == t``: below the resolution of doubles at ``t``)
+        would repeat forever."""
+        if not t + H > t:
+            raise _Stop(f"the macro step {H!r} does not advance time at t = {t!r} (below the resolution of "
+                        "doubles there); raise `min_step`")
 
     def _predict(self, t, H, q, start_value):
         """What the estimate compares at ``t + H`` (docs/cosimulation.md, 'Step control'): with ``q >= 1``
@@ -572,6 +603,10 @@ class Run(object):
             return
         where = "{}.{}".format(*self.sources[worst])
         if indicator_only:
+            if H <= self.control.min_step * (1 + 1e-12):
+                raise _Stop(f"the step control needs a step below min_step ({self.control.min_step!r}) at t = {t!r}: "
+                            f"the coupling error estimate of {where} is {err:.3g} times the tolerance (some FMUs "
+                            "cannot roll back: the steps were kept)")
             if not self.warned_rollback:
                 self.warned_rollback = True
                 bad = [n for n, c in self.comps.items() if not c.can_rollback]

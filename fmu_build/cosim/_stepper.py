@@ -32,6 +32,8 @@ estimate is an indicator: a warning says so) and the next step is adapted.
 
 import numpy as np
 
+MAX_STEPS = 10 ** 7  # macro steps one run may take
+
 
 class StepControl:
     """Tolerances and bounds of the macro-step control (``enabled`` False: fixed step).
@@ -60,6 +62,9 @@ class StepControl:
         if not (0 < min_step <= step_size <= max_step) and step_control:
             raise ValueError(f"`min_step` <= `step_size` <= `max_step` must hold with 0 < `min_step`; found "
                              f"{min_step!r}, {step_size!r}, {max_step!r}.")
+        if step_control:
+            # at most MAX_STEPS steps per run: a tolerance met only by tinier steps ends the run
+            min_step = min(max(min_step, span / MAX_STEPS), step_size)
         if step_control and iterations:
             raise ValueError("`step_control` and `iterations` > 0 cannot be combined; choose one.")
         return cls(bool(step_control), float(rtol), float(atol), float(min_step), float(max_step))

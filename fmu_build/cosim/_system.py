@@ -15,12 +15,15 @@ import os
 import posixpath
 import re
 import shutil
+import stat
 import tempfile
-import warnings
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
+SSD_NS = "http://ssp-standard.org/SSP1/SystemStructureDescription"
+FMU_TYPE = "application/x-fmu-sharedlibrary"
+CONNECTOR_TYPES = ("Real", "Integer", "Boolean", "String", "Enumeration")
 IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 MAX_UNPACKED = 1 << 30  # bytes one archive may unpack to (SSP or FMU)
 
@@ -40,6 +43,8 @@ class System:
 
     def __init__(self, components, connections, workdir=None, origin="`system`"):
         self.components, self.connections, self.workdir, self.origin = components, connections, workdir, origin
+        self.connectors = {}  # (component, connector) -> type declared in the SSD
+        self.parameters = {}  # "component.variable" -> value bound in the SSD (applied as a start value)
 
     def __iter__(self):
         return iter((self.components, self.connections, self.workdir))
@@ -92,13 +97,15 @@ def read_system(system, *, allow_external=False, max_unpacked=MAX_UNPACKED):
     """
     if isinstance(system, dict):
         return _from_dict(system)
+    if not isinstance(allow_external, bool):
+        raise TypeError(f"`allow_external` must be True or False; found {allow_external!r}.")
     if not isinstance(system, (str, Path)):
         raise TypeError(f"`system` must be an .ssp/.ssd path or a dict; found {type(system).__name__}.")
     path = Path(system)
     if not path.is_file():
         raise ValueError(f"`system`: no such file {str(path)!r}.")
     if path.suffix.lower() == ".ssd":
-        return _from_ssd(path.read_bytes(), f"`system` {path.name}", lambda src: _outside(src, path.parent))
+        return _from_ssd(path.read_bytes(), f"`system` {path}", lambda src, index: _outside(src, path.parent))
     return _from_ssp(path, allow_external, int(max_unpacked))
 
 
@@ -106,10 +113,15 @@ def _from_dict(system):
     unknown = set(system) - {"components", "connections"}
     if unknown or "components" not in system:
         raise ValueError(f"`system` as a dict must have the keys 'components' and 'connections'; found {sorted(system)}.")
+    if not isinstance(system["components"], dict):
+        raise TypeError(f"`system`['components'] must be a dict {{name: fmu_path}}; found "
+                        f"{type(system['components']).__name__}.")
     components = {}
     for name, fmu in system["components"].items():
         _check_name(name, "`system`")
-        components[name] = str(fmu)
+        if not isinstance(fmu, (str, os.PathLike)):
+            raise TypeError(f"`system`: component {name!r} must be an FMU path; found {type(fmu).__name__} {fmu!r}.")
+        components[name] = os.fspath(fmu)
     pairs = []
     for pair in system.get("connections", []):
         if len(pair) != 2:
@@ -119,10 +131,15 @@ def _from_dict(system):
 
 
 def _from_ssp(path, allow_external, max_unpacked):
-    where = f"`system` {path.name}"
+    where = f"`system` {path}"
     workdir = tempfile.mkdtemp(prefix="lsc_cosim_ssp_")
     try:
-        with zipfile.ZipFile(path) as zf:
+        try:
+            archive = zipfile.ZipFile(path)
+        except zipfile.BadZipFile:
+            raise ValueError(f"{where}: not an SSP archive (a zip holding SystemStructure.ssd); a plain "
+                             "SystemStructure.ssd is read from a file ending in .ssd.") from None
+        with archive as zf:
             members = set(zf.namelist())
             if "SystemStructure.ssd" not in members:
                 raise ValueError(f"{where}: no SystemStructure.ssd at the archive's root.")
@@ -189,12 +206,18 @@ def _from_ssd(data, where, locate):
         root = ET.fromstring(data)
     except ET.ParseError as exc:
         raise ValueError(f"{where}: SystemStructure.ssd is not valid XML ({exc}).") from None
+    if not root.tag.startswith("{" + SSD_NS + "}") or _local(root.tag) != "SystemStructureDescription":
+        raise ValueError(f"{where}: the root element {root.tag!r} is not a SystemStructureDescription in the SSP "
+                         f"namespace {SSD_NS!r}; refused (a document of another namespace means something else).")
     system = _child(root, "System")
     if system is None:
         raise ValueError(f"{where}: the SSD has no System element.")
-    if any(_local(e.tag) == "ParameterBindings" for e in system.iter()):
-        warnings.warn(f"{where}: SSP parameter bindings are not applied; use `start_values`.", stacklevel=4)
-    components = {}
+    if _child(system, "ParameterBindings") is not None:
+        raise ValueError(f"{where}: the System has ParameterBindings; only a Component's inline ParameterBindings "
+                         "are applied (a run without them would be another model). Give the values as "
+                         "`start_values`.")
+    parameters = {}
+    components, connectors = {}, {}
     elements = _child(system, "Elements")
     for index, element in enumerate(list(elements) if elements is not None else []):
         kind, name = _local(element.tag), element.get("name")
@@ -206,11 +229,21 @@ def _from_ssd(data, where, locate):
         source = element.get("source")
         if not source:
             raise ValueError(f"{where}: component {name!r} has no source.")
+        kind = element.get("type", FMU_TYPE)
+        if kind != FMU_TYPE:
+            raise ValueError(f"{where}: component {name!r} is of type {kind!r}; only FMUs ({FMU_TYPE}) are "
+                             "supported (a nested SSP is not).")
         components[name] = locate(source, index)
+        connectors.update(_connectors(element, name))
+        parameters.update(_bindings(element, name, where))
     connections = []
     links = _child(system, "Connections")
     for c in list(links) if links is not None else []:
         a, y, b, u = (c.get(k) for k in ("startElement", "startConnector", "endElement", "endConnector"))
+        for k, v in (("startConnector", y), ("endConnector", u)):
+            if not v:
+                raise ValueError(f"{where}: connection {a}.{y} -> {b}.{u} has no {k} attribute; a Connection "
+                                 "names its startConnector and endConnector.")
         if not a or not b:
             raise ValueError(f"{where}: connection {a}.{y} -> {b}.{u}: connections to the system's own connectors "
                              "are not supported.")
@@ -221,7 +254,42 @@ def _from_ssd(data, where, locate):
             if comp not in components:
                 raise ValueError(f"{where}: connection {a}.{y} -> {b}.{u}: no component {comp!r}.")
         connections.append((a, y, b, u))
-    return System(components, _check_connections(connections, where), None, where)
+    system = System(components, _check_connections(connections, where), None, where)
+    system.connectors, system.parameters = connectors, parameters
+    return system
+
+
+def _bindings(element, name, where):
+    """``{"component.parameter": value}`` of a component's inline ParameterBindings; what this master
+    cannot apply exactly (an external .ssv, a prefix, a mapping, an Enumeration item) is refused."""
+    found = {}
+    block = _child(element, "ParameterBindings")
+    for binding in list(block) if block is not None else []:
+        what = f"{where}: component {name!r}: a ParameterBinding"
+        if binding.get("source") or binding.get("prefix") or _child(binding, "ParameterMapping") is not None:
+            raise ValueError(f"{what} with a source file, a prefix or a ParameterMapping is not applied by this "
+                             "master; refused. Give the values inline or as `start_values`.")
+        values = _child(binding, "ParameterValues")
+        sets = [e for e in (list(values) if values is not None else []) if _local(e.tag) == "ParameterSet"]
+        for parameters in (_child(ps, "Parameters") for ps in sets):
+            for parameter in list(parameters) if parameters is not None else []:
+                kinds = [e for e in parameter if _local(e.tag) in ("Real", "Integer", "Boolean", "String")]
+                if not parameter.get("name") or len(kinds) != 1 or kinds[0].get("value") is None:
+                    raise ValueError(f"{what}: parameter {parameter.get('name')!r} must have a name and one "
+                                     "Real, Integer, Boolean or String value; refused.")
+                found[f"{name}.{parameter.get('name')}"] = (_local(kinds[0].tag), kinds[0].get("value"))
+    return found
+
+
+def _connectors(element, name):
+    """``{(component, connector): declared type}`` of a component's Connectors (the types given)."""
+    found = {}
+    block = _child(element, "Connectors")
+    for connector in list(block) if block is not None else []:
+        kinds = [_local(e.tag) for e in connector if _local(e.tag) in CONNECTOR_TYPES]
+        if kinds and connector.get("name"):
+            found[(name, connector.get("name"))] = kinds[0]
+    return found
 
 
 def _local(tag):
@@ -270,13 +338,17 @@ def unzip(path, dest, max_unpacked=MAX_UNPACKED, where=None):
     ValueError: archive: member '../evil.txt' would be written outside its folder; refused.
     """
     where = where or "archive"
-    budget = [int(max_unpacked)]
+    # a one-item list is a budget shared by several archives (the FMUs of one run)
+    budget = max_unpacked if isinstance(max_unpacked, list) else [int(max_unpacked)]
     dest = os.path.realpath(dest)
     with zipfile.ZipFile(path) as zf:
         for info in zf.infolist():
             member = _member(info.filename)
             if member is None or member.startswith("./") or member == ".":
                 raise ValueError(f"{where}: member {info.filename!r} would be written outside its folder; refused.")
+            if stat.S_ISLNK(info.external_attr >> 16):
+                raise ValueError(f"{where}: member {info.filename!r} is a symlink; refused (an archive's members "
+                                 "are files and folders only).")
             target = os.path.join(dest, member)
             if info.is_dir():
                 os.makedirs(target, exist_ok=True)
