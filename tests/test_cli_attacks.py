@@ -385,3 +385,62 @@ def test_plot_study_to_a_folder_or_missing_folder_names_path(tmp_path, where):
         assert "`path`" in str(exc) and ".tmp" not in str(exc), exc
     else:
         assert Path(written).read_bytes().startswith(PNG)
+
+
+# -- files of the wrong kind, outputs of the wrong kind ----------------------------------------------------
+def test_sweep_target_that_is_not_an_fmu_is_refused_without_traceback(tmp_path):
+    """A text file named .fmu gave zipfile.BadZipFile's traceback."""
+    (tmp_path / "bad.fmu").write_text("garbage\n")
+    proc = _cli("sweep", "bad.fmu", "--grid", "lam=1", "--scheduler", "serial", "--no-progress", "-o", "s.csv",
+                cwd=tmp_path)
+    _assert_refused(proc, "bad.fmu")
+
+
+def test_sweep_parquet_output_without_a_writer_is_refused_before_the_study(tmp_path):
+    """Without pyarrow the whole study ran, then failed, leaving s.parquet.partial.csv."""
+    pytest.importorskip("pandas")
+    try:
+        import pyarrow  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        pytest.skip("pyarrow is installed: a Parquet file can be written")
+    proc = _cli("sweep", *GALLERY, "--grid", "lam=1", "-o", "s.parquet", cwd=tmp_path)
+    _assert_refused(proc, "pyarrow")
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("output", ["d/", "-", "s.txt"])
+def test_sweep_output_is_written_where_it_says(tmp_path, output):
+    """`-o d/` printed 'written to d/' and wrote d/.partial.csv; `-o -` wrote '-.partial.csv'."""
+    (tmp_path / "d").mkdir()
+    proc = _cli("sweep", *GALLERY, "--grid", "lam=1", "-o", output, cwd=tmp_path)
+    if proc.returncode == 0:
+        assert (tmp_path / output).is_file(), sorted(p.name for p in tmp_path.rglob("*"))
+        assert f"written to {output}" in proc.stdout
+    else:
+        _assert_refused(proc, "-o")
+
+
+@pytest.mark.parametrize("name", ["error", "steps", "run", "success"])
+def test_sweep_grid_name_equal_to_a_column_is_refused(tmp_path, name):
+    proc = _cli("sweep", *GALLERY, "--grid", f"{name}=1", "-o", "s.csv", cwd=tmp_path)
+    _assert_refused(proc, name)
+
+
+def test_build_over_an_existing_file_that_is_not_an_fmu_is_refused(tmp_path):
+    """`lsc-fmu build spec.toml -o notes.fmu` replaced the user's file, exit 0."""
+    (tmp_path / "notes.fmu").write_bytes(b"my notes\n")
+    proc = _cli("build", SPECS / "prescribed_path.toml", "-o", "notes.fmu", cwd=tmp_path)
+    assert (tmp_path / "notes.fmu").read_bytes() == b"my notes\n", "a file that is not an FMU was replaced"
+    _assert_refused(proc, "notes.fmu")
+
+
+@pytest.mark.parametrize("output", ["spec.toml", "afile/x.fmu"])
+def test_build_output_that_is_a_file_says_what_is_expected(tmp_path, output):
+    """Gave a bare '[Errno 17] File exists: ...'."""
+    (tmp_path / "spec.toml").write_bytes((SPECS / "prescribed_path.toml").read_bytes())
+    (tmp_path / "afile").write_text("mine\n")
+    proc = _cli("build", "spec.toml", "-o", output, cwd=tmp_path)
+    _assert_refused(proc, "-o")
+    assert "Errno" not in proc.stderr, proc.stderr
