@@ -444,3 +444,19 @@ def test_build_output_that_is_a_file_says_what_is_expected(tmp_path, output):
     proc = _cli("build", "spec.toml", "-o", output, cwd=tmp_path)
     _assert_refused(proc, "-o")
     assert "Errno" not in proc.stderr, proc.stderr
+
+
+# -- times far from zero --------------------------------------------------------------------------------
+def test_simulate_far_from_zero_runs_the_whole_horizon_or_refuses(fmus, tmp_path):
+    """[1e6, 1e6 + 1e-3] with step 1e-4 ran one step to 1000000.0001 and exited 0: the 'reached
+    the stop time' check allows 1e-9 * |stop| = the whole horizon."""
+    import numpy as np
+
+    proc = _cli("simulate", fmus["native"], "--start-time", "1e6", "--stop-time", "1000000.001", "--step", "1e-4",
+                "-o", "r.csv", cwd=tmp_path)
+    _no_traceback(proc)
+    if proc.returncode == 0:
+        t = np.loadtxt(tmp_path / "r.csv", delimiter=",", skiprows=1)[:, 0]
+        assert abs(t[-1] - 1000000.001) < 1e-5 and len(t) == 11, t
+    else:
+        _assert_refused(proc, "--step")
