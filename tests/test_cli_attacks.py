@@ -460,3 +460,31 @@ def test_simulate_far_from_zero_runs_the_whole_horizon_or_refuses(fmus, tmp_path
         assert abs(t[-1] - 1000000.001) < 1e-5 and len(t) == 11, t
     else:
         _assert_refused(proc, "--step")
+
+
+# -- study-level mistakes are refused up front, not recorded as failed runs with exit 0 ------------------
+def test_sweep_ssp_without_a_step_is_refused_up_front(ssp, tmp_path):
+    """Every run failed with 'an SSP target needs `step`' and the command exited 0."""
+    proc = _cli("sweep", ssp, "--grid", "lam=10", "--t-span", "0", "0.1", "--scheduler", "serial", "--no-progress",
+                "-o", "s.csv", cwd=tmp_path)
+    _assert_refused(proc, "step")
+
+
+def test_sweep_ssp_lam_and_component_lambda_together_is_refused(ssp, tmp_path):
+    """`lam` sets every component's `lambda`; with `dae.lambda` too, one silently wins."""
+    proc = _cli("sweep", ssp, "--grid", "step=0.01", "--grid", "dae.lambda=10", "--grid", "lam=20", "--t-span", "0",
+                "0.1", "--scheduler", "serial", "--no-progress", "-o", "s.csv", cwd=tmp_path)
+    _assert_refused(proc, "lam", "dae.lambda")
+
+
+def test_sweep_where_every_run_failed_does_not_exit_0(fmus, tmp_path):
+    proc = _cli("sweep", fmus["native"], "--t-span", "0", "0.1", "--grid", "lam=-1,-2", "--scheduler", "serial",
+                "--no-progress", "-o", "s.csv", cwd=tmp_path)
+    _no_traceback(proc)
+    assert proc.returncode != 0, proc.stdout
+
+
+def test_cosim_start_of_the_same_variable_twice_is_refused(ssp, tmp_path):
+    proc = _cli("cosim", ssp, "--stop-time", "0.1", "--step-size", "0.01", "--start", "dae.lambda=1", "--start",
+                "dae.lambda=5", "-o", "c.csv", cwd=tmp_path)
+    _assert_refused(proc, "dae.lambda")
