@@ -488,3 +488,19 @@ def test_cosim_start_of_the_same_variable_twice_is_refused(ssp, tmp_path):
     proc = _cli("cosim", ssp, "--stop-time", "0.1", "--step-size", "0.01", "--start", "dae.lambda=1", "--start",
                 "dae.lambda=5", "-o", "c.csv", cwd=tmp_path)
     _assert_refused(proc, "dae.lambda")
+
+
+def test_simulate_input_that_is_a_folder_names_the_option(fmus, tmp_path):
+    """Gave a bare '[Errno 21] Is a directory: 'd''."""
+    (tmp_path / "d").mkdir()
+    proc = _cli("simulate", fmus["input"], "--stop-time", "0.1", "--input", "d", "-o", "r.csv", cwd=tmp_path)
+    _assert_refused(proc, "--input", "folder")
+
+
+def test_sweep_resume_of_a_binary_file_names_the_file_and_keeps_it(tmp_path):
+    """Gave "'utf-8' codec can't decode byte ..." without the file's name."""
+    garbage = bytes(range(256)) * 8
+    (tmp_path / "s.csv").write_bytes(garbage)
+    proc = _cli("sweep", *GALLERY, "--grid", "lam=1", "-o", "s.csv", cwd=tmp_path)
+    _assert_refused(proc, "s.csv")
+    assert (tmp_path / "s.csv").read_bytes() == garbage
