@@ -504,3 +504,17 @@ def test_sweep_resume_of_a_binary_file_names_the_file_and_keeps_it(tmp_path):
     proc = _cli("sweep", *GALLERY, "--grid", "lam=1", "-o", "s.csv", cwd=tmp_path)
     _assert_refused(proc, "s.csv")
     assert (tmp_path / "s.csv").read_bytes() == garbage
+
+
+def test_simulate_fmu_that_fails_to_instantiate_names_the_file_and_the_reason(fmus, tmp_path):
+    """A pythonfmu FMU missing its model module: only fmpy's 'Failed to instantiate model'."""
+    import zipfile
+
+    broken = tmp_path / "broken.fmu"
+    with zipfile.ZipFile(fmus["plain"]) as src, zipfile.ZipFile(broken, "w") as dst:
+        for item in src.infolist():
+            if not item.filename.endswith("_model.py"):
+                dst.writestr(item, src.read(item))
+    proc = _cli("simulate", broken, "--stop-time", "0.05", "-o", "r.csv", cwd=tmp_path)
+    _assert_refused(proc, "broken.fmu", "instantiate")
+    assert proc.stderr.count("\n") <= 3 and "_model" in proc.stderr, proc.stderr[-1500:]
