@@ -517,4 +517,3 @@ def test_simulate_fmu_that_fails_to_instantiate_names_the_file_and_the_reason(fm
                 dst.writestr(item, src.read(item))
     proc = _cli("simulate", broken, "--stop-time", "0.05", "-o", "r.csv", cwd=tmp_path)
     _assert_refused(proc, "broken.fmu", "instantiate")
-    assert proc.stderr.count("\n") <= 3 and "_model" in proc.stderr, proc.stderr[-1500:]
