@@ -517,3 +517,12 @@ def test_simulate_fmu_that_fails_to_instantiate_names_the_file_and_the_reason(fm
                 dst.writestr(item, src.read(item))
     proc = _cli("simulate", broken, "--stop-time", "0.05", "-o", "r.csv", cwd=tmp_path)
     _assert_refused(proc, "broken.fmu", "instantiate")
+
+
+@pytest.mark.parametrize("extra,needle", [(["--range", "lam=1:inf"], "lam"), (["--range", "method=1:2"], "method"),
+                                          (["--range", "lam=1:2", "--seed", "-1"], "--seed")])
+def test_sweep_latin_hypercube_that_cannot_be_sampled_is_refused(tmp_path, extra, needle):
+    """An infinite range made every point inf, a categorical name was sampled as a float (every
+    run failed, exit 0); a negative seed gave 'expected non-negative integer'."""
+    proc = _cli("sweep", *GALLERY, "--lhs", "2", *extra, "-o", "s.csv", cwd=tmp_path)
+    _assert_refused(proc, needle)
