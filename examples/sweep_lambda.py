@@ -1,16 +1,17 @@
 """Choosing λ with parameter studies: throughput on Dask and the rule of thumb across the gallery.
 
 Writes
-- docs/_generated/sweep_throughput.md: runs per second of a study of pythonfmu FMU runs with 1
+- sweep_throughput.md: runs per second of a study of pythonfmu FMU runs with 1
   and 2 worker processes, and the speed-up (native C FMUs too, when this installation can build
   them: see `native_fmu`);
-- docs/_generated/sweep_rule.md: for gallery problems started off their solution manifold, the
+- sweep_rule.md: for gallery problems started off their solution manifold, the
   λ `recommend` picks on a coarse grid, the brute-force optimum of a fine grid, and the rule
   ``λ · horizon ≈ ln(offset / error target)``;
-- docs/_generated/sweep_lambda.png: error and cost against λ, residual decay curves.
+- sweep_lambda.png: error and cost against λ, residual decay curves.
 
-Run: ``python examples/sweep_lambda.py [--throughput]`` (about a minute on two cores; ``--throughput``: only
-the throughput table).
+Run: ``python examples/sweep_lambda.py [--throughput] [--docs]`` (about a minute on two cores;
+``--throughput``: only the throughput table). The files go to out/; ``--docs`` writes them to
+docs/_generated instead.
 """
 import math
 import os
@@ -25,7 +26,8 @@ from fmu_build import build_fmu, plot_study, recommend, sweep
 from lsc import gallery
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
-OUT = ROOT / "docs" / "_generated"
+# Results go under out/; only --docs regenerates the tracked docs/_generated files.
+OUT = ROOT / ("docs/_generated" if "--docs" in sys.argv[1:] else "out")
 SPEC = ROOT / "examples" / "specs" / "prescribed_path.toml"
 T_SPAN = (0.0, 2.0)
 OFFSET, TARGET = 0.1, 1e-4

@@ -23,9 +23,9 @@ commands:
   ecos      run the ecos host shipped with ecospy, with that environment
               lsc-fmu ecos simulate --path out/PrescribedPath.fmu --stopTime 10
   cosim     co-simulate FMUs connected in an SSP file (or .ssd) with a fixed macro step
-              lsc-fmu cosim system.ssp --stop-time 10 --step-size 0.01 -o result.csv --plot
+              lsc-fmu cosim out/loop.ssp --stop-time 10 --step-size 0.01 -o out/result.csv --plot
   sweep     run a parameter study (lambda, steps, tolerances, parameters) on Dask
-              lsc-fmu sweep out/PrescribedPath.fmu --grid lam=1,2,5,10 -o study.csv --plot study.png
+              lsc-fmu sweep out/PrescribedPath.fmu --grid lam=1,2,5,10 -o out/study.csv --plot out/study.png
 
 Run `lsc-fmu COMMAND --help` for the options of one command.
 """
@@ -82,12 +82,15 @@ def _add_simulate(sub):
         "simulate", help="run an FMU in fmpy and write its outputs as CSV (and a PNG)",
         description="Simulate an FMU in fmpy over its default experiment (or --stop-time) and write every "
                     "output to a CSV file. An input CSV has a header row 'time,<input>,...' and one row per "
-                    "time; fmpy interpolates it linearly.",
+                    "time; fmpy interpolates it linearly. It is checked before the run: times finite and "
+                    "strictly increasing, every value a finite number, every column an input of the FMU, "
+                    "every input a column or given a start value.",
         epilog="example: lsc-fmu simulate out/PathInput.fmu --input path.csv --step 0.01 --plot -o out/run.csv",
     )
     p.add_argument("fmu", help="path of the .fmu file")
     p.add_argument("--input", metavar="CSV", help="input signals: columns 'time' and one per FMU input")
-    p.add_argument("-o", "--output", metavar="CSV", help="result file (default: <model>.csv in the current folder)")
+    p.add_argument("-o", "--output", metavar="CSV",
+                   help="result file, or a folder to write <model>.csv into (default: <model>.csv in the current folder)")
     p.add_argument("--plot", action="store_true", help="also plot the outputs to the result's name with .png")
     p.add_argument("--start-time", type=float, help="start time (default: the FMU's default experiment)")
     p.add_argument("--stop-time", type=float, help="stop time (default: the FMU's default experiment)")
@@ -267,8 +270,15 @@ def _native_options(args):
 
 
 def _add_sweep(sub):
-    sweep = sub.add_parser("sweep", help="run a parameter study (lam, steps, tolerances, parameters) on Dask",
-                           description="Run one simulation per point of a grid on Dask and write one row per run.")
+    sweep = sub.add_parser(
+        "sweep", help="run a parameter study (lam, steps, tolerances, parameters) on Dask",
+        description="Run one simulation per point of a grid (or a Latin hypercube sample) in Dask worker "
+                    "processes and write one row per run: the inputs, success, message, error against the "
+                    "reference, residuals, run time, steps. Needs the sweep extra (pip install -e \".[sweep]\"). "
+                    "An existing output of the same study is resumed; the study's identity is kept in "
+                    "OUTPUT.study.json and a file of another study is refused.",
+        epilog="example: lsc-fmu sweep out/PrescribedPath.fmu --grid lam=1,2,5,10 --t-span 0 2 -o out/study.csv "
+               "--plot out/study.png")
     sweep.add_argument("target", help="an .fmu, a .toml spec, an SSP scenario, or gallery:NAME (an lsc.gallery problem)")
     sweep.add_argument("--grid", action="append", default=[], metavar="NAME=V1,V2,...",
                        help="values of one input (repeat: every combination is run)")
@@ -285,6 +295,8 @@ def _add_sweep(sub):
     sweep.add_argument("--recommend", type=float, metavar="ERROR", help="print the cheapest point reaching this error")
     sweep.add_argument("--cost", default="run_time", choices=["run_time", "steps"], help="cost the recommendation minimizes")
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
+    sweep.add_argument("--timeout", type=float, metavar="SECONDS",
+                       help="end a run that takes longer (its worker is restarted; recorded as failed)")
 
 
 def _value(text):
@@ -329,7 +341,7 @@ def _run_sweep(args):
             target = getattr(lsc.gallery, name)()
         df = sweep(target, grid, reference=args.reference, scheduler=args.scheduler, progress=not args.no_progress,
                    output=args.output, t_span=args.t_span, error_from=args.error_from, n_workers=args.workers,
-                   seed=args.seed)
+                   seed=args.seed, timeout=args.timeout)
     except (ValueError, TypeError, OSError, ImportError, NotImplementedError) as exc:
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2
@@ -342,7 +354,12 @@ def _run_sweep(args):
     return 0
 
 def _add_cosim(sub):
-    cosim = sub.add_parser("cosim", help="co-simulate FMUs connected by an SSP file (.ssp/.ssd)")
+    cosim = sub.add_parser(
+        "cosim", help="co-simulate FMUs connected by an SSP file (.ssp/.ssd)",
+        description="Co-simulate the FMUs of an SSP system (an .ssp archive or a SystemStructure.ssd) with a "
+                    "fixed macro step in fmpy, and write the recorded variables as CSV (columns 'time' and "
+                    "'component.variable'). A run that stops early writes what it computed and exits 1.",
+        epilog="example: lsc-fmu cosim out/loop.ssp --stop-time 10 --step-size 0.01 -o out/result.csv --plot")
     cosim.add_argument("system", help="the .ssp or .ssd file")
     cosim.add_argument("--stop-time", type=float, required=True, help="end time")
     cosim.add_argument("--step-size", type=float, required=True, help="macro step")
@@ -391,6 +408,7 @@ def _run_cosim(args):
               "expected an SSP archive (.ssp) or a SystemStructure.ssd (see docs/cosimulation.md).", file=sys.stderr)
         return 2
     names = result.dtype.names
+    Path(args.result).parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(args.result).with_name(f".{Path(args.result).name}.tmp{os.getpid()}")
     np.savetxt(tmp, np.column_stack([result[n] for n in names]) if len(result) else np.zeros((0, len(names))),
                delimiter=",", header=",".join(names), comments="", fmt="%.17g")
@@ -425,13 +443,28 @@ COMMANDS = {
 }
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(prog="lsc-fmu", description=DESCRIPTION,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+def parser():
+    """The argument parser of ``lsc-fmu``: one subcommand per entry of COMMANDS."""
+    main_parser = argparse.ArgumentParser(prog="lsc-fmu", description=DESCRIPTION,
+                                          formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = main_parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add, _ in COMMANDS.values():
         add(sub)
-    args = parser.parse_args(argv)
+    return main_parser
+
+
+def main(argv=None):
+    """Run ``lsc-fmu`` with `argv` (default: the command line); return the exit status.
+
+    ``--markdown`` alone prints the command-line reference (docs/cli.md).
+    """
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv == ["--markdown"]:
+        from ._cli_docs import markdown
+
+        print(markdown(parser()), end="")
+        return 0
+    args = parser().parse_args(argv)
     return COMMANDS[args.command][1](args)
 
 

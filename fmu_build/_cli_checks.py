@@ -153,7 +153,7 @@ def check_input_csv(path, inputs, set_names):
 
     path = os.fspath(path)
     try:
-        with open(path, newline="", encoding="utf-8") as fh:
+        with open(path, newline="", encoding="utf-8-sig") as fh:  # a spreadsheet's byte-order mark is not a name
             rows = list(csv.reader(fh))
     except UnicodeDecodeError as exc:
         raise ValueError(f"`--input` {path} is not a text CSV file ({exc.reason} at byte {exc.start}).") from None

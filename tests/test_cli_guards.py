@@ -190,3 +190,10 @@ def test_cosim_given_a_spec_an_fmu_or_a_corrupt_file(fmus, tmp_path, capsys):
     bad_ssd = tmp_path / "bad.ssd"
     bad_ssd.write_text("<ssd:SystemStructureDescription")
     _refused(capsys, ["cosim", bad_ssd, *args], str(bad_ssd))
+
+
+def test_an_input_csv_with_a_byte_order_mark_or_quoted_names_is_read(tmp_path):
+    csv = tmp_path / "in.csv"
+    csv.write_bytes(b'\xef\xbb\xbf"time","p"\n0,0\n1,2.5\n')
+    data = check_input_csv(csv, {"p": 0.0}, set_names=())
+    assert data.dtype.names == ("time", "p") and data["p"].tolist() == [0.0, 2.5]

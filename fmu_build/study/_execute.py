@@ -1,5 +1,6 @@
 """Running a study's jobs: serially, or on Dask worker processes."""
 import math
+import os
 
 class _Progress:
     """A tqdm bar of runs done, with running and failed counts."""
@@ -39,7 +40,9 @@ def _local(client):
 def _crash_result(exc):
     from distributed import KilledWorker
 
-    if isinstance(exc, KilledWorker):
+    if exc is None:
+        reason = ""
+    elif isinstance(exc, KilledWorker):
         worker = getattr(getattr(exc, "last_worker", None), "address", None)
         reason = ("the worker process running it died (killed, or crashed e.g. by a segmentation fault in the FMU)"
                   + (f": {worker}" if worker else ""))
@@ -49,23 +52,22 @@ def _crash_result(exc):
                 steps=0, t=None, x=None, residual=None)
 
 
-def _execute(runner, payload, settings, jobs, accept, scheduler, n_workers, bar):
+def _execute(runner, payload, settings, jobs, accept, scheduler, n_workers, bar, timeout=None):
     if scheduler == "serial":
         for tag, point in jobs:
             bar.update(1)
             accept(tag, runner(payload, point, settings))
         return
-    from concurrent.futures import CancelledError
-
     import dask
-    from distributed import Client, KilledWorker, LocalCluster, as_completed
+    from distributed import Client, LocalCluster
 
     cluster = None
     if scheduler is None:
         # A run that kills its worker is not retried on another one: it is recorded as failed.
+        # Temporary TLS credentials: no other local process can submit code to these workers.
         with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
             cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                   dashboard_address=None, silence_logs=50)
+                                   dashboard_address=None, silence_logs=50, security=True)
             client = Client(cluster)
     elif isinstance(scheduler, str):
         client = Client(scheduler)
@@ -75,23 +77,40 @@ def _execute(runner, payload, settings, jobs, accept, scheduler, n_workers, bar)
         if isinstance(payload, str) and payload.lower().endswith(".fmu") and not _local(client):
             with open(payload, "rb") as fh:  # workers elsewhere need not share a file system
                 payload = fh.read()
-        slots = max(sum(client.nthreads().values()), 1)
-        # At most one run in flight per worker thread: a worker that dies then takes down only
-        # the run it was computing, and a run caught in the crash of another is retried once.
-        queue, futures, tries = list(jobs), {}, {}
-        running = as_completed()
+        _run_jobs(client, runner, payload, settings, jobs, accept, bar, timeout)
+    finally:
+        if cluster is not None:
+            client.close()
+            cluster.close()
 
-        def submit():
-            while queue and len(futures) < slots:
-                tag, point = queue.pop(0)
-                fut = client.submit(runner, payload, point, settings, pure=False, retries=0)
-                futures[fut] = (tag, point)
-                running.add(fut)
 
-        submit()
-        bar.update(len(futures))
-        for fut in running:
-            tag, point = futures.pop(fut)
+def _run_jobs(client, runner, payload, settings, jobs, accept, bar, timeout):
+    """Submit at most one run per worker thread; record each result, crash or timeout as it comes."""
+    import time
+    from concurrent.futures import CancelledError
+
+    from distributed import KilledWorker, wait
+
+    # At most one run in flight per worker thread: a worker that dies then takes down only the run
+    # it was computing, and a run caught in the crash of another is retried once.
+    slots = max(sum(client.nthreads().values()), 1)
+    queue, futures, tries = list(jobs), {}, {}
+
+    def submit():
+        while queue and len(futures) < slots:
+            tag, point = queue.pop(0)
+            fut = client.submit(runner, payload, point, settings, pure=False, retries=0)
+            futures[fut] = (tag, point, time.monotonic())
+
+    submit()
+    bar.update(len(futures))
+    while futures:
+        try:
+            done, _ = wait(list(futures), timeout=0.2 if timeout else None, return_when="FIRST_COMPLETED")
+        except TimeoutError:  # nothing finished in this poll: look for runs past their timeout
+            done = []
+        for fut in done:
+            tag, point, _ = futures.pop(fut)
             try:
                 result = fut.result()
             except Exception as exc:
@@ -99,15 +118,57 @@ def _execute(runner, payload, settings, jobs, accept, scheduler, n_workers, bar)
                 if isinstance(exc, (KilledWorker, CancelledError)) and tries[tag] < 2:
                     queue.insert(0, (tag, point))
                     fut.release()
-                    submit()
                     continue
                 result = _crash_result(exc)
             accept(tag, result)
             fut.release()
-            submit()
-            bar.update(len(futures))
-    finally:
-        if cluster is not None:
-            client.close()
-            cluster.close()
+        if timeout:
+            _end_overdue(client, futures, timeout, accept)
+        submit()
+        bar.update(len(futures))
 
+
+def _warm_up():
+    import importlib
+
+    for name in ("lsc", "fmpy", "fmu_build.study._runs"):
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            pass
+
+
+def _end_overdue(client, futures, timeout, accept):
+    """Record runs past `timeout` as failed and restart the workers computing them."""
+    import time
+
+    now = time.monotonic()
+    overdue = [fut for fut, (_, _, started) in futures.items() if now - started > timeout]
+    if not overdue:
+        return
+    processing = client.processing()
+    workers = {w for w, keys in processing.items() for fut in overdue if fut.key in keys}
+    for fut in overdue:
+        tag, _, _ = futures.pop(fut)
+        fut.cancel()
+        accept(tag, dict(_crash_result(None), message=f"timeout: the run took more than {timeout:g} s; "
+                                                      "its worker was restarted"))
+    if workers:
+        # End the worker process at once (a graceful restart waits for the stuck run); its nanny
+        # starts a fresh one, and the scheduler moves the worker's other runs.
+        count = len(client.scheduler_info()["workers"])
+        try:
+            client.run(os._exit, 1, workers=list(workers))
+        except Exception:  # the connection dies with the process
+            pass
+        gone = time.monotonic() + 30
+        while time.monotonic() < gone and workers & set(client.scheduler_info()["workers"]):
+            time.sleep(0.1)  # the scheduler notices the death before a fresh worker can be counted
+        try:
+            client.wait_for_workers(count, timeout=120)
+            client.run(_warm_up)  # a fresh worker imports the numerical stack: not the next run's time
+        except Exception:  # fewer workers (no nanny to restart it): the study goes on with the others
+            pass
+    restarted = time.monotonic()
+    for fut, (tag, point, _) in list(futures.items()):  # runs queued behind a restart start their clock now
+        futures[fut] = (tag, point, restarted)

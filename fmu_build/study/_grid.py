@@ -8,6 +8,23 @@ from ._runs import NUMERICAL
 
 METRICS = ("success", "message", "error", "residual_final", "residual_peak", "run_time", "steps")
 _LOG_SAMPLED = ("lam", "step", "rtol", "atol")
+# Grid names whose values must be real numbers (a bool or a text would be read as one silently).
+_REAL = ("lam", "step", "rtol", "atol", "offset", "k", "extrapolation", "iterations")
+
+
+def _check_names(names):
+    for name in names:
+        if name in METRICS or name == "run":
+            raise ValueError(f"`grid` name {name!r} is a column of the result (`run` and {', '.join(METRICS)}); "
+                             "it would overwrite the input in the table: rename the input.")
+
+
+def _check_values(name, values):
+    if name not in _REAL:
+        return
+    for value in values:
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise TypeError(f"`grid[{name!r}]` must hold real numbers; found {value!r} ({type(value).__name__}).")
 
 
 # -- the grid ------------------------------------------------------------------
@@ -17,6 +34,7 @@ def _points(grid, seed):
         if not grid:
             raise ValueError("`grid` must name at least one input; found an empty dict.")
         names = list(grid)
+        _check_names(names)
         lists = []
         for name in names:
             values = grid[name]
@@ -25,6 +43,7 @@ def _points(grid, seed):
             values = list(values)
             if not values:
                 raise ValueError(f"`grid[{name!r}]` must hold at least one value; found an empty list.")
+            _check_values(name, values)
             lists.append(values)
         return [dict(zip(names, combo)) for combo in itertools.product(*lists)], names
     if isinstance(grid, tuple) and len(grid) == 2 and isinstance(grid[1], dict):
@@ -34,6 +53,7 @@ def _points(grid, seed):
         from scipy.stats import qmc
 
         names = list(ranges)
+        _check_names(names)
         for name in names:
             lo_hi = ranges[name]
             if len(lo_hi) != 2 or not lo_hi[0] < lo_hi[1]:

@@ -4,7 +4,56 @@ import os
 
 from ._grid import METRICS
 
-# -- the output file -----------------------------------------------------------
+
+def check_output(output):
+    """Refuse an output the study could not write as asked, before anything runs."""
+    path = os.fspath(output)
+    if os.path.isdir(path) or not path.lower().endswith((".csv", ".parquet")):
+        raise ValueError(f"`output` must be a .csv or .parquet file; found {path!r}.")
+    if path.lower().endswith(".parquet"):
+        try:
+            import pyarrow  # noqa: F401
+        except ImportError:
+            raise ImportError(f"`output` {path!r}: writing Parquet needs pyarrow (pip install pyarrow); "
+                              "or write a .csv file.") from None
+
+
+def identity_path(output):
+    """The file beside `output` that records the study's identity."""
+    return os.fspath(output) + ".study.json"
+
+
+def check_identity(output, identity):
+    """Refuse to resume a study in files written by another one; record the identity of a new one.
+
+    The identity (target, grid names, reference, settings) is stored as JSON
+    in ``output + '.study.json'`` before the first row is written.
+    """
+    import json
+
+    record = identity_path(output)
+    data = [p for p in (os.fspath(output), _stream_path(output)) if os.path.exists(p) and os.path.getsize(p) > 0]
+    if data and not os.path.exists(record):
+        raise ValueError(f"`output` {data[0]!r} exists, but there is no record of the study that wrote it "
+                         f"({record!r}): choose another output, or remove it.")
+    if data:
+        try:
+            with open(record, encoding="utf-8") as fh:
+                stored = json.load(fh)
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"the study record {record!r} cannot be read ({exc}).") from None
+        wanted = json.loads(json.dumps(identity))  # tuples as lists, as stored
+        different = [k for k in sorted(set(stored) | set(wanted)) if stored.get(k) != wanted.get(k)]
+        if different:
+            details = "; ".join(f"its {k} is {stored.get(k)!r}, this study's {wanted.get(k)!r}" for k in different)
+            raise ValueError(f"`output` {os.fspath(output)!r} holds another study: {details}.")
+        return
+    tmp = f"{record}.tmp{os.getpid()}"
+    with open(tmp, "w", encoding="utf-8") as fh:
+        json.dump(identity, fh, indent=1)
+    os.replace(tmp, record)
+
+
 def _stream_path(output):
     output = os.fspath(output)
     return output if output.lower().endswith(".csv") else output + ".partial.csv"
@@ -20,7 +69,10 @@ def _read_finished(output, names, points):
         frames.append(pd.read_parquet(output).reset_index())
     if os.path.exists(stream) and os.path.getsize(stream) > 0:
         # an interrupted write leaves at most a broken last line: skip what does not parse
-        frames.append(pd.read_csv(stream, on_bad_lines="skip", engine="python"))
+        try:
+            frames.append(pd.read_csv(stream, on_bad_lines="skip", engine="python"))
+        except (UnicodeDecodeError, pd.errors.ParserError, ValueError) as exc:
+            raise ValueError(f"`output` {stream!r} is not a readable CSV file of a study ({exc}).") from None
     if not frames:
         return {}
     old = pd.concat(frames, ignore_index=True)

@@ -90,8 +90,12 @@ def _run_dae(problem, point, settings, start):
                 run_time=time.perf_counter() - start, steps=steps, t=result.t, x=result.x, residual=residual)
 
 
-def _extract(fmu):
-    """The extraction folder of an FMU given as bytes (cached per process) or a path."""
+def _extract(fmu, workdir=None):
+    """The extraction folder of an FMU given as bytes (cached per process) or a path.
+
+    Inside the study's `workdir` when this process can see it (the study
+    removes it at the end), else in a folder of the system's temporary one.
+    """
     import hashlib
     import os
     import tempfile
@@ -103,7 +107,8 @@ def _extract(fmu):
     key = hashlib.sha256(fmu).hexdigest()
     folder = _EXTRACTED.get(key)
     if folder is None or not os.path.isdir(folder):
-        folder = tempfile.mkdtemp(prefix=f"lsc_study_{key[:12]}_")
+        parent = workdir if workdir and os.path.isdir(workdir) else None
+        folder = tempfile.mkdtemp(prefix=f"lsc_study_{key[:12]}_", dir=parent)
         archive = os.path.join(folder, "model.fmu")
         with open(archive, "wb") as fh:
             fh.write(fmu)
@@ -126,7 +131,7 @@ def _run_fmu(fmu, point, settings, start):
     from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
     from fmpy.logging import addLoggerProxy
 
-    folder = _extract(fmu)
+    folder = _extract(fmu, settings.get("workdir"))
     unzipped = os.path.join(folder, "unzipped")
     md = _DESCRIPTIONS.get(folder)
     if md is None:
@@ -155,22 +160,8 @@ def _run_fmu(fmu, point, settings, start):
     t0, t1 = settings["t_span"] if settings.get("t_span") else (
         float(md.defaultExperiment.startTime or 0.0), float(md.defaultExperiment.stopTime or 1.0))
     h = float(point.get("step", settings.get("step") or (md.defaultExperiment.stepSize or (t1 - t0) / 100)))
-    n_steps = max(int(round((t1 - t0) / h)), 1)
-    values = {}
-    for name, value in point.items():
-        if name in ("step", "offset"):
-            continue
-        fmi_name = {"lam": "lambda", "method": "solver"}.get(name, name)
-        if fmi_name not in var:
-            raise ValueError(f"the FMU has no variable {fmi_name!r} to set from the grid's `{name}`")
-        if fmi_name == "solver" and isinstance(value, str):
-            value = ("RK45", "DOP853", "Radau", "BDF", "exact", "Magnus4").index(value)
-        values[fmi_name] = value
-    offset = float(point.get("offset", 0.0))
-    if offset:
-        for s in states:
-            key = _start_name(s)
-            values[key] = values.get(key, float(var[key].start or 0.0)) + offset / math.sqrt(len(states))
+    n_steps = steps_over(t0, t1, h)
+    values = _fmu_values(point, var, states)
 
     slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=ident, instanceName="study")
     slave.instantiate(callbacks=callbacks, loggingOn=True)
@@ -182,12 +173,8 @@ def _run_fmu(fmu, point, settings, start):
         slave.enterInitializationMode()
         for name, value in values.items():
             v = var[name]
-            if v.type == "Real":
-                slave.setReal([v.valueReference], [float(value)])
-            elif v.type == "Integer":
-                slave.setInteger([v.valueReference], [int(value)])
-            else:
-                slave.setBoolean([v.valueReference], [bool(value)])
+            setter = {"Real": slave.setReal, "Integer": slave.setInteger, "Boolean": slave.setBoolean}[v.type]
+            setter([v.valueReference], [value])
         slave.exitInitializationMode()
 
         def read():
@@ -223,6 +210,70 @@ def _run_fmu(fmu, point, settings, start):
                 residual_peak=float(np.max(residual)) if residual.size else math.nan,
                 run_time=time.perf_counter() - start, steps=steps,
                 t=np.array(t_out[:x.shape[1]]), x=x, residual=residual)
+
+
+def _fmu_values(point, var, states):
+    """{FMU variable: value} a point sets: grid names mapped, values typed, the offset added to the starts."""
+    values = {}
+    for name, value in point.items():
+        if name in ("step", "offset"):
+            continue
+        fmi_name = {"lam": "lambda", "method": "solver"}.get(name, name)
+        if fmi_name not in var:
+            raise ValueError(f"the FMU has no variable {fmi_name!r} to set from the grid's `{name}`")
+        if fmi_name == "solver" and isinstance(value, str):
+            solvers = ("RK45", "DOP853", "Radau", "BDF", "exact", "Magnus4")
+            if value not in solvers:
+                raise ValueError(f"`method` must be one of {solvers}; found {value!r}")
+            value = solvers.index(value)
+        values[fmi_name] = fmi_value(name, value, var[fmi_name].type)
+    offset = float(point.get("offset", 0.0))
+    if offset:
+        for s in states:
+            key = _start_name(s)
+            values[key] = values.get(key, float(var[key].start or 0.0)) + offset / math.sqrt(len(states))
+    return values
+
+
+def steps_over(t0, t1, h):
+    """The number of steps `h` from `t0` to `t1`; a ValueError if they do not end on `t1`."""
+    n = int(round((t1 - t0) / h))
+    if n < 1 or abs(t0 + n * h - t1) > 1e-9 * max(abs(t1 - t0), abs(t1), 1e-300):
+        raise ValueError(f"`step` {h!r} does not divide the horizon [{t0!r}, {t1!r}]: the run would end at "
+                         f"{t0 + max(n, 1) * h!r}; choose a step that divides it")
+    return n
+
+
+_TRUE, _FALSE = ("true", "1"), ("false", "0")
+
+
+def fmi_value(name, value, kind):
+    """`value` of the grid's `name` as the FMI type `kind` ('Real', 'Integer', 'Boolean'), or a TypeError.
+
+    Texts are read, never passed through ``bool()``: "false" and "0" are False.
+    """
+    def refuse():
+        raise TypeError(f"`{name}` sets a {kind} variable; found {value!r} ({type(value).__name__}).")
+
+    if isinstance(value, str):
+        text = value.strip().lower()
+        if kind == "Boolean" and text in _TRUE + _FALSE:
+            return text in _TRUE
+        try:
+            value = int(text) if kind == "Integer" else float(text)
+        except ValueError:
+            refuse()
+    if kind == "Boolean":
+        if isinstance(value, (bool, np.bool_)) or (isinstance(value, (int, np.integer)) and value in (0, 1)):
+            return bool(value)
+        refuse()
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        refuse()
+    if kind == "Integer":
+        if float(value) != int(value):
+            refuse()
+        return int(value)
+    return float(value)
 
 
 def _start_name(name):
@@ -293,6 +344,7 @@ def _run_ssp(cosimulate, scenario, point, settings, start):
         raise ValueError("an SSP target needs `t_span` (the start and stop time of the co-simulation)")
     if "step" not in point:
         raise ValueError("an SSP target needs `step` (the macro step) in the grid")
+    steps_over(float(t_span[0]), float(t_span[1]), float(point["step"]))
     outputs, residuals, with_lambda = ssp_layout(scenario)
     start_values, options = {}, {}
     for name, value in point.items():

@@ -1,12 +1,14 @@
 """The front of a study: `sweep`."""
 import math
 import os
+import shutil
+import tempfile
 
 import numpy as np
 
 from ._execute import _execute, _Progress
 from ._grid import METRICS, _group_key, _points, _tightest, _valid
-from ._output import _read_finished, _rewrite, _stream_path
+from ._output import _read_finished, _rewrite, _stream_path, check_identity, check_output
 from ._runs import run_dae, run_fmu, run_ssp
 
 # -- the target ----------------------------------------------------------------
@@ -63,7 +65,7 @@ def _error(t, x, ref, error_from):
 
 # -- the study -------------------------------------------------------------------
 def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progress=True, output=None, t_span=None,
-          x0=None, error_from=None, n_workers=2, seed=0, curves=True):
+          x0=None, error_from=None, n_workers=2, seed=0, curves=True, timeout=None):
     """Run a parameter study: one simulation per point of `grid`, on Dask.
 
     Parameters
@@ -105,7 +107,9 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
         ``.csv`` or ``.parquet`` file. Rows are appended to the CSV (for
         Parquet: to ``output + '.partial.csv'``, converted at the end) as
         they arrive; a study run again with the same output computes only the
-        runs not in it yet.
+        runs not in it yet. The study's identity (target, grid names,
+        reference, horizon, settings) is kept in ``output + '.study.json'``;
+        resuming a file of another study is refused and the file kept.
     t_span : pair of float, optional
         Horizon (default: the problem's, or the FMU's default experiment).
     x0 : array_like, optional
@@ -120,6 +124,10 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
     curves : bool, optional
         Keep each run's residual curve in ``df.attrs['curves']`` (run ->
         (t, residual)) for `plot_study`.
+    timeout : float, optional
+        Seconds a run may take (worker processes only, not ``'serial'``). A
+        run past it is ended by restarting its worker and recorded as failed
+        with a message starting ``timeout``; the study goes on.
 
     Returns
     -------
@@ -142,16 +150,57 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
     >>> df["success"].tolist(), bool(df["error"].iloc[1] < 1e-4), df["message"].iloc[2]
     ([True, True, False], True, '`lam` must be positive; found -1.0')
     """
-    import pandas as pd
-
+    _require(scheduler)
+    if timeout is not None and not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0):
+        raise ValueError(f"`timeout` must be a positive number of seconds; found {timeout!r}.")
+    if timeout is not None and scheduler == "serial":
+        raise ValueError("`timeout` needs worker processes (a Dask scheduler), not scheduler='serial'.")
+    if output is not None:
+        check_output(output)
+    if t_span is not None:
+        span = tuple(t_span) if np.ndim(t_span) == 1 else ()
+        if len(span) != 2 or not all(isinstance(t, (int, float, np.integer, np.floating)) and math.isfinite(t)
+                                     for t in span) or not span[0] < span[1]:
+            raise ValueError(f"`t_span` must be two finite times with t_span[0] < t_span[1]; found {t_span!r}.")
+    if scheduler is None and not (isinstance(n_workers, (int, np.integer)) and not isinstance(n_workers, bool)
+                                  and n_workers >= 1):
+        raise ValueError(f"`n_workers` must be a positive integer; found {n_workers!r}.")
     points, names = _points(grid, seed)
     metrics = dict(metrics or {})
     for name in metrics:
         if name in METRICS or name in names:
             raise ValueError(f"`metrics` name {name!r} is already a column.")
+    workdir = tempfile.mkdtemp(prefix="lsc_study_")  # extracted FMUs, a built spec: removed at the end
+    try:
+        kind, payload, reference, settings = _setup(target, reference, t_span, x0, workdir)
+        settings["error_from"] = settings["t_span"][0] if error_from is None and settings["t_span"] else error_from
+        if output is not None:
+            os.makedirs(os.path.dirname(os.path.abspath(output)), exist_ok=True)
+            check_identity(output, _identity(target, payload, names, reference, settings, metrics))
+        return _study(kind, payload, points, names, reference, settings, metrics, output, scheduler, n_workers,
+                      progress, curves, timeout)
+    finally:
+        shutil.rmtree(workdir, ignore_errors=True)
+
+
+def _require(scheduler):
+    """Name the extra a study needs, instead of a bare ModuleNotFoundError."""
+    needed = ["pandas"] + ([] if scheduler == "serial" else ["distributed"])
+    for module in needed:
+        try:
+            __import__(module)
+        except ImportError:
+            raise ImportError(f"studies need {module!r}: install the sweep extra, pip install -e \".[sweep]\" in a "
+                              "clone (pip install \"lsc[sweep]\" otherwise).") from None
+
+
+def _setup(target, reference, t_span, x0, workdir):
+    """(kind, payload, reference, settings) for a target and a reference as `sweep` accepts them."""
+    import lsc
+
     kind, payload, exact, t_span = _target(target, t_span, x0)
     if kind == "spec":
-        payload = _build_spec(payload)
+        payload = _build_spec(payload, workdir)
         kind = "fmu"
     if kind == "fmu" and t_span is None:  # the FMU's default experiment (read from the archive, not run)
         from fmpy import read_model_description
@@ -159,9 +208,6 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
         experiment = read_model_description(payload).defaultExperiment
         if experiment is not None and experiment.stopTime is not None:
             t_span = (float(experiment.startTime or 0.0), float(experiment.stopTime))
-
-    import lsc
-
     if isinstance(reference, lsc.gallery.Problem):
         reference = reference.exact
     if reference is None:
@@ -179,93 +225,67 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
     elif not (callable(reference) or reference == "tightest"):
         raise ValueError(f"`reference` must be None, 'exact', 'tightest', 'monolithic', a callable or a gallery "
                          f"Problem; found {reference!r}.")
+    return kind, payload, reference, {"t_span": t_span, "workdir": workdir}
 
-    settings = {"t_span": t_span}
+
+def _identity(target, payload, names, reference, settings, metrics):
+    """What makes two studies the same: stored with the output, compared when resuming."""
+    import hashlib
+
+    import lsc
+
+    if isinstance(target, lsc.gallery.Problem):
+        what = {"gallery": target.name}
+    elif isinstance(target, lsc.LinearDAE):
+        what = {"LinearDAE": [float(v) for v in np.ravel(payload["x0"])]}
+    elif isinstance(target, dict):
+        what = {"spec": repr(sorted(target.items()))}
+    else:
+        what = {"file": os.path.basename(os.fspath(target))}
+    path = payload if isinstance(payload, str) and os.path.isfile(payload) else None
+    if path:  # the FMU (built from a spec, or given) by its content
+        with open(path, "rb") as fh:
+            what["sha256"] = hashlib.sha256(fh.read()).hexdigest()
+    ref = reference if isinstance(reference, str) else "callable " + getattr(reference, "__qualname__",
+                                                                          type(reference).__name__)
+    t_span = settings["t_span"]
+    return {"target": what, "grid names": list(names), "reference": ref,
+            "t_span": [float(t) for t in t_span] if t_span else None,
+            "error_from": None if settings["error_from"] is None else float(settings["error_from"]),
+            "metrics": sorted(metrics)}
+
+
+def _study(kind, payload, points, names, reference, settings, metrics, output, scheduler, n_workers, progress,
+           curves, timeout):
+    """Run the points not in `output` yet, stream their rows, and return the table."""
+    import pandas as pd
+
     runner = {"dae": run_dae, "fmu": run_fmu, "ssp": run_ssp}[kind]
-    t0 = (t_span or (0.0,))[0]
-    error_from = t0 if error_from is None else float(error_from)
-
     columns = ["run", *names, *METRICS, *metrics]
     finished = _read_finished(output, names, points) if output is not None else {}
     stream = _stream_path(output) if output is not None else None
     if stream is not None:
         _rewrite(stream, [finished[r] for r in sorted(finished)], columns)
     todo = [i for i in range(len(points)) if i not in finished]
-
-    references = {}
     tight = {}
     if reference == "tightest":  # over the whole grid, so resumed rows and new ones share a reference
         needed = {_group_key(points[i]) for i in todo}
         tight = {k: p for k, p in _tightest([p for p in points if _valid(p)]).items() if k in needed}
-
-    rows = dict(finished)
-    curves_out = ResidualCurves()
-    done_count = [len(finished)]
-    failed_count = [sum(1 for r in finished.values() if not r["success"])]
-    waiting = {}  # group key -> list of (run, result) waiting for their reference
-
-    def emit(run, result):
-        row = {"run": run, **points[run]}
-        for m in METRICS:
-            if m != "error":
-                row[m] = result[m]
-        ref = reference if callable(reference) else references.get(_group_key(points[run]))
-        row["error"] = math.nan
-        if result["success"] and ref is None:
-            row["message"] = f"{row['message']}; no error: the reference run (the tightest point) failed"
-        if result["success"] and ref is not None:
-            try:
-                row["error"] = _error(result["t"], result["x"], ref, error_from)
-            except Exception as exc:
-                row["message"] = f"{row['message']}; the error could not be computed: {exc}"
-        for name, fn in metrics.items():
-            try:
-                row[name] = float(fn(result["t"], result["x"], result["residual"])) if result["success"] else math.nan
-            except Exception as exc:
-                row[name] = math.nan
-                row["message"] = f"{row['message']}; metric {name!r} failed: {exc}"
-        rows[run] = row
-        if curves and result.get("residual") is not None:
-            t_run, r_run = np.asarray(result["t"]), np.asarray(result["residual"])
-            if t_run.size > 400:  # a curve for a plot, not the trajectory
-                keep = np.unique(np.linspace(0, t_run.size - 1, 400).astype(int))
-                t_run, r_run = t_run[keep], r_run[keep]
-            curves_out[run] = (t_run, r_run)
-        if stream is not None:
-            pd.DataFrame([row], columns=columns).to_csv(stream, mode="a", header=False, index=False)
-        done_count[0] += 1
-        failed_count[0] += not row["success"]
-
-    def accept(tag, result):
-        if tag[0] == "ref":
-            key = tag[1]
-            references[key] = (result["t"], result["x"]) if result["success"] and result["t"] is not None else None
-            for run, res in waiting.pop(key, []):
-                emit(run, res)
-            return
-        run = tag[1]
-        key = _group_key(points[run])
-        if reference == "tightest" and key in tight and key not in references:
-            waiting.setdefault(key, []).append((run, result))
-        else:
-            emit(run, result)
-
+    table = _Table(points, columns, reference, tight, settings["error_from"], metrics, curves, stream)
+    table.rows.update(finished)
+    table.done[0], table.failed[0] = len(finished), sum(1 for r in finished.values() if not r["success"])
     jobs = [(("ref", key), point) for key, point in tight.items()] + [(("run", i), points[i]) for i in todo]
-    bar = _Progress(len(points), done_count, failed_count, progress)
+    bar = _Progress(len(points), table.done, table.failed, progress)
     try:
-        _execute(runner, payload, settings, jobs, accept, scheduler, n_workers, bar)
+        _execute(runner, payload, settings, jobs, table.accept, scheduler, n_workers, bar, timeout)
     finally:
         bar.close()
-    for key, items in list(waiting.items()):  # references that never arrived
-        references.setdefault(key, None)
-        for run, res in items:
-            emit(run, res)
-
-    df = pd.DataFrame([rows[r] for r in sorted(rows)], columns=columns).set_index("run")
+    table.flush()
+    df = pd.DataFrame([table.rows[r] for r in sorted(table.rows)], columns=columns).set_index("run")
     df["success"] = df["success"].astype(bool)
     df["steps"] = df["steps"].astype(int)
-    df.attrs["curves"] = curves_out
-    df.attrs["t_span"] = t_span
+    df.attrs["curves"] = table.curves
+    df.attrs["t_span"] = settings["t_span"]
     if output is not None and os.fspath(output).lower().endswith(".parquet"):
         tmp = f"{os.fspath(output)}.tmp{os.getpid()}"
         plain = df.copy()
@@ -276,13 +296,78 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
     return df
 
 
-def _build_spec(spec):
-    import tempfile
+class _Table:
+    """The rows of a study as runs arrive: errors against the reference, streamed to the output."""
 
+    def __init__(self, points, columns, reference, tight, error_from, metrics, curves, stream):
+        self.points, self.columns, self.reference, self.tight = points, columns, reference, tight
+        self.error_from, self.metrics, self.keep_curves, self.stream = error_from, metrics, curves, stream
+        self.rows, self.curves, self.done, self.failed = {}, ResidualCurves(), [0], [0]
+        self.references, self.reasons, self.waiting = {}, {}, {}  # waiting: group key -> [(run, result)]
+
+    def accept(self, tag, result):
+        if tag[0] == "ref":
+            key = tag[1]
+            ok = result["success"] and result["t"] is not None
+            self.references[key] = (result["t"], result["x"]) if ok else None
+            self.reasons[key] = result["message"]
+            for run, res in self.waiting.pop(key, []):
+                self.emit(run, res)
+            return
+        run = tag[1]
+        key = _group_key(self.points[run])
+        if self.reference == "tightest" and key in self.tight and key not in self.references:
+            self.waiting.setdefault(key, []).append((run, result))
+        else:
+            self.emit(run, result)
+
+    def flush(self):
+        """Rows still waiting for a reference run that never reported."""
+        for key, items in list(self.waiting.items()):
+            self.references.setdefault(key, None)
+            self.reasons.setdefault(key, "it did not report")
+            for run, res in items:
+                self.emit(run, res)
+
+    def emit(self, run, result):
+        import pandas as pd
+
+        point = self.points[run]
+        row = {"run": run, **point, **{m: result[m] for m in METRICS if m != "error"}, "error": math.nan}
+        key = _group_key(point)
+        ref = self.reference if callable(self.reference) else self.references.get(key)
+        if result["success"] and ref is None:
+            described = ", ".join(f"{k}={v!r}" for k, v in self.tight.get(key, {}).items())
+            row["message"] = (f"{row['message']}; no error: the reference run ({described}) failed: "
+                              f"{self.reasons.get(key, 'unknown')}")
+        if result["success"] and ref is not None:
+            try:
+                row["error"] = _error(result["t"], result["x"], ref, self.error_from)
+            except Exception as exc:
+                row["message"] = f"{row['message']}; the error could not be computed: {exc}"
+        for name, fn in self.metrics.items():
+            try:
+                row[name] = float(fn(result["t"], result["x"], result["residual"])) if result["success"] else math.nan
+            except Exception as exc:
+                row[name] = math.nan
+                row["message"] = f"{row['message']}; metric {name!r} failed: {exc}"
+        self.rows[run] = row
+        if self.keep_curves and result.get("residual") is not None:
+            t_run, r_run = np.asarray(result["t"]), np.asarray(result["residual"])
+            if t_run.size > 400:  # a curve for a plot, not the trajectory
+                keep = np.unique(np.linspace(0, t_run.size - 1, 400).astype(int))
+                t_run, r_run = t_run[keep], r_run[keep]
+            self.curves[run] = (t_run, r_run)
+        if self.stream is not None:
+            pd.DataFrame([row], columns=self.columns).to_csv(self.stream, mode="a", header=False, index=False)
+        self.done[0] += 1
+        self.failed[0] += not row["success"]
+
+
+def _build_spec(spec, workdir):
     from .._build import build_fmu
 
-    folder = tempfile.mkdtemp(prefix="lsc_study_spec_")
-    return os.fspath(build_fmu(spec, folder))
+    return os.fspath(build_fmu(spec, workdir))
 
 
 class ResidualCurves(dict):

@@ -1,0 +1,285 @@
+"""Studies refuse what they cannot do right: another study's file, grid names that collide with
+metrics, grid values of the wrong type, steps that miss the horizon; a run past its timeout is
+ended and recorded, a failed reference is named, nothing is left in the temporary folder.
+FMU runs happen in a subprocess or a Dask worker, never in the pytest process.
+"""
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+pd = pytest.importorskip("pandas")
+distributed = pytest.importorskip("distributed")
+
+from lsc import gallery  # noqa: E402
+from fmu_build import sweep  # noqa: E402
+from fmu_build.study import _runs, _sweep  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SPECS = os.path.join(ROOT, "examples", "specs")
+T_SPAN = (0.0, 1.0)
+
+
+def _serial(grid, output=None, **kwargs):
+    return sweep(gallery.prescribed_path(t_span=T_SPAN), grid, scheduler="serial", progress=False, output=output,
+                 **kwargs)
+
+
+# -- 6. a study's identity is stored with its output --------------------------------------------
+@pytest.mark.parametrize("change, needle", [
+    ({"grid": {"lam": [1.0, 2.0], "offset": [0.0]}}, "grid names"),
+    ({"t_span": (0.0, 0.5)}, "t_span"),
+    ({"reference": "tightest"}, "reference"),
+    ({"error_from": 0.5}, "error_from"),
+])
+def test_resuming_against_another_study_is_refused_and_the_file_kept(tmp_path, change, needle):
+    output = tmp_path / "s.csv"
+    _serial({"lam": [1.0, 2.0]}, output)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    grid = change.pop("grid", {"lam": [1.0, 2.0]})
+    problem = gallery.prescribed_path(t_span=change.pop("t_span", T_SPAN))
+    with pytest.raises(ValueError, match=f"holds another study.*{needle}"):
+        sweep(problem, grid, scheduler="serial", progress=False, output=output, **change)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_a_csv_without_a_study_record_is_not_resumed(tmp_path):
+    output = tmp_path / "s.csv"
+    output.write_text("run,lam,success,message,error,residual_final,residual_peak,run_time,steps\n")
+    with pytest.raises(ValueError, match="no record of the study"):
+        _serial({"lam": [1.0]}, output)
+    assert output.read_text().startswith("run,lam,")
+
+
+def test_binary_garbage_in_a_resumed_csv_names_the_file(tmp_path):
+    output = tmp_path / "s.csv"
+    _serial({"lam": [1.0, 2.0]}, output)
+    with open(output, "ab") as fh:
+        fh.write(b"\xff\xfe\x00\x81garbage\n")
+    with pytest.raises(ValueError, match=f"{output}.*not a readable CSV"):
+        _serial({"lam": [1.0, 2.0]}, output)
+
+
+# -- 7, 10. grid names and values --------------------------------------------------------------
+@pytest.mark.parametrize("name", ["error", "steps", "run", "success", "message", "run_time"])
+def test_a_grid_name_equal_to_a_column_is_refused(name):
+    with pytest.raises(ValueError, match=f"`grid` name {name!r} is a column of the result"):
+        _serial({"lam": [1.0], name: [1.0]})
+
+
+@pytest.mark.parametrize("grid, needle", [
+    ({"lam": [True]}, r"`grid\['lam'\]` must hold real numbers; found True \(bool\)"),
+    ({"lam": ["abc"]}, r"`grid\['lam'\]` must hold real numbers; found 'abc' \(str\)"),
+    ({"step": [0.1, "x"]}, r"`grid\['step'\]` must hold real numbers; found 'x'"),
+    ({"offset": [None]}, r"`grid\['offset'\]` must hold real numbers; found None"),
+])
+def test_wrong_typed_grid_values_are_refused(grid, needle):
+    with pytest.raises(TypeError, match=needle):
+        _serial(grid)
+
+
+@pytest.mark.parametrize("value, kind, expected", [
+    ("false", "Boolean", False), ("0", "Boolean", False), ("False", "Boolean", False), (0, "Boolean", False),
+    ("true", "Boolean", True), ("1", "Boolean", True), (True, "Boolean", True), (np.bool_(False), "Boolean", False),
+    (3.0, "Integer", 3), ("4", "Integer", 4), (2.5, "Real", 2.5), ("2.5", "Real", 2.5),
+])
+def test_fmu_values_are_converted_by_the_variables_type(value, kind, expected):
+    converted = _runs.fmi_value("flag", value, kind)
+    assert converted == expected and type(converted) is type(expected)
+
+
+@pytest.mark.parametrize("value, kind", [("yes", "Boolean"), (2, "Boolean"), (0.5, "Boolean"), (True, "Real"),
+                                         ("abc", "Real"), (2.5, "Integer"), (True, "Integer"), (None, "Real")])
+def test_fmu_values_of_the_wrong_type_are_refused(value, kind):
+    with pytest.raises(TypeError, match=f"`flag` sets a {kind} variable"):
+        _runs.fmi_value("flag", value, kind)
+
+
+# -- 8. a step that does not divide the horizon -------------------------------------------------
+def test_a_step_that_misses_the_horizon_fails_the_run(tmp_path):
+    code = textwrap.dedent(f"""
+        import json
+        from fmu_build import sweep
+        df = sweep({os.path.join(SPECS, 'prescribed_path.toml')!r}, {{"step": [0.7, 0.25]}},
+                   reference=lambda t: __import__("numpy").zeros((3, len(t))), t_span=(0.0, 1.0),
+                   scheduler="serial", progress=False)
+        print(json.dumps([df["success"].tolist(), df["message"].tolist(), df["steps"].tolist()]))
+    """)
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    success, message, steps = eval(run.stdout.strip().splitlines()[-1].replace("true", "True").replace("false", "False"))
+    assert success == [False, True] and steps == [0, 4]
+    assert "`step` 0.7 does not divide the horizon [0.0, 1.0]" in message[0]
+
+
+def test_an_ssp_step_that_misses_the_horizon_fails_the_run(tmp_path, monkeypatch):
+    scenario = tmp_path / "s.ssp"
+    scenario.write_bytes(b"")
+    monkeypatch.setattr(_runs, "ssp_layout", lambda s: (["a.y"], [], []))
+    df = sweep(scenario, {"step": [0.3]}, reference=lambda t: np.zeros((1, len(t))), t_span=(0.0, 1.0),
+               scheduler="serial", progress=False)
+    assert not df["success"][0] and "`step` 0.3 does not divide the horizon" in df["message"][0]
+
+
+# -- 9. timeouts and failed references -----------------------------------------------------------
+def _hang_plugin():
+    from distributed import WorkerPlugin
+
+    class HangAtLam3(WorkerPlugin):  # defined in a function: cloudpickle ships it by value
+        name = "hang-at-lam-3"
+
+        def setup(self, worker):
+            from fmu_build.study import _runs
+
+            original = _runs._run_dae
+
+            def run(problem, point, settings, start):
+                if point.get("lam") == 3.0:
+                    import time
+
+                    time.sleep(3600)
+                return original(problem, point, settings, start)
+
+            _runs._run_dae = run
+
+    return HangAtLam3()
+
+
+@pytest.fixture()
+def one_worker():
+    from distributed import Client, LocalCluster
+
+    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address=None, silence_logs=50)
+    client = Client(cluster)
+    client.register_plugin(_hang_plugin())
+    yield client
+    client.close()
+    cluster.close()
+
+
+def test_a_run_past_its_timeout_is_ended_and_the_study_goes_on(one_worker):
+    problem = gallery.prescribed_path(t_span=T_SPAN)
+    df = sweep(problem, {"lam": [1.0, 3.0, 2.0]}, scheduler=one_worker, progress=False, timeout=3.0)
+    assert df["success"].tolist() == [True, False, True], df["message"].tolist()
+    assert df.loc[1, "message"] == "timeout: the run took more than 3 s; its worker was restarted"
+    assert df.loc[[0, 2], "error"].max() < 1e-4
+    # a reference that times out: the other rows say so instead of waiting for it
+    df = sweep(problem, {"lam": [1.0, 3.0]}, reference="tightest", scheduler=one_worker, progress=False, timeout=3.0)
+    assert df["success"].tolist() == [True, False] and np.isnan(df.loc[0, "error"]), df["message"].tolist()
+    assert "no error: the reference run (lam=3.0) failed: timeout" in df.loc[0, "message"]
+
+
+def test_a_failed_reference_is_named_in_the_rows(monkeypatch):
+    original = _sweep.run_dae
+
+    def run(problem, point, settings):
+        if point["lam"] == 2.0:
+            return dict(original(problem, point, settings), success=False, message="boom")
+        return original(problem, point, settings)
+
+    monkeypatch.setattr(_sweep, "run_dae", run)
+    df = _serial({"lam": [1.0, 2.0]}, reference="tightest")
+    assert "no error: the reference run (lam=2.0) failed: boom" in df.loc[0, "message"]
+
+
+def test_timeout_is_checked():
+    with pytest.raises(ValueError, match="`timeout` needs worker processes"):
+        _serial({"lam": [1.0]}, timeout=1.0)
+    with pytest.raises(ValueError, match="`timeout` must be a positive number of seconds; found 0"):
+        sweep(gallery.prescribed_path(), {"lam": [1.0]}, progress=False, timeout=0)
+
+
+# -- weak: temporary folders, the embedded cluster ------------------------------------------------
+def test_a_study_leaves_nothing_in_the_temporary_folder(tmp_path):
+    code = textwrap.dedent(f"""
+        from fmu_build import sweep
+        df = sweep({os.path.join(SPECS, 'prescribed_path.toml')!r}, {{"lam": [1.0, 2.0]}}, t_span=(0.0, 0.5),
+                   scheduler="serial", progress=False)
+        assert df["success"].all(), df
+    """)
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "TMPDIR": str(temp)})
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert [p.name for p in temp.iterdir() if p.name.startswith("lsc_study")] == []
+
+
+def test_the_embedded_cluster_uses_tls_and_no_dashboard(monkeypatch):
+    seen = []
+
+    class Recording(distributed.LocalCluster):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            seen.append((kwargs, self.scheduler_address, self.dashboard_link if kwargs.get("dashboard_address") else None))
+
+    monkeypatch.setattr(distributed, "LocalCluster", Recording)
+    df = sweep(gallery.prescribed_path(t_span=T_SPAN), {"lam": [1.0]}, progress=False, n_workers=1)
+    assert df["success"].all()
+    (kwargs, address, dashboard), = seen
+    assert address.startswith("tls://127.0.0.1:") and kwargs["security"] is True
+    assert kwargs["dashboard_address"] is None and dashboard is None
+
+
+# -- weak: the command line of a study ---------------------------------------------------------------
+@pytest.mark.parametrize("output, needle", [("x.txt", "must be a .csv or .parquet file"),
+                                            (".", "must be a .csv or .parquet file")])
+def test_cli_sweep_output_is_checked_before_running(tmp_path, capsys, output, needle):
+    from fmu_build.__main__ import main
+
+    assert main(["sweep", "gallery:prescribed_path", "--grid", "lam=1", "--scheduler", "serial", "--no-progress",
+                 "-o", str(tmp_path / output)]) == 2
+    assert needle in capsys.readouterr().err
+    assert not list(tmp_path.glob("*.partial.csv"))
+
+
+def _cli_without(blocked, *args, cwd):
+    code = textwrap.dedent(f"""
+        import sys
+        sys.path.insert(0, {os.path.join(ROOT, 'tests')!r})
+        from _support import ImportBlocker
+        sys.meta_path.insert(0, ImportBlocker({blocked!r}))
+        from fmu_build.__main__ import main
+        sys.exit(main({list(args)!r}))
+    """)
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=cwd)
+
+
+def test_cli_sweep_parquet_without_pyarrow_is_refused_before_running(tmp_path):
+    run = _cli_without(["pyarrow"], "sweep", "gallery:prescribed_path", "--grid", "lam=1", "--scheduler", "serial",
+                       "--no-progress", "-o", "s.parquet", cwd=tmp_path)
+    assert run.returncode == 2 and "needs pyarrow" in run.stderr and "Traceback" not in run.stderr, run.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cli_sweep_without_the_extra_names_it(tmp_path):
+    run = _cli_without(["pandas", "distributed"], "sweep", "gallery:prescribed_path", "--grid", "lam=1",
+                       "--no-progress", "-o", "s.csv", cwd=tmp_path)
+    assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
+    assert 'pip install -e ".[sweep]"' in run.stderr
+
+
+def test_cli_sweep_refuses_a_boolean_lam(tmp_path, capsys):
+    from fmu_build.__main__ import main
+
+    assert main(["sweep", "gallery:prescribed_path", "--grid", "lam=true", "--scheduler", "serial", "--no-progress",
+                 "-o", str(tmp_path / "s.csv")]) == 2
+    assert "`grid['lam']` must hold real numbers; found 'true' (str)" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("kwargs, needle", [
+    ({"t_span": (1.0, 0.0)}, r"`t_span` must be two finite times with t_span\[0\] < t_span\[1\]; found \(1.0, 0.0\)"),
+    ({"t_span": (0.0, float("inf"))}, "`t_span` must be two finite times"),
+    ({"t_span": (0.0,)}, "`t_span` must be two finite times"),
+    ({"n_workers": 0, "scheduler": None}, "`n_workers` must be a positive integer; found 0"),
+])
+def test_horizon_and_workers_are_checked_up_front(kwargs, needle):
+    from _support import deadline
+
+    kwargs = {"scheduler": "serial", **kwargs}
+    with deadline(30, "a refusal that should be immediate"), pytest.raises(ValueError, match=needle):
+        sweep(gallery.prescribed_path(), {"lam": [1.0]}, progress=False, **kwargs)
