@@ -67,7 +67,8 @@ def _execute(runner, payload, settings, jobs, accept, scheduler, n_workers, bar,
         # Temporary TLS credentials: no other local process can submit code to these workers.
         with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
             cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                   dashboard_address=None, silence_logs=50, security=True)
+                                   dashboard_address=None, silence_logs=50, security=True,
+                                   local_directory=settings.get("workdir"))  # removed with the study
             client = Client(cluster)
     elif isinstance(scheduler, str):
         client = Client(scheduler)

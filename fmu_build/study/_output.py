@@ -45,7 +45,7 @@ def check_identity(output, identity):
         wanted = json.loads(json.dumps(identity))  # tuples as lists, as stored
         different = [k for k in sorted(set(stored) | set(wanted)) if stored.get(k) != wanted.get(k)]
         if different:
-            details = "; ".join(f"its {k} is {stored.get(k)!r}, this study's {wanted.get(k)!r}" for k in different)
+            details = "; ".join(f"{k}: {stored.get(k)!r} there, {wanted.get(k)!r} here" for k in different)
             raise ValueError(f"`output` {os.fspath(output)!r} holds another study: {details}.")
         return
     tmp = f"{record}.tmp{os.getpid()}"
