@@ -65,16 +65,9 @@ def _run_build(args):
 
 def _assignments(items, option, form):
     """``{name: float}`` from repeated ``NAME=VALUE`` options, or a ValueError naming the option."""
-    values = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep or not name.strip():
-            raise ValueError(f"`{option}` expects {form}; found {item!r}.")
-        try:
-            values[name.strip()] = float(value)
-        except ValueError:
-            raise ValueError(f"`{option}` expects {form} with a number; found {item!r}.") from None
-    return values
+    from ._cli_checks import number_assignments
+
+    return number_assignments(items, option, form)
 
 
 def _add_simulate(sub):
@@ -126,6 +119,9 @@ def _simulate_output(args, md):
     out = Path(args.output) if args.output else Path(f"{md.modelName}.csv")
     if out.is_dir():
         out = out / f"{md.modelName}.csv"
+    if args.plot and out.with_suffix(".png") == out:
+        raise ValueError(f"`--plot` writes the plot to the result's name with .png, which is the result "
+                         f"{os.fspath(out)!r} itself; give `-o` a .csv name.")
     outputs = [v.name for v in md.modelVariables if v.causality == "output"]
     for path in [out] + ([out.with_suffix(".png")] if args.plot else []):
         check_output(path, [args.fmu, args.input], "-o", args.force, columns=outputs)
@@ -133,40 +129,65 @@ def _simulate_output(args, md):
 
 
 def _run_simulate(args):
-    from fmpy import read_model_description, simulate_fmu
+    import shutil
+    import signal
+    import tempfile
 
-    from ._cli_checks import check_fmu_file, check_input_csv
+    from fmpy import extract, read_model_description, simulate_fmu
 
-    logs = []
+    from ._cli_checks import check_fmu_file, check_input_csv, typed_start_values
+
+    logs, interrupted = [], []
 
     def logger(env, instance, status, category, message):  # keep the FMU's warnings and errors for the reason
         if status >= 1:
             logs.append(message.decode("utf-8", "replace"))
 
+    def stop(signum, frame):  # Ctrl-C or SIGTERM: end the run, then clean up (the FMU may swallow the exception)
+        interrupted.append(signal.Signals(signum).name)
+        raise KeyboardInterrupt
+
     try:
         check_fmu_file(args.fmu)
         md = read_model_description(args.fmu)
-        start_values = _assignments(args.set, "--set", "NAME=VALUE")
-        start, stop, step = _experiment(args, md)
+        start_values = typed_start_values(args.set, md.modelVariables)
+        start, stop_time, step = _experiment(args, md)
         out, outputs = _simulate_output(args, md)
         signals = None
         if args.input:
             inputs = {v.name: v.start for v in md.modelVariables if v.causality == "input"}
-            signals = check_input_csv(args.input, inputs, start_values)
-        result = simulate_fmu(args.fmu, start_time=start, stop_time=stop, output_interval=step,
-                              start_values=start_values, input=signals, output=outputs, logger=logger,
-                              debug_logging=True)
+            signals = check_input_csv(args.input, inputs, start_values, span=(start, stop_time))
     except Exception as exc:  # fmpy raises bare Exception; report any failure as one line
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2
+    unzipped = tempfile.mkdtemp(prefix="lsc_simulate_")  # fmpy's own extraction is left behind on a signal
+    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        extract(args.fmu, unzipdir=unzipped)
+        result = simulate_fmu(unzipped, start_time=start, stop_time=stop_time, output_interval=step,
+                              start_values=start_values, input=signals, output=outputs, logger=logger,
+                              debug_logging=True, model_description=md)
+    except (Exception, KeyboardInterrupt) as exc:
+        if interrupted or isinstance(exc, KeyboardInterrupt):
+            print(f"lsc-fmu: error: interrupted ({interrupted[0] if interrupted else 'SIGINT'}); nothing written.",
+                  file=sys.stderr)
+            return 130
+        reason = f" (the FMU logged: {logs[-1]})" if logs else ""
+        print(f"lsc-fmu: error: {args.fmu}: {exc}{reason}", file=sys.stderr)
+        return 2
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        shutil.rmtree(unzipped, ignore_errors=True)
     _write_result(out, result)
     print(out)
     if args.plot:
         print(_plot_simulation(out, result, outputs, md.modelName))
     reached = result["time"][-1] if len(result) else start
-    if not reached >= stop - 1e-9 * max(1.0, abs(stop)):
+    tolerance = 1e-6 * (step if step is not None else (stop_time - start) / 500)
+    if not reached >= stop_time - tolerance:  # relative to the step: |stop| may dwarf the horizon
         reason = logs[-1] if logs else "the FMU gave no reason"
-        print(f"lsc-fmu: error: the run stopped at t = {reached:g} before the stop time {stop:g}: {reason}",
+        print(f"lsc-fmu: error: the run stopped at t = {float(reached):g} before the stop time {stop_time:g}: {reason}",
               file=sys.stderr)
         return 1
     return 0
