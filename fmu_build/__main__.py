@@ -324,38 +324,15 @@ def _add_sweep(sub):
                        help="end a run that takes longer (its worker is restarted; recorded as failed)")
 
 
-def _value(text):
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
-
-
 def _run_sweep(args):
     """``lsc-fmu sweep``: run a study, write it, optionally plot and recommend."""
     from .study import plot_study, recommend, sweep
 
+    from ._cli_sweep import check_files, check_names, grid_of
+
     try:
-        if args.lhs is not None:
-            if args.grid or not args.range:
-                raise ValueError("--lhs takes --range NAME=LOW:HIGH inputs (and no --grid)")
-            ranges = {}
-            for item in args.range:
-                name, _, span = item.partition("=")
-                low, _, high = span.partition(":")
-                ranges[name.strip()] = (float(low), float(high))
-            grid = (args.lhs, ranges)
-        else:
-            if not args.grid or args.range:
-                raise ValueError("give --grid NAME=V1,V2,... (or --lhs N with --range)")
-            grid = {}
-            for item in args.grid:
-                name, sep, values = item.partition("=")
-                if not sep or not values:
-                    raise ValueError(f"--grid must read NAME=V1,V2,...; found {item!r}")
-                grid[name.strip()] = [_value(v.strip()) for v in values.split(",")]
+        grid = grid_of(args)
+        check_files(args)
         target = args.target
         if target.startswith("gallery:"):
             import lsc
@@ -364,6 +341,7 @@ def _run_sweep(args):
             if name not in lsc.gallery.__all__ or name in ("Problem", "StateSpace"):
                 raise ValueError(f"gallery:NAME must name an lsc.gallery problem; found {name!r}")
             target = getattr(lsc.gallery, name)()
+        check_names(grid, target)
         df = sweep(target, grid, reference=args.reference, scheduler=args.scheduler, progress=not args.no_progress,
                    output=args.output, t_span=args.t_span, error_from=args.error_from, n_workers=args.workers,
                    seed=args.seed, timeout=args.timeout)
@@ -376,6 +354,10 @@ def _run_sweep(args):
         print(plot_study(df, args.plot, cost=args.cost))
     if args.recommend is not None:
         print(recommend(df, args.recommend, cost=args.cost))
+    if len(df) and failed == len(df):
+        print(f"lsc-fmu: error: every run of the study failed; the first reason: {df['message'].iloc[0]}",
+              file=sys.stderr)
+        return 1
     return 0
 
 def _add_cosim(sub):
@@ -415,6 +397,9 @@ def _run_cosim(args):
         check_span(0.0, check_time(args.stop_time, "--stop-time"), check_step(args.step_size, "--step-size"),
                    "--stop-time", "--step-size")
         outputs = [Path(args.result)] + ([Path(args.result).with_suffix(".png")] if args.plot else [])
+        if args.plot and outputs[1] == outputs[0]:
+            raise ValueError(f"`--plot` writes the plot to the result's name with .png, which is the result "
+                             f"{args.result!r} itself; give `-o` a .csv name.")
         for path in outputs:
             check_output(path, [args.system], "-o", args.force, columns=args.output)
         check_system_file(args.system)

@@ -174,6 +174,7 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
     try:
         kind, payload, reference, settings = _setup(target, reference, t_span, x0, workdir)
         settings["error_from"] = settings["t_span"][0] if error_from is None and settings["t_span"] else error_from
+        _check_error_from(error_from, settings["t_span"])
         if output is not None:
             os.makedirs(os.path.dirname(os.path.abspath(output)), exist_ok=True)
             check_identity(output, _identity(target, payload, names, reference, settings, metrics))
@@ -181,6 +182,17 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
                       progress, curves, timeout)
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
+
+
+def _check_error_from(error_from, t_span):
+    """An error counted from a time outside the horizon is no error at all (NaN labelled success)."""
+    if error_from is None:
+        return
+    if not isinstance(error_from, (int, float, np.integer, np.floating)) or isinstance(error_from, bool):
+        raise TypeError(f"`error_from` must be a time; found {type(error_from).__name__}.")
+    if not math.isfinite(error_from) or (t_span and not t_span[0] <= error_from <= t_span[1]):
+        raise ValueError(f"`error_from` must be a time in the horizon [{t_span[0]!r}, {t_span[1]!r}]; "
+                         f"found {error_from!r}." if t_span else f"`error_from` must be finite; found {error_from!r}.")
 
 
 def _require(scheduler):
