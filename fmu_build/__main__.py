@@ -46,7 +46,24 @@ def _add_build(sub):
                                              "it stays a tunable FMU parameter named 'lambda'")
     p.add_argument("--k", type=int, help="number of differentiations (default: decided from the index)")
     p.add_argument("--name", help="model name (default: the spec's)")
+    p.add_argument("--force", action="store_true", help="replace an existing output file that is not an FMU")
     _add_native_flags(p)
+
+
+def _check_build_output(output, force):
+    """Refuse an output that is an existing file other than an FMU, or below a file."""
+    import zipfile
+
+    from ._cli_checks import check_parent
+
+    check_parent(output, "-o")
+    if not os.path.isfile(output):
+        return
+    if not output.lower().endswith(".fmu"):
+        raise ValueError(f"`-o` {output!r} is an existing file; expected a folder or a .fmu file name.")
+    is_fmu = zipfile.is_zipfile(output) and "modelDescription.xml" in zipfile.ZipFile(output).namelist()
+    if not is_fmu and not force:
+        raise ValueError(f"`-o` {output!r} exists and is not an FMU; pass --force to replace it.")
 
 
 def _run_build(args):
@@ -54,6 +71,7 @@ def _run_build(args):
     from .targets import build_fmu
 
     try:
+        _check_build_output(args.output, args.force)
         path = build_fmu(args.spec, args.output, method=args.method, lam=args.lam, model_name=args.name, k=args.k,
                          **_native_options(args))
     except (SpecError, ValueError, TypeError, OSError) as exc:
