@@ -61,6 +61,15 @@ def check_names(grid, target):
             raise ValueError(f"`--grid` names {unknown} are not inputs of a gallery problem; it takes "
                              f"{', '.join(_DAE_NAMES)}.")
         return
+    if target.lower().endswith(".fmu") and os.path.isfile(target):
+        from fmpy import read_model_description
+
+        variables = {v.name for v in read_model_description(target).modelVariables}
+        unknown = [n for n in names if n not in ("step", "offset")
+                   and {"lam": "lambda", "method": "solver"}.get(n, n) not in variables]
+        if unknown:
+            raise ValueError(f"`--grid` names {unknown} are not variables of {target!r} (nor step, offset).")
+        return
     if target.lower().endswith((".ssp", ".ssd")) or os.path.isdir(target):
         if "step" not in names:
             raise ValueError("an SSP target needs `step` (the macro step) in --grid.")
