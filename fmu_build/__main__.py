@@ -46,7 +46,24 @@ def _add_build(sub):
                                              "it stays a tunable FMU parameter named 'lambda'")
     p.add_argument("--k", type=int, help="number of differentiations (default: decided from the index)")
     p.add_argument("--name", help="model name (default: the spec's)")
+    p.add_argument("--force", action="store_true", help="replace an existing output file that is not an FMU")
     _add_native_flags(p)
+
+
+def _check_build_output(output, force):
+    """Refuse an output that is an existing file other than an FMU, or below a file."""
+    import zipfile
+
+    from ._cli_checks import check_parent
+
+    check_parent(output, "-o")
+    if not os.path.isfile(output):
+        return
+    if not output.lower().endswith(".fmu"):
+        raise ValueError(f"`-o` {output!r} is an existing file; expected a folder or a .fmu file name.")
+    is_fmu = zipfile.is_zipfile(output) and "modelDescription.xml" in zipfile.ZipFile(output).namelist()
+    if not is_fmu and not force:
+        raise ValueError(f"`-o` {output!r} exists and is not an FMU; pass --force to replace it.")
 
 
 def _run_build(args):
@@ -54,6 +71,7 @@ def _run_build(args):
     from .targets import build_fmu
 
     try:
+        _check_build_output(args.output, args.force)
         path = build_fmu(args.spec, args.output, method=args.method, lam=args.lam, model_name=args.name, k=args.k,
                          **_native_options(args))
     except (SpecError, ValueError, TypeError, OSError) as exc:
@@ -65,19 +83,13 @@ def _run_build(args):
 
 def _assignments(items, option, form, text=False):
     """``{name: float}`` from repeated ``NAME=VALUE`` options, or a ValueError naming the option;
-    ``text``: a value that is no number is kept as a string (converted by the variable's type later)."""
-    values = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep or not name.strip():
-            raise ValueError(f"`{option}` expects {form}; found {item!r}.")
-        try:
-            values[name.strip()] = float(value)
-        except ValueError:
-            if not text:
-                raise ValueError(f"`{option}` expects {form} with a number; found {item!r}.") from None
-            values[name.strip()] = value
-    return values
+    ``text``: a value that is no plain decimal number is kept as a string (converted by the variable's type later)."""
+    from ._cli_checks import assignments, decimal, number_assignments
+
+    if not text:
+        return number_assignments(items, option, form)
+    values = assignments(items, option, form)
+    return {name: value if decimal(value) is None else decimal(value) for name, value in values.items()}
 
 
 def _add_simulate(sub):
@@ -129,6 +141,9 @@ def _simulate_output(args, md):
     out = Path(args.output) if args.output else Path(f"{md.modelName}.csv")
     if out.is_dir():
         out = out / f"{md.modelName}.csv"
+    if args.plot and out.with_suffix(".png") == out:
+        raise ValueError(f"`--plot` writes the plot to the result's name with .png, which is the result "
+                         f"{os.fspath(out)!r} itself; give `-o` a .csv name.")
     outputs = [v.name for v in md.modelVariables if v.causality == "output"]
     for path in [out] + ([out.with_suffix(".png")] if args.plot else []):
         check_output(path, [args.fmu, args.input], "-o", args.force, columns=outputs)
@@ -136,40 +151,65 @@ def _simulate_output(args, md):
 
 
 def _run_simulate(args):
-    from fmpy import read_model_description, simulate_fmu
+    import shutil
+    import signal
+    import tempfile
 
-    from ._cli_checks import check_fmu_file, check_input_csv
+    from fmpy import extract, read_model_description, simulate_fmu
 
-    logs = []
+    from ._cli_checks import check_fmu_file, check_input_csv, typed_start_values
+
+    logs, interrupted = [], []
 
     def logger(env, instance, status, category, message):  # keep the FMU's warnings and errors for the reason
         if status >= 1:
             logs.append(message.decode("utf-8", "replace"))
 
+    def stop(signum, frame):  # Ctrl-C or SIGTERM: end the run, then clean up (the FMU may swallow the exception)
+        interrupted.append(signal.Signals(signum).name)
+        raise KeyboardInterrupt
+
     try:
         check_fmu_file(args.fmu)
         md = read_model_description(args.fmu)
-        start_values = _assignments(args.set, "--set", "NAME=VALUE")
-        start, stop, step = _experiment(args, md)
+        start_values = typed_start_values(args.set, md.modelVariables)
+        start, stop_time, step = _experiment(args, md)
         out, outputs = _simulate_output(args, md)
         signals = None
         if args.input:
             inputs = {v.name: v.start for v in md.modelVariables if v.causality == "input"}
-            signals = check_input_csv(args.input, inputs, start_values)
-        result = simulate_fmu(args.fmu, start_time=start, stop_time=stop, output_interval=step,
-                              start_values=start_values, input=signals, output=outputs, logger=logger,
-                              debug_logging=True)
+            signals = check_input_csv(args.input, inputs, start_values, span=(start, stop_time))
     except Exception as exc:  # fmpy raises bare Exception; report any failure as one line
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2
+    unzipped = tempfile.mkdtemp(prefix="lsc_simulate_")  # fmpy's own extraction is left behind on a signal
+    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        extract(args.fmu, unzipdir=unzipped)
+        result = simulate_fmu(unzipped, start_time=start, stop_time=stop_time, output_interval=step,
+                              start_values=start_values, input=signals, output=outputs, logger=logger,
+                              debug_logging=True, model_description=md)
+    except (Exception, KeyboardInterrupt) as exc:
+        if interrupted or isinstance(exc, KeyboardInterrupt):
+            print(f"lsc-fmu: error: interrupted ({interrupted[0] if interrupted else 'SIGINT'}); nothing written.",
+                  file=sys.stderr)
+            return 130
+        reason = f" (the FMU logged: {logs[-1]})" if logs else ""
+        print(f"lsc-fmu: error: {args.fmu}: {exc}{reason}", file=sys.stderr)
+        return 2
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        shutil.rmtree(unzipped, ignore_errors=True)
     _write_result(out, result)
     print(out)
     if args.plot:
         print(_plot_simulation(out, result, outputs, md.modelName))
     reached = result["time"][-1] if len(result) else start
-    if not reached >= stop - 1e-9 * max(1.0, abs(stop)):
+    tolerance = 1e-6 * (step if step is not None else (stop_time - start) / 500)
+    if not reached >= stop_time - tolerance:  # relative to the step: |stop| may dwarf the horizon
         reason = logs[-1] if logs else "the FMU gave no reason"
-        print(f"lsc-fmu: error: the run stopped at t = {reached:g} before the stop time {stop:g}: {reason}",
+        print(f"lsc-fmu: error: the run stopped at t = {float(reached):g} before the stop time {stop_time:g}: {reason}",
               file=sys.stderr)
         return 1
     return 0
@@ -306,38 +346,15 @@ def _add_sweep(sub):
                        help="end a run that takes longer (its worker is restarted; recorded as failed)")
 
 
-def _value(text):
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
-
-
 def _run_sweep(args):
     """``lsc-fmu sweep``: run a study, write it, optionally plot and recommend."""
     from .study import plot_study, recommend, sweep
 
+    from ._cli_sweep import check_files, check_names, grid_of
+
     try:
-        if args.lhs is not None:
-            if args.grid or not args.range:
-                raise ValueError("--lhs takes --range NAME=LOW:HIGH inputs (and no --grid)")
-            ranges = {}
-            for item in args.range:
-                name, _, span = item.partition("=")
-                low, _, high = span.partition(":")
-                ranges[name.strip()] = (float(low), float(high))
-            grid = (args.lhs, ranges)
-        else:
-            if not args.grid or args.range:
-                raise ValueError("give --grid NAME=V1,V2,... (or --lhs N with --range)")
-            grid = {}
-            for item in args.grid:
-                name, sep, values = item.partition("=")
-                if not sep or not values:
-                    raise ValueError(f"--grid must read NAME=V1,V2,...; found {item!r}")
-                grid[name.strip()] = [_value(v.strip()) for v in values.split(",")]
+        grid = grid_of(args)
+        check_files(args)
         target = args.target
         if target.startswith("gallery:"):
             import lsc
@@ -346,6 +363,7 @@ def _run_sweep(args):
             if name not in lsc.gallery.__all__ or name in ("Problem", "StateSpace"):
                 raise ValueError(f"gallery:NAME must name an lsc.gallery problem; found {name!r}")
             target = getattr(lsc.gallery, name)()
+        check_names(grid, target)
         df = sweep(target, grid, reference=args.reference, scheduler=args.scheduler, progress=not args.no_progress,
                    output=args.output, t_span=args.t_span, error_from=args.error_from, n_workers=args.workers,
                    seed=args.seed, timeout=args.timeout)
@@ -358,6 +376,10 @@ def _run_sweep(args):
         print(plot_study(df, args.plot, cost=args.cost))
     if args.recommend is not None:
         print(recommend(df, args.recommend, cost=args.cost))
+    if len(df) and failed == len(df):
+        print(f"lsc-fmu: error: every run of the study failed; the first reason: {df['message'].iloc[0]}",
+              file=sys.stderr)
+        return 1
     return 0
 
 def _add_cosim(sub):
@@ -416,6 +438,9 @@ def _run_cosim(args):
         check_span(0.0, check_time(args.stop_time, "--stop-time"), check_step(args.step_size, "--step-size"),
                    "--stop-time", "--step-size")
         outputs = [Path(args.result)] + ([Path(args.result).with_suffix(".png")] if args.plot else [])
+        if args.plot and outputs[1] == outputs[0]:
+            raise ValueError(f"`--plot` writes the plot to the result's name with .png, which is the result "
+                             f"{args.result!r} itself; give `-o` a .csv name.")
         for path in outputs:
             check_output(path, [args.system], "-o", args.force, columns=args.output)
         check_system_file(args.system)

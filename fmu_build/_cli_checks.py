@@ -6,10 +6,80 @@ what was expected and what was found; the command prints it and exits 2.
 import csv
 import math
 import os
+import re
 import zipfile
 
 # A run of more communication steps than this is refused: it would not end in useful time.
 MAX_STEPS = 10_000_000
+
+
+# A plain decimal number: Python's float() would also read '1_0' as 10, and int() '0x10' with base 0.
+_DECIMAL = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|[+-]?(inf|nan)", re.IGNORECASE)
+# FMI 2.0 Integer variables are C ints.
+_INT_RANGE = (-2**31, 2**31 - 1)
+
+
+def decimal(text):
+    """`text` as a float if it is a plain decimal number (``1``, ``-2.5``, ``1e-3``, ``inf``), else None."""
+    text = text.strip()
+    return float(text) if _DECIMAL.fullmatch(text) else None
+
+
+def assignments(items, option, form):
+    """``{name: text}`` from repeated ``NAME=VALUE`` options; a name given twice is refused."""
+    values = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        if not sep or not name or not value.strip():
+            raise ValueError(f"`{option}` expects {form}; found {item!r}.")
+        if name in values:
+            raise ValueError(f"`{option}` gives `{name}` twice ({values[name]!r} and {value.strip()!r}); give it once.")
+        values[name] = value.strip()
+    return values
+
+
+def number_assignments(items, option, form):
+    """``{name: float}`` from repeated ``NAME=VALUE`` options, each value a plain decimal number."""
+    values = assignments(items, option, form)
+    for name, text in values.items():
+        value = decimal(text)
+        if value is None:
+            raise ValueError(f"`{option}` expects {form} with a plain decimal number; found {name}={text!r}.")
+        values[name] = value
+    return values
+
+
+def typed_start_values(items, variables, option="--set"):
+    """``{name: value}`` from ``NAME=VALUE`` texts, each read by its FMU variable's type.
+
+    Real: a decimal number. Integer: a whole decimal number in the C int range
+    (1.7 is not 1). Boolean: true/false/1/0 (0.5 is neither). String: the text.
+    A name that is not a variable is left to fmpy, which refuses it.
+    """
+    types = {v.name: v.type for v in variables}
+    values = {}
+    for name, text in assignments(items, option, "NAME=VALUE").items():
+        kind = types.get(name, "Real")
+        if kind == "String":
+            values[name] = text
+            continue
+        if kind == "Boolean":
+            flag = {"true": True, "1": True, "false": False, "0": False}.get(text.lower())
+            if flag is None:
+                raise ValueError(f"`{option}` {name}={text!r}: `{name}` is a Boolean; expected true, false, 1 or 0.")
+            values[name] = flag
+            continue
+        value = decimal(text)
+        if value is None:  # a Real may be non-finite: the FMU refuses it with its own reason
+            raise ValueError(f"`{option}` {name}={text!r}: expected a plain decimal number.")
+        if kind in ("Integer", "Enumeration"):
+            if not math.isfinite(value) or value != int(value) or not _INT_RANGE[0] <= value <= _INT_RANGE[1]:
+                raise ValueError(f"`{option}` {name}={text!r}: `{name}` is an {kind}; expected a whole number in "
+                                 f"[{_INT_RANGE[0]}, {_INT_RANGE[1]}].")
+            value = int(value)
+        values[name] = value
+    return values
 
 
 def check_time(value, option):
@@ -33,6 +103,13 @@ def check_span(start, stop, step, stop_option, step_option):
     if step is not None and (stop - start) / step > MAX_STEPS:
         raise ValueError(f"`{step_option}` {step!r} over [{start!r}, {stop!r}] makes {(stop - start) / step:.3g} "
                          f"communication steps (at most {MAX_STEPS:.0e}); give a larger step.")
+    # fmpy ends a run at a time within 1e-9 relative of the stop time (math.isclose): a step below
+    # that resolution would end the run after one step.
+    scale = max(abs(start), abs(stop))
+    if step is not None and step <= 1e-8 * scale:
+        raise ValueError(f"`{step_option}` {step!r} is too small for times near {scale:g}: fmpy resolves times to "
+                         f"1e-9 relative ({1e-9 * scale:.3g}); give a step above {1e-8 * scale:.3g} or shift "
+                         "the time origin.")
 
 
 def _same_file(a, b):
@@ -67,8 +144,18 @@ def is_result(path, columns=None):
     return len(header) > 1 and all("." in cell for cell in header[1:])
 
 
+def check_parent(output, option):
+    """Refuse an output below an existing file (its folder cannot be made)."""
+    parent = os.path.dirname(os.path.abspath(output))
+    while parent and not os.path.exists(parent):
+        parent = os.path.dirname(parent)
+    if parent and not os.path.isdir(parent):
+        raise ValueError(f"`{option}` {os.fspath(output)!r} is below {parent!r}, which is a file, not a folder.")
+
+
 def check_output(output, inputs, option, force, columns=None):
     """Refuse an output that is one of `inputs` (however spelled) or an existing file that is not a result."""
+    check_parent(output, option)
     for given in inputs:
         if given is not None and os.path.exists(given) and os.path.exists(output) and _same_file(output, given):
             raise ValueError(f"`{option}` {os.fspath(output)!r} is the input {os.fspath(given)!r}: writing the "
@@ -142,7 +229,7 @@ def _cell(text, row, column, path):
     return value
 
 
-def check_input_csv(path, inputs, set_names):
+def check_input_csv(path, inputs, set_names, span=None):
     """Read and check an input CSV; return its rows as a numpy structured array.
 
     `inputs` maps each FMU input to its start value (None if it has none);
@@ -152,6 +239,10 @@ def check_input_csv(path, inputs, set_names):
     import numpy as np
 
     path = os.fspath(path)
+    if os.path.isdir(path):
+        raise ValueError(f"`--input` {path!r} is a folder; expected a CSV file.")
+    if not os.path.isfile(path):
+        raise ValueError(f"`--input` {path!r} does not exist.")
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:  # a spreadsheet's byte-order mark is not a name
             rows = list(csv.reader(fh))
@@ -160,6 +251,9 @@ def check_input_csv(path, inputs, set_names):
     if not rows or [c.strip() for c in rows[0]][:1] != ["time"]:
         raise ValueError(f"`--input` {path}: the first column must be 'time', found {rows[0] if rows else 'no header'}.")
     header = [c.strip() for c in rows[0]]
+    for i, name in enumerate(header):
+        if name in header[:i]:
+            raise ValueError(f"`--input` {path}: column `{name}` appears twice in the header; give each once.")
     for name in header[1:]:
         if name not in inputs:
             raise ValueError(f"`--input` {path}: column `{name}` is not an input of the FMU; its inputs are "
@@ -182,4 +276,8 @@ def check_input_csv(path, inputs, set_names):
         data.append(tuple(values))
     if not data:
         raise ValueError(f"`--input` {path} has no data rows.")
+    if span is not None and (data[0][0] > span[0] or data[-1][0] < span[1]):
+        # fmpy would hold the first or last value outside the file's times: a signal nobody gave
+        raise ValueError(f"`--input` {path}: `time` covers [{data[0][0]!r}, {data[-1][0]!r}], which does not "
+                         f"cover the run's horizon [{span[0]!r}, {span[1]!r}].")
     return np.array(data, dtype=[(name, float) for name in header])

@@ -65,7 +65,9 @@ def _execute(runner, payload, settings, jobs, accept, scheduler, n_workers, bar,
     if scheduler is None:
         # A run that kills its worker is not retried on another one: it is recorded as failed.
         # Temporary TLS credentials: no other local process can submit code to these workers.
-        with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+        # temporary-directory: Dask's scratch space goes into the study's folder, removed at the end
+        with dask.config.set({"distributed.scheduler.allowed-failures": 0,
+                              "temporary-directory": settings.get("workdir")}):
             cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                    dashboard_address=None, silence_logs=50, security=True,
                                    local_directory=settings.get("workdir"))  # removed with the study

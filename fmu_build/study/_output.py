@@ -92,7 +92,11 @@ def _read_finished(output, names, points):
             if not same and str(a) != str(b):
                 raise ValueError(f"`output` {os.fspath(output)!r} holds another study: run {run} has {name}={a!r}, "
                                  f"this study {b!r}.")
-        row["success"] = row["success"] in (True, "True", 1)
+        flag = {True: True, False: False, "True": True, "False": False, 1: True, 0: False}.get(row["success"])
+        if flag is None:
+            raise ValueError(f"`output` {stream!r}: run {run} has `success` {row['success']!r}, neither True nor "
+                             "False; the file was edited or damaged: repair it or choose another output.")
+        row["success"] = flag
         row["message"] = "" if row["message"] is None or (isinstance(row["message"], float)) else row["message"]
         finished[run] = row
     return finished

@@ -157,6 +157,11 @@ def plot_study(df, path, *, cost="run_time", max_curves=12):
 
     if "lam" not in df.columns:
         raise ValueError("`df` must have a `lam` column to plot against.")
+    if os.path.isdir(path):
+        raise ValueError(f"`path` {os.fspath(path)!r} is a folder; give a .png file name.")
+    if not os.path.isdir(os.path.dirname(os.path.abspath(path))):
+        raise ValueError(f"`path` {os.fspath(path)!r}: the folder {os.path.dirname(os.path.abspath(path))!r} "
+                         "does not exist.")
     inputs = [c for c in df.columns[: list(df.columns).index("success")] if c != "lam"]
     ok = df[df["success"]]
     fig, axes = plt.subplots(1, 3, figsize=(14, 4))

@@ -171,16 +171,57 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
         if name in METRICS or name in names:
             raise ValueError(f"`metrics` name {name!r} is already a column.")
     workdir = tempfile.mkdtemp(prefix="lsc_study_")  # extracted FMUs, a built spec: removed at the end
+    lock = None
     try:
         kind, payload, reference, settings = _setup(target, reference, t_span, x0, workdir)
         settings["error_from"] = settings["t_span"][0] if error_from is None and settings["t_span"] else error_from
+        _check_error_from(error_from, settings["t_span"])
+        lock = None
         if output is not None:
             os.makedirs(os.path.dirname(os.path.abspath(output)), exist_ok=True)
+            lock = _lock(output)
             check_identity(output, _identity(target, payload, names, reference, settings, metrics))
         return _study(kind, payload, points, names, reference, settings, metrics, output, scheduler, n_workers,
                       progress, curves, timeout)
     finally:
+        if lock is not None:
+            _unlock(lock)
         shutil.rmtree(workdir, ignore_errors=True)
+
+
+def _lock(output):
+    """Hold ``output + '.lock'``: two studies appending to one file would write every row twice."""
+    import fcntl
+
+    path = os.fspath(output) + ".lock"
+    fh = open(path, "a")
+    try:
+        fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        fh.close()
+        raise ValueError(f"`output` {os.fspath(output)!r} is being written by another study (it holds "
+                         f"{path!r}); wait for it to end or choose another output.") from None
+    return fh, path
+
+
+def _unlock(lock):
+    fh, path = lock
+    try:
+        os.remove(path)
+    except OSError:
+        pass
+    fh.close()
+
+
+def _check_error_from(error_from, t_span):
+    """An error counted from a time outside the horizon is no error at all (NaN labelled success)."""
+    if error_from is None:
+        return
+    if not isinstance(error_from, (int, float, np.integer, np.floating)) or isinstance(error_from, bool):
+        raise TypeError(f"`error_from` must be a time; found {type(error_from).__name__}.")
+    if not math.isfinite(error_from) or (t_span and not t_span[0] <= error_from <= t_span[1]):
+        raise ValueError(f"`error_from` must be a time in the horizon [{t_span[0]!r}, {t_span[1]!r}]; "
+                         f"found {error_from!r}." if t_span else f"`error_from` must be finite; found {error_from!r}.")
 
 
 def _require(scheduler):
@@ -336,7 +377,11 @@ class _Table:
         row = {"run": run, **point, **{m: result[m] for m in METRICS if m != "error"}, "error": math.nan}
         key = _group_key(point)
         ref = self.reference if callable(self.reference) else self.references.get(key)
-        if result["success"] and ref is None:
+        if result["success"] and self.reference == "tightest" and self.tight.get(key) == point:
+            # the tightest run of its group is its own reference: its error would read 0.0
+            ref = None
+            row["message"] = f"{row['message']}; no error: this run is its group's reference (the tightest point)"
+        if result["success"] and ref is None and self.tight.get(key) != point:
             described = ", ".join(f"{k}={v!r}" for k, v in self.tight.get(key, {}).items())
             row["message"] = (f"{row['message']}; no error: the reference run ({described}) failed: "
                               f"{self.reasons.get(key, 'unknown')}")

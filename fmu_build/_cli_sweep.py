@@ -1,0 +1,111 @@
+"""Checks `lsc-fmu sweep` makes before a study runs: the grid, the files, the recommendation target.
+
+Each raises ValueError with one sentence naming the option; the command prints it and exits 2.
+"""
+import math
+import os
+
+from ._cli_checks import assignments, check_parent, decimal
+
+# Names a Latin hypercube cannot sample: categories, not numbers.
+_CATEGORICAL = ("method", "completion", "extrapolation", "iterations", "k")
+# Names a LinearDAE (gallery) target takes; it has no model parameters.
+_DAE_NAMES = ("lam", "step", "rtol", "atol", "method", "offset", "completion", "k")
+_NUMBERS = ("lam", "step", "rtol", "atol", "offset", "k", "extrapolation", "iterations")
+
+
+def _grid_value(name, text):
+    value = decimal(text)
+    if value is not None:
+        return int(value) if text.strip().lstrip("+-").isdigit() else value
+    if not text or name in _NUMBERS or text[:1].isdigit() or text[:1] in "+-.":
+        if name in _NUMBERS:
+            raise ValueError(f"`--grid` {name}: `grid[{name!r}]` must hold real numbers; found {text!r} (str).")
+        raise ValueError(f"`--grid` {name}: {text!r} is not a plain decimal number.")
+    return text
+
+
+def grid_of(args):
+    """The grid `sweep` takes, from --grid or --lhs/--range (names given once, values plain numbers)."""
+    if args.lhs is not None:
+        if args.grid or not args.range:
+            raise ValueError("`--lhs` takes --range NAME=LOW:HIGH inputs (and no --grid)")
+        if args.seed < 0:
+            raise ValueError(f"`--seed` must be a non-negative integer; found {args.seed}.")
+        ranges = {}
+        for name, span in assignments(args.range, "--range", "NAME=LOW:HIGH").items():
+            low, sep, high = span.partition(":")
+            lo, hi = decimal(low), decimal(high)
+            if not sep or lo is None or hi is None:
+                raise ValueError(f"`--range` {name}: expected NAME=LOW:HIGH with plain decimal numbers; "
+                                 f"found {span!r}.")
+            if name in _CATEGORICAL:
+                raise ValueError(f"`--range` {name}: `{name}` takes categories, which a Latin hypercube cannot "
+                                 "sample; use --grid.")
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+                raise ValueError(f"`--range` {name}: expected finite LOW < HIGH; found {span!r}.")
+            ranges[name] = (lo, hi)
+        return args.lhs, ranges
+    if not args.grid or args.range:
+        raise ValueError("give --grid NAME=V1,V2,... (or --lhs N with --range)")
+    return {name: [_grid_value(name, v.strip()) for v in values.split(",")]
+            for name, values in assignments(args.grid, "--grid", "NAME=V1,V2,...").items()}
+
+
+def check_names(grid, target):
+    """Refuse a grid name the target does not take (a LinearDAE target takes no model parameters)."""
+    names = list(grid[1] if isinstance(grid, tuple) else grid)
+    if not isinstance(target, str):  # a gallery Problem
+        unknown = [n for n in names if n not in _DAE_NAMES]
+        if unknown:
+            raise ValueError(f"`--grid` names {unknown} are not inputs of a gallery problem; it takes "
+                             f"{', '.join(_DAE_NAMES)}.")
+        return
+    if target.lower().endswith(".fmu") and os.path.isfile(target):
+        from fmpy import read_model_description
+
+        variables = {v.name for v in read_model_description(target).modelVariables}
+        unknown = [n for n in names if n not in ("step", "offset")
+                   and {"lam": "lambda", "method": "solver"}.get(n, n) not in variables]
+        if unknown:
+            raise ValueError(f"`--grid` names {unknown} are not variables of {target!r} (nor step, offset).")
+        return
+    if target.lower().endswith((".ssp", ".ssd")) or os.path.isdir(target):
+        if "step" not in names:
+            raise ValueError("an SSP target needs `step` (the macro step) in --grid.")
+        if "lam" in names and any(n.endswith(".lambda") for n in names):
+            both = [n for n in names if n.endswith(".lambda")]
+            raise ValueError(f"`lam` sets every component's lambda; with {both} too one would silently win: "
+                             "give one of them.")
+
+
+def check_files(args):
+    """Refuse an output or plot that would overwrite the target, each other, or cannot be written."""
+    import zipfile
+
+    target = args.target
+    if target.lower().endswith(".fmu") and os.path.isfile(target):
+        if not zipfile.is_zipfile(target) or "modelDescription.xml" not in zipfile.ZipFile(target).namelist():
+            raise ValueError(f"`target` {target!r} is not an FMU (a zip archive holding modelDescription.xml).")
+    out = args.output
+    if os.path.isdir(out) or out.endswith(("/", os.sep)):
+        raise ValueError(f"`-o` must be a .csv or .parquet file; found the folder {out!r}.")
+    if not out.lower().endswith((".csv", ".parquet")):
+        raise ValueError(f"`-o` must be a .csv or .parquet file; found {out!r}.")
+    check_parent(out, "-o")
+    if os.path.exists(target) and os.path.exists(out) and os.path.samefile(target, out):
+        raise ValueError(f"`-o` {out!r} is the target: writing the study there would destroy it.")
+    if args.plot:
+        plot = args.plot
+        if os.path.isdir(plot):
+            raise ValueError(f"`--plot` {plot!r} is a folder; give a .png file.")
+        if os.path.abspath(plot) == os.path.abspath(out):
+            raise ValueError(f"`--plot` {plot!r} is the output `-o`: the plot would replace the study's rows.")
+        if os.path.exists(target) and os.path.exists(plot) and os.path.samefile(target, plot):
+            raise ValueError(f"`--plot` {plot!r} is the target: the plot would replace it.")
+        check_parent(plot, "--plot")
+        folder = os.path.dirname(os.path.abspath(plot))
+        if not os.path.isdir(folder):
+            raise ValueError(f"`--plot` {plot!r}: the folder {folder!r} does not exist.")
+    if args.recommend is not None and not (math.isfinite(args.recommend) and args.recommend > 0):
+        raise ValueError(f"`--recommend` must be a positive finite error; found {args.recommend!r}.")
