@@ -73,26 +73,6 @@ def _points(grid, seed):
                     f"(Latin hypercube); found {type(grid).__name__}.")
 
 
-def _error(t, x, ref, error_from):
-    """Largest absolute state error over the output times from `error_from` on."""
-    if t is None or x is None or x.size == 0:
-        return math.nan
-    if callable(ref):
-        xr = np.asarray(ref(t), dtype=float)
-    else:
-        tr, xrr = ref
-        if t[-1] > tr[-1] + 1e-9 * max(1.0, abs(tr[-1])) or t[0] < tr[0] - 1e-9 * max(1.0, abs(tr[0])):
-            return math.nan
-        xr = np.array([np.interp(t, tr, row) for row in xrr])
-    if xr.shape != x.shape:
-        raise ValueError(f"the reference has shape {xr.shape} where the run has {x.shape}.")
-    mask = t >= error_from - 1e-12 * max(1.0, abs(error_from))
-    if not mask.any():
-        return math.nan
-    err = float(np.max(np.abs(x[:, mask] - xr[:, mask])))
-    return err if math.isfinite(err) else math.inf
-
-
 def _group_key(point):
     return tuple((k, v) for k, v in point.items() if k not in NUMERICAL)
 
