@@ -263,6 +263,14 @@ def test_cli_sweep_without_the_extra_names_it(tmp_path):
     assert 'pip install -e ".[sweep]"' in run.stderr
 
 
+def test_cli_sweep_without_cryptography_names_the_extra(tmp_path):
+    """The embedded cluster's temporary TLS credentials need cryptography (part of the sweep extra)."""
+    run = _cli_without(["cryptography"], "sweep", "gallery:prescribed_path", "--grid", "lam=1",
+                       "--no-progress", "-o", "s.csv", cwd=tmp_path)
+    assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
+    assert "'cryptography'" in run.stderr and 'pip install -e ".[sweep]"' in run.stderr, run.stderr
+
+
 def test_cli_sweep_refuses_a_boolean_lam(tmp_path, capsys):
     from fmu_build.__main__ import main
 

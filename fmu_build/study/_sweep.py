@@ -226,7 +226,8 @@ def _check_error_from(error_from, t_span):
 
 def _require(scheduler):
     """Name the extra a study needs, instead of a bare ModuleNotFoundError."""
-    needed = ["pandas"] + ([] if scheduler == "serial" else ["distributed"])
+    # the embedded cluster's temporary TLS credentials are made with cryptography
+    needed = ["pandas"] + ([] if scheduler == "serial" else ["distributed"]) + (["cryptography"] if scheduler is None else [])
     for module in needed:
         try:
             __import__(module)
