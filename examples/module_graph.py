@@ -110,36 +110,12 @@ def graph(root=ROOT, packages=PACKAGES):
 
 
 def cycles(rows):
-    """The strongly connected components with more than one module (Tarjan), packages left out."""
+    """The strongly connected components with more than one module, packages left out."""
+    from fmu_build.cosim._graph import _strongly_connected  # the master's Tarjan, reused
+
     nodes = {r["module"] for r in rows if not r["package"]}
     edges = {r["module"]: sorted(set(r["imports"]) & nodes) for r in rows if r["module"] in nodes}
-    index, low, stack, on_stack, out = {}, {}, [], set(), []
-
-    def visit(v):
-        index[v] = low[v] = len(index)
-        stack.append(v)
-        on_stack.add(v)
-        for w in edges[v]:
-            if w not in index:
-                visit(w)
-                low[v] = min(low[v], low[w])
-            elif w in on_stack:
-                low[v] = min(low[v], index[w])
-        if low[v] == index[v]:
-            component = []
-            while True:
-                w = stack.pop()
-                on_stack.discard(w)
-                component.append(w)
-                if w == v:
-                    break
-            if len(component) > 1:
-                out.append(sorted(component))
-
-    for v in sorted(edges):
-        if v not in index:
-            visit(v)
-    return out
+    return sorted(sorted(scc) for scc in _strongly_connected(edges) if len(scc) > 1)
 
 
 def markdown(rows, title):
