@@ -30,11 +30,16 @@ def other_args(argv=None):
     return [a for a in (sys.argv[1:] if argv is None else argv) if a != FLAG]
 
 
-def output_path(filename, docs=None):
-    """``docs/_generated/filename`` with ``--docs``, else ``out/filename``; the folder exists afterwards."""
+def output_folder(docs=None):
+    """``docs/_generated`` with ``--docs``, else ``out/``; it exists afterwards."""
     folder = GENERATED if (docs_requested() if docs is None else docs) else OUT
     folder.mkdir(parents=True, exist_ok=True)
-    return folder / filename
+    return folder
+
+
+def output_path(filename, docs=None):
+    """``docs/_generated/filename`` with ``--docs``, else ``out/filename``; the folder exists afterwards."""
+    return output_folder(docs) / filename
 
 
 class _Tee(io.TextIOBase):

@@ -3,7 +3,7 @@
 Scenario 2: plant w' = -w + g x2 feeds the index-2 Follower x1' + x2 = 0, x1 = w, whose flow
 x2 = -w' goes back to the plant. Exact: w = exp(-t / (1 + g)), x2 = w / (1 + g).
 
-Writes into docs/_generated/: cosim_loop_values.md (our pythonfmu DAE FMU, which receives values
+Writes into out/ (docs/_generated/ with --docs): cosim_loop_values.md (our pythonfmu DAE FMU, which receives values
 only and estimates w' itself), cosim_loop_derivatives.md (a DAE FMU that receives w, w', w''
 from the plant's output derivatives: the C follower), cosim_loop_damper.md (the second loop),
 cosim_loop.png (a case on each side of each stability condition), cosim_loop_native.md (the
@@ -23,7 +23,10 @@ import scenarios  # noqa: E402
 
 from fmu_build.cosim import cosimulate  # noqa: E402
 
-OUT = Path(__file__).parent.parent / "docs" / "_generated"
+sys.path.insert(0, str(Path(__file__).parent))
+from _docs_output import output_folder  # noqa: E402
+
+OUT = output_folder()  # out/; docs/_generated with --docs
 STEPS = [0.04, 0.02, 0.01, 0.005]
 STOP = 2.0
 

@@ -1,6 +1,6 @@
 """Scenario 1: prescribed-path control (index 3) in closed loop with a C mass-spring-damper.
 
-Writes into docs/_generated/: cosim_path_orders.md (coupling error for H, H/2, H/4, H/8 and the
+Writes into out/ (docs/_generated/ with --docs): cosim_path_orders.md (coupling error for H, H/2, H/4, H/8 and the
 observed order, per algorithm and extrapolation order, against the monolithic lsc solution),
 cosim_path_crosscheck.md (our Jacobi + zero-order hold against libcosimpy and ecos on the same
 SSP file), cosim_path_cost.md (cost per macro step of each master, one run, side by side, with the pythonfmu
@@ -23,7 +23,10 @@ import scenarios  # noqa: E402
 
 from fmu_build.cosim import cosimulate  # noqa: E402
 
-OUT = Path(__file__).parent.parent / "docs" / "_generated"
+sys.path.insert(0, str(Path(__file__).parent))
+from _docs_output import output_folder  # noqa: E402
+
+OUT = output_folder()  # out/; docs/_generated with --docs
 STATES = ["plant.x", "plant.v"]
 TIGHT = {"dae.rtol": 1e-11, "dae.atol": 1e-12}  # the DAE FMU's own integration error below the coupling error
 
