@@ -366,7 +366,7 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     sources = _FIXED_SOURCES + (_FMI3_SOURCES if fmi_version == 3 else ())
     kpars = _check_expressible(spec, fix_parameters)
     compiler = find_compiler()
-    platform, suffix = _platform()
+    _platform()  # an unknown platform is refused before any work
     dae = _numeric_dae(spec)
     k = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=spec.k).k
     if dae.is_constant:
@@ -417,14 +417,25 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     dest = Path(dest)
     target = dest if dest.suffix == ".fmu" else dest / f"{ident}.fmu"
     target.parent.mkdir(parents=True, exist_ok=True)
+    _package(target, ident, sources, header, xml, compiler, extra_cflags, fmi_version)
+    if not quiet:
+        print(f"lsc-fmu: {target.name}: {note}", file=sys.stderr)
+        if tv is not None:
+            print(f"lsc-fmu: {target.name}: {_native_tv.report(tv, target, header)}", file=sys.stderr)
+    return target
+
+
+def _package(target, ident, sources, header, xml, compiler, extra_cflags, fmi_version):
+    """Compile the sources with `header` as model.h and zip the FMU into `target`, atomically (a file next to
+    it, then one rename: the old FMU or the new one, never a broken one)."""
     with tempfile.TemporaryDirectory(prefix="lsc_native_") as tmp:
         src = Path(tmp) / "sources"
         src.mkdir()
         for name in sources:
             shutil.copy(_TEMPLATES / name, src / name)
         (src / "model.h").write_text(header)
+        platform, suffix = _platform3() if fmi_version == 3 else _platform()
         if fmi_version == 3:
-            platform, suffix = _platform3()
             (src / "buildDescription.xml").write_bytes(build_description3(ident, "fmi3Functions.c"))
         lib = Path(tmp) / f"{ident}{suffix}"
         _compile(src, lib, compiler, extra_cflags, main="fmi3Functions.c" if fmi_version == 3 else "fmi2Functions.c")
@@ -441,11 +452,6 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
         except BaseException:
             Path(part).unlink(missing_ok=True)
             raise
-    if not quiet:
-        print(f"lsc-fmu: {target.name}: {note}", file=sys.stderr)
-        if tv is not None:
-            print(f"lsc-fmu: {target.name}: {_native_tv.report(tv, target, header)}", file=sys.stderr)
-    return target
 
 
 def _variables3(variables, nr):
