@@ -15,7 +15,8 @@ BLAS thread count of ``LSC_BENCH_THREADS`` (default 2; set before numpy is impor
   residual ``max_t |x*' - G x* - g| / |x*'|`` at 5 times and the relative error of a DOP853 solution
   (rtol 1e-12) of the completion over t in [0, 0.5] started at ``x*(0)``.
 
-Writes ``out/bench_scaling.md``; with ``--docs`` ``docs/_generated/bench_scaling.md``.
+Writes ``out/bench_scaling.md`` and the log-log plot ``out/bench_scaling.png`` (matplotlib, the ``bench``
+extra; without it the table alone); with ``--docs`` both into ``docs/_generated``.
 
 Run:  python examples/bench_scaling.py [--docs] [--dense-max N] [--diff-max N] [n ...]
       python examples/bench_scaling.py --index-only [--docs] [n ...]   (dense index determination alone)
@@ -125,6 +126,39 @@ def write(text, docs):
     return target / "bench_scaling.md"
 
 
+def plot(rows, folder):
+    """Log-log plot of the set-up times against n, with n^2 and n^3 guides through the largest structured point."""
+    try:
+        import matplotlib
+    except ImportError:  # the table is the result; the plot needs the `bench` extra
+        return None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.0, 4.2))
+    for col, label, style in (("structured", "structured, wall", "o-"), ("cpu", "structured, CPU", "o--"),
+                              ("dense", "dense, wall", "s-"), ("dense_cpu", "dense, CPU", "s--")):
+        pts = [(r["n"], r[col]) for r in rows if r.get(col) is not None]
+        if pts:
+            ax.loglog(*zip(*pts), style, label=label)
+    last = max((r for r in rows), key=lambda r: r["n"])
+    n = np.array([min(r["n"] for r in rows), last["n"]], dtype=float)
+    for p, style in ((2, ":"), (3, "-.")):
+        ax.loglog(n, last["structured"] * (n / n[-1]) ** p, "k" + style, lw=0.8, label=f"~ n^{p}")
+    ax.set_xlabel("n (unknowns)")
+    ax.set_ylabel("set-up [s]")
+    ax.set_title(f"complete(..., 'alternative'), index 3, {THREADS} BLAS threads")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path = folder / "bench_scaling.png"
+    tmp = path.with_suffix(".tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(path)  # a reader of the docs never sees a half-written figure
+    return path
+
+
 def index_only(sizes, docs):
     """The dense index determination (`differentiation_index`: SVDs of the arrays k = 0..4) for large n."""
     lines = ["| n | index [s] |", "|---:|---:|"]
@@ -176,6 +210,7 @@ def main(argv=None):
         path = write(report(rows, notes), args.docs)  # after every size: a long run keeps what it measured
     notes.append(f"Load average at the end: {os.getloadavg()[0]:.1f}.")
     path = write(report(rows, notes), args.docs)
+    plot(rows, path.parent)
     print(path.read_text())
 
 
