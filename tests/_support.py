@@ -4,7 +4,27 @@ The runners (fmu_runner.py, native_runner.py) import this file as scripts run fr
 it imports nothing beyond the standard library at module level for that reason.
 """
 import contextlib
+import os
 import signal
+from pathlib import Path
+
+REFERENCE_FMUS_HELP = ("set LSC_REFERENCE_FMUS to a folder of built Modelica Reference FMUs (the layout of their "
+                       "release archive: 2.0/Dahlquist.fmu, 3.0/Dahlquist.fmu, ...)")
+
+
+def reference_fmus(version):
+    """The folder of the Modelica Reference FMUs built for FMI `version` ("2.0" or "3.0"), or a skip reason.
+
+    Returns ``(folder, None)`` or ``(None, reason)``. The FMUs are read from ``LSC_REFERENCE_FMUS``, built
+    outside this repository (their release archive has this layout); the tests never build third-party code.
+    """
+    given = os.environ.get("LSC_REFERENCE_FMUS")
+    if not given:
+        return None, f"Reference FMUs not given: {REFERENCE_FMUS_HELP}"
+    folder = Path(given) / version
+    if not (folder / "Dahlquist.fmu").is_file():
+        return None, f"{folder / 'Dahlquist.fmu'} not found: {REFERENCE_FMUS_HELP}"
+    return folder, None
 
 
 class ImportBlocker:

@@ -1,74 +1,26 @@
-"""fmu_build.cosim with FMUs nobody here wrote: the Modelica Reference FMUs (FMI 2.0), built from their
-sources with cmake at test time into a cache under the system temporary folder.
+"""fmu_build.cosim with FMUs nobody here wrote: the Modelica Reference FMUs (FMI 2.0).
 
-The sources: ``LSC_REFERENCE_FMUS`` (a source folder or a git directory), else the mirror the fetch tool
-keeps at /work/.mirror/modelica+Reference-FMUs/repo. Without them (or without cmake) the tests skip with
-the reason. The Reference FMUs' Co-Simulation steps with fixed-step forward Euler (FMI_NOTES.md).
+They are read from ``LSC_REFERENCE_FMUS``, a folder with the layout of the Reference FMUs' release
+archive (``2.0/Dahlquist.fmu``, ...), built or downloaded outside this repository; without it the tests
+skip with the reason. The Reference FMUs' Co-Simulation steps with fixed-step forward Euler (FMI_NOTES.md).
 """
-import hashlib
-import os
-import shutil
-import subprocess
 import sys
-import tempfile
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+import _support
 from test_cosim import PLANTS, ROOT, run
 
 sys.path.insert(0, str(PLANTS))
-DEFAULT = Path("/work/.mirror/modelica+Reference-FMUs/repo")
-
-
-def _sources():
-    """(kind, path): a source folder with CMakeLists.txt or a git directory, or None."""
-    given = os.environ.get("LSC_REFERENCE_FMUS")
-    for candidate in ([Path(given)] if given else []) + [DEFAULT]:
-        if (candidate / "CMakeLists.txt").is_file():
-            return "dir", candidate
-        if (candidate / "HEAD").is_file() and (candidate / "objects").is_dir():
-            return "git", candidate
-    return None
 
 
 @pytest.fixture(scope="session")
 def reference_fmus():
-    found = _sources()
-    if found is None:
-        pytest.skip("Reference FMU sources not found (set LSC_REFERENCE_FMUS to a source folder or git directory)")
-    if shutil.which("cmake") is None or shutil.which("git") is None and found[0] == "git":
-        pytest.skip("the Reference FMUs are built with cmake (and read with git): not installed")
-    kind, path = found
-    if kind == "git":
-        head = subprocess.run(["git", f"--git-dir={path}", "rev-parse", "HEAD"], capture_output=True, text=True,
-                              check=True).stdout.strip()
-    else:
-        head = hashlib.sha256(str(path.resolve()).encode()).hexdigest()[:16]
-    cache = Path(tempfile.gettempdir()) / "lsc_reference_fmus" / head
-    if not (cache / "Dahlquist.fmu").exists():
-        work = Path(tempfile.mkdtemp(prefix="lsc_reference_build_"))
-        try:
-            src = work / "src"
-            if kind == "git":
-                src.mkdir()
-                archive = subprocess.run(["git", f"--git-dir={path}", "archive", "HEAD"], capture_output=True, check=True)
-                subprocess.run(["tar", "-x", "-C", str(src)], input=archive.stdout, check=True)
-            else:
-                shutil.copytree(path, src, ignore=shutil.ignore_patterns("build", ".git"))
-            for args in (["cmake", "-B", "build", "-DFMI_VERSION=2", "."], ["cmake", "--build", "build", "-j2"]):
-                subprocess.run(args, cwd=src, capture_output=True, check=True, timeout=1200)
-            partial = work / "fmus"
-            shutil.copytree(src / "build" / "fmus", partial)
-            cache.parent.mkdir(parents=True, exist_ok=True)
-            try:
-                os.replace(partial, cache)
-            except OSError:  # another process finished first
-                pass
-        finally:
-            shutil.rmtree(work, ignore_errors=True)
-    return cache
+    folder, reason = _support.reference_fmus("2.0")
+    if folder is None:
+        pytest.skip(reason)
+    return folder
 
 
 @pytest.fixture(scope="module")

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import _support
 from fmu_build import build_fmu
 
 HERE = Path(__file__).parent
@@ -202,36 +203,12 @@ def test_command_line_builds_fmi3(tmp_path, capsys):
 
 # -- coupled to the Modelica Reference FMUs' FMI 3.0 Dahlquist ----------------------------------------
 
-def _reference_fmus_source(dest):
-    """A source tree of modelica/Reference-FMUs in `dest` ($LSC_REFERENCE_FMUS: a checkout or a bare git dir), or None."""
-    import os
-
-    for cand in [os.environ.get("LSC_REFERENCE_FMUS"), "/work/.mirror/modelica+Reference-FMUs/repo"]:
-        if not cand or not Path(cand).is_dir():
-            continue
-        if (Path(cand) / "CMakeLists.txt").is_file():
-            return Path(cand)
-        archive = subprocess.run(["git", "--git-dir", cand, "archive", "HEAD"], capture_output=True)
-        if archive.returncode == 0:
-            dest.mkdir()
-            subprocess.run(["tar", "-x", "-C", str(dest)], input=archive.stdout, check=True)
-            return dest
-    return None
-
-
 def test_coupled_to_reference_dahlquist(built, tmp_path):
     """The plant's output x = 0.9^k (Dahlquist, explicit Euler) is our path input p: y follows it, as the FMI 2.0 build."""
-    if shutil.which("cmake") is None:
-        pytest.skip("cmake not installed: the Reference FMUs cannot be built")
-    src = _reference_fmus_source(tmp_path / "src")
-    if src is None:
-        pytest.skip("Reference-FMUs source not found (set LSC_REFERENCE_FMUS to a checkout)")
-    build = tmp_path / "build"
-    for cmd in (["cmake", "-S", str(src), "-B", str(build), "-DFMI_VERSION=3", "-DCMAKE_BUILD_TYPE=Release"],
-                ["cmake", "--build", str(build), "--target", "Dahlquist"]):
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
-        assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
-    out = run({"kind": "couple", "plant": str(build / "fmus" / "Dahlquist.fmu"), "fmu": str(built["path_input", 3]),
+    folder, reason = _support.reference_fmus("3.0")
+    if folder is None:
+        pytest.skip(reason)
+    out = run({"kind": "couple", "plant": str(folder / "Dahlquist.fmu"), "fmu": str(built["path_input", 3]),
                "fmu2": str(built["path_input", 2]), "dt": 0.1, "steps": 50})
     t, x, y3, y2 = (np.array(out[k]) for k in ("t", "x", "y3", "y2"))
     assert out["logs"] == []
