@@ -45,7 +45,10 @@ def fmus(tmp_path_factory):
     folder = tmp_path_factory.mktemp("tvattack")
     built = {"rot2": build_fmu(PROBLEMS["Rot2"][0], folder, target="native"),
              "rot3": build_fmu(PROBLEMS["Rot3"][0], folder, target="native"),
-             "chain5": build_fmu(_chain5_spec(), folder, target="native")}
+             "chain5": build_fmu(_chain5_spec(), folder / "c5", target="native"),
+             # the same model with a longer horizon: a state of the same size, other tables
+             "rot2long": build_fmu(dict(PROBLEMS["Rot2"][0], experiment={"start": 0.0, "stop": 3.0, "step": 0.01}),
+                                   folder / "long", target="native")}
     info = {key: _unpack(fmu, folder / key) for key, fmu in built.items()}
     master = folder / "tv_attack_master"
     subprocess.run(["gcc", *SAN, "-Wall", "-Wextra", "-Werror", "-I", str(HEADERS), "-o", str(master), str(MASTER),
@@ -212,12 +215,13 @@ def test_output_derivative_orders_and_input_derivatives_without_inputs(fmus):
 
 # ---- FMU states ---------------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("other", ["chain5", "rot3"])
+@pytest.mark.parametrize("other", ["chain5", "rot3", "rot2long"])
 def test_foreign_states_are_refused_and_never_freed(fmus, other):
     # fmi2FreeFMUstate with another FMU's state (a constant-coefficient one or another time-varying one) freed
     # it and returned fmi2OK: the owner's own fmi2FreeFMUstate then read freed memory (heap-use-after-free)
     rc, text, st, logs, v = attack(fmus, "foreign_states", other)
     clean(rc, text)
+    assert (v["sizes"][0] == v["sizes"][1]) == (other == "rot2long")
     for label in ("set_theirs_into_tv", "set_mine_into_other", "size_theirs_in_tv", "deserialize_theirs_in_tv",
                   "deserialize_mine_in_other", "get_into_theirs", "free_theirs_in_tv"):
         assert st[label] == ERROR, (label, text)
@@ -365,3 +369,90 @@ def test_fmpy_run_beyond_the_horizon_fails_at_once_with_the_reason(fmus, kind, s
 def test_fmpy_runs_to_the_horizon_end(fmus):
     r = _fmpy(fmus["rot2"]["fmu"], "CoSimulation", 0.0, T1)
     assert r.get("end") == T1 and max(abs(v) for v in r["residual"]) < 1e-6, r
+
+
+_ME_DERIVATIVES = textwrap.dedent("""
+    import ctypes, json, sys
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Model
+    path, cases = sys.argv[1], json.loads(sys.argv[2])
+    md = read_model_description(path)
+    m = FMU2Model(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.modelExchange.modelIdentifier,
+                  instanceName="me")
+    m.instantiate()
+    m.setupExperiment(startTime=0.0)
+    m.enterInitializationMode()
+    m.exitInitializationMode()
+    out, lam = [], None
+    for t, lam_t, x in cases:
+        if lam_t != lam:
+            m.enterEventMode()
+            m.setReal([0], [lam_t])
+            m.newDiscreteStates()
+            lam = lam_t
+            m.enterContinuousTimeMode()
+        m.setTime(t)
+        m.setContinuousStates((ctypes.c_double * len(x))(*x), len(x))
+        d = (ctypes.c_double * len(x))()
+        m.getDerivatives(d, len(x))
+        out.append(list(d))
+    m.terminate()
+    m.freeInstance()
+    print(json.dumps(out))
+""")
+
+
+def test_model_exchange_derivatives_at_piece_breaks_and_horizon_ends(fmus):
+    # Clenshaw on the piece of t: at each break, one ulp either side, and at both ends of the horizon (and within
+    # the slack past them), G(t) x + g(t) equals the library's to the tables' accuracy, at two values of lambda
+    import lsc
+    from fmu_build import parse_spec
+    from fmu_build._model import _numeric_dae
+
+    with zipfile.ZipFile(fmus["rot2"]["fmu"]) as zf:
+        header = zf.read("sources/model.h").decode()
+    breaks = [float(b) for b in re.search(r"TV_BREAKS\[\d+\] = \{([^}]*)\}", header).group(1).split(",")]
+    assert breaks[0] == 0.0 and breaks[-1] == T1 and len(breaks) > 2
+    times = sorted({min(max(np.nextafter(b, d), 0.0), T1) for b in breaks for d in (-np.inf, np.inf)} | set(breaks))
+    rng = np.random.default_rng(7)
+    cases = [(float(t), lam, rng.normal(size=NX).tolist()) for lam in (2.0, 5.0) for t in times]
+    proc = subprocess.run([sys.executable, "-c", _ME_DERIVATIVES, str(fmus["rot2"]["fmu"]), json.dumps(cases)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    got = np.array(json.loads(proc.stdout.strip().splitlines()[-1]))
+    dae = _numeric_dae(parse_spec(PROBLEMS["Rot2"][0]))
+    comps = {lam: lsc.complete(dae, "alternative", lam=lam) for lam in (2.0, 5.0)}
+    for (t, lam, x), d in zip(cases, got):
+        G, g = comps[lam].matrices(t)
+        expected = G @ np.array(x) + g
+        assert np.abs(d - expected).max() <= 1e-10 * (1 + np.abs(expected).max()), (t, lam, d, expected)
+
+
+def test_fixed_lambda_build_refuses_lambda(tmp_path):
+    from test_native_timevarying import PROBLEMS_SOURCES, _spec
+
+    d, _ = _spec("Rot2Std", *[PROBLEMS_SOURCES["Rot2"][k] for k in ("A", "B", "xe")], method="standard")
+    fmu = build_fmu(d, tmp_path, target="native")
+    script = textwrap.dedent(f"""
+        import json
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+        md = read_model_description({str(fmu)!r})
+        f = FMU2Slave(guid=md.guid, unzipDirectory=extract({str(fmu)!r}), modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName="i")
+        f.instantiate(); f.setupExperiment(startTime=0.0)
+        out = {{}}
+        for label, value in (("init", 5.0), ("same", float(md.modelVariables[0].start))):
+            try:
+                f.setReal([0], [value]); out[label] = "ok"
+            except Exception as exc:
+                out[label] = str(exc)
+        f.enterInitializationMode(); f.exitInitializationMode(); f.doStep(0.0, 0.1)
+        out["lambda"] = f.getReal([0])[0]
+        f.terminate(); f.freeInstance()
+        print(json.dumps(out))
+    """)
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    r = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert r["init"] != "ok" and r["lambda"] == 2.0, r
