@@ -15,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <pthread.h>
 
 #include "fmi2Functions.h"
 
@@ -80,6 +81,29 @@ static int march(fmi2Component c, double t0, double h, int steps) {
     for (k = 0; k < steps; k++)
         if ((s = (int)F(fmi2DoStep)(c, t0 + k * h, h, fmi2True)) != fmi2OK) return s;
     return 0;
+}
+
+/* an allocator that fails from the n-th call on (n < 0: never) */
+static int alloc_left = -1;
+static void *failing_calloc(size_t n, size_t size) {
+    if (alloc_left == 0) return NULL;
+    if (alloc_left > 0) alloc_left--;
+    return calloc(n, size);
+}
+
+/* one instance stepped in a thread of its own */
+typedef struct { double lam; double x[16]; int status; } Job;
+static void *run_job(void *arg) {
+    Job *j = (Job *)arg;
+    char name[32];
+    fmi2Component c;
+    snprintf(name, sizeof name, "thread%g", j->lam);
+    c = inited(name, fmi2CoSimulation);
+    F(fmi2SetReal)(c, &LAM, 1, &j->lam);
+    j->status = march(c, 0.0, 0.01, 200);
+    getx(c, j->x);
+    F(fmi2FreeInstance)(c);
+    return NULL;
 }
 
 static int scenario(const char *sc) {
@@ -519,6 +543,67 @@ static int scenario(const char *sc) {
         SAY("exit_init", F(fmi2ExitInitializationMode)(c));
         F(fmi2GetReal)(c, &RES, 1, &v);
         printf("res_after_init %.17g\n", v);
+        F(fmi2FreeInstance)(c);
+    } else if (!strcmp(sc, "threads")) {
+        /* two instances stepped at once in two threads equal the same runs one after the other */
+        Job jobs[2] = {{2.0, {0}, -1}, {11.0, {0}, -1}}, alone[2] = {{2.0, {0}, -1}, {11.0, {0}, -1}};
+        pthread_t th[2];
+        for (i = 0; i < 2; i++) pthread_create(&th[i], NULL, run_job, &jobs[i]);
+        for (i = 0; i < 2; i++) pthread_join(th[i], NULL);
+        for (i = 0; i < 2; i++) run_job(&alone[i]);
+        printf("statuses %d %d\n", jobs[0].status, jobs[1].status);
+        printf("bitwise %d\n", same(jobs[0].x, alone[0].x, nx) && same(jobs[1].x, alone[1].x, nx));
+        printf("differ %d\n", !same(jobs[0].x, jobs[1].x, nx));
+    } else if (!strcmp(sc, "null_logger")) {
+        /* a host without a logger: bad calls are refused all the same, nothing is written through NULL */
+        cb.logger = NULL;
+        c = inited("nolog", fmi2CoSimulation);
+        v = NAN; SAY("lambda_nan", F(fmi2SetReal)(c, &LAM, 1, &v));
+        SAY("step_invalid", F(fmi2DoStep)(c, 0.0, 0.1, fmi2True));
+        v = 2.0; F(fmi2SetReal)(c, &LAM, 1, &v);
+        SAY("step_far_past", F(fmi2DoStep)(c, 0.0, 3 * T1, fmi2True));
+        SAY("setup_again", F(fmi2SetupExperiment)(c, fmi2False, 0.0, -1.0, fmi2False, 0.0));
+        F(fmi2FreeInstance)(c);
+        SAY("instantiate_bad_guid", F(fmi2Instantiate)("x", fmi2CoSimulation, "{bad}", "", &cb, 0, 0) == NULL);
+    } else if (!strcmp(sc, "failing_allocator")) {
+        /* the host's allocator fails: for the instance (NULL, no crash), its name, and for a state (fmi2Error) */
+        fmi2FMUstate st = NULL;
+        size_t sz = 0;
+        fmi2Byte *b;
+        cb.allocateMemory = failing_calloc;
+        alloc_left = 0;
+        SAY("instance_null", F(fmi2Instantiate)("a", fmi2CoSimulation, guid, "", &cb, 0, 0) == NULL);
+        alloc_left = 1;
+        SAY("name_null", F(fmi2Instantiate)("a", fmi2CoSimulation, guid, "", &cb, 0, 0) == NULL);
+        alloc_left = -1;
+        c = inited("a", fmi2CoSimulation);
+        F(fmi2GetFMUstate)(c, &st);
+        F(fmi2SerializedFMUstateSize)(c, st, &sz);
+        b = (fmi2Byte *)malloc(sz);
+        F(fmi2SerializeFMUstate)(c, st, b, sz);
+        F(fmi2FreeFMUstate)(c, &st); /* retired: the next state reuses it without allocating */
+        alloc_left = 0;
+        SAY("get_reusing_retired", F(fmi2GetFMUstate)(c, &st));
+        { fmi2FMUstate st2 = NULL; SAY("get_out_of_memory", F(fmi2GetFMUstate)(c, &st2)); printf("st2_null %d\n", st2 == NULL); }
+        { fmi2FMUstate st3 = NULL; SAY("deserialize_out_of_memory", F(fmi2DeSerializeFMUstate)(c, b, sz, &st3)); }
+        alloc_left = -1;
+        SAY("step_after", F(fmi2DoStep)(c, 0.0, 0.1, fmi2True));
+        F(fmi2FreeFMUstate)(c, &st);
+        free(b);
+        F(fmi2FreeInstance)(c);
+    } else if (!strcmp(sc, "invalid_start")) {
+        /* a start value set to NaN in Initialization Mode: exit refused until a valid one is set */
+        c = inst("st", fmi2CoSimulation);
+        F(fmi2SetupExperiment)(c, fmi2False, 0.0, 0.0, fmi2False, 0.0);
+        F(fmi2EnterInitializationMode)(c);
+        v = NAN; SAY("x0_nan", F(fmi2SetReal)(c, &X0VR[0], 1, &v));
+        SAY("exit_refused", F(fmi2ExitInitializationMode)(c));
+        v = 2.0; SAY("x0_valid", F(fmi2SetReal)(c, &X0VR[0], 1, &v));
+        SAY("exit", F(fmi2ExitInitializationMode)(c));
+        SAY("x0_after_init", F(fmi2SetReal)(c, &X0VR[0], 1, &v));
+        SAY("state_vr_set", F(fmi2SetReal)(c, &XVR[0], 1, &v));
+        SAY("residual_vr_set", F(fmi2SetReal)(c, &RES, 1, &v));
+        SAY("step", F(fmi2DoStep)(c, 0.0, 0.1, fmi2True));
         F(fmi2FreeInstance)(c);
     } else if (!strcmp(sc, "free")) {
         F(fmi2FreeInstance)(NULL);

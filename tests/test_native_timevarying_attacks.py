@@ -52,7 +52,7 @@ def fmus(tmp_path_factory):
     info = {key: _unpack(fmu, folder / key) for key, fmu in built.items()}
     master = folder / "tv_attack_master"
     subprocess.run(["gcc", *SAN, "-Wall", "-Wextra", "-Werror", "-I", str(HEADERS), "-o", str(master), str(MASTER),
-                    "-ldl", "-lm"], check=True)
+                    "-ldl", "-lm", "-pthread"], check=True)
     info["master"] = str(master)
     return info
 
@@ -456,3 +456,32 @@ def test_fixed_lambda_build_refuses_lambda(tmp_path):
     assert proc.returncode == 0, proc.stderr[-3000:]
     r = json.loads(proc.stdout.strip().splitlines()[-1])
     assert r["init"] != "ok" and r["lambda"] == 2.0, r
+
+
+def test_two_instances_in_two_threads(fmus):
+    rc, text, _, _, v = attack(fmus, "threads")
+    clean(rc, text)
+    assert v["statuses"] == [0, 0] and v["bitwise"] == [1] and v["differ"] == [1]
+
+
+def test_host_without_a_logger(fmus):
+    rc, text, st, _, _ = attack(fmus, "null_logger")
+    clean(rc, text)
+    assert st == {"lambda_nan": ERROR, "step_invalid": DISCARD, "step_far_past": DISCARD, "setup_again": ERROR,
+                  "instantiate_bad_guid": 1}
+
+
+def test_failing_host_allocator(fmus):
+    rc, text, st, logs, v = attack(fmus, "failing_allocator")
+    clean(rc, text)
+    assert st["instance_null"] == 1 and st["name_null"] == 1
+    assert st["get_reusing_retired"] == OK  # a retired block needs no allocation
+    assert st["get_out_of_memory"] == ERROR and v["st2_null"] == [1] and st["deserialize_out_of_memory"] == ERROR
+    assert sum("out of memory" in m for m in logs) == 2 and st["step_after"] == OK
+
+
+def test_invalid_start_value_blocks_initialization_until_a_valid_one(fmus):
+    rc, text, st, _, _ = attack(fmus, "invalid_start")
+    clean(rc, text)
+    assert st == {"x0_nan": ERROR, "exit_refused": ERROR, "x0_valid": OK, "exit": OK, "x0_after_init": ERROR,
+                  "state_vr_set": ERROR, "residual_vr_set": ERROR, "step": OK}
