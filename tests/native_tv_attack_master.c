@@ -219,6 +219,8 @@ static int scenario(const char *sc) {
         t0 = clock();
         SAY("step_tol_1e-300", F(fmi2DoStep)(c, 0.0, 0.1, fmi2True));
         printf("seconds %.3f\n", (double)(clock() - t0) / CLOCKS_PER_SEC);
+        getx(c, x); vals("x", x, nx);
+        printf("t %.17g\n", last_time(c));
         F(fmi2FreeInstance)(c);
     } else if (!strcmp(sc, "lambda_values")) {
         c = inited("lam", fmi2CoSimulation);

@@ -158,6 +158,9 @@ def test_tolerance_below_double_precision_is_met_or_discarded(fmus):
     assert st["setup_tol_1e-300"] in (OK, ERROR)
     if st["setup_tol_1e-300"] == OK:
         assert st["step_tol_1e-300"] in (OK, DISCARD) and v["seconds"][0] < 5.0
+        t = v["t"][0] if st["step_tol_1e-300"] == OK else 0.0
+        assert t == (0.1 if st["step_tol_1e-300"] == OK else 0.0)
+        assert np.abs(np.array(v["x"]) - exact(t)).max() < 1e-12
 
 
 # ---- lambda -------------------------------------------------------------------------------------------------------
