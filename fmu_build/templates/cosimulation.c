@@ -130,6 +130,11 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueRefer
                    "custom outputs linear in the states)", vr[i]);
             return fmi2Error;
         }
+        if (!isfinite(value[i])) {
+            logmsg(c, fmi2Error, "fmi2GetRealOutputDerivatives: the derivative of value reference %u is not finite at "
+                   "t = %.17g", vr[i], c->s.t);
+            return fmi2Error;
+        }
     }
     return fmi2OK;
 }

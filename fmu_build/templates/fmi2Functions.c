@@ -131,6 +131,18 @@ fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined,
                startTime, stopTime);
         return fmi2Error;
     }
+#ifdef LSC_TIME_VARYING
+    /* FMI 2.0: startTime and stopTime are given so that the FMU can check it is valid between them */
+    {
+        const int bad_stop = stopTimeDefined && stopTime > TV_T1 + TV_TIME_SLACK(TV_T1);
+        if (bad_stop || !(startTime >= TV_T0 - TV_TIME_SLACK(TV_T0) && startTime <= TV_T1 + TV_TIME_SLACK(TV_T1))) {
+            logmsg(c, fmi2Error, "fmi2SetupExperiment: %s %.17g is outside the horizon [%.17g, %.17g] the "
+                   "time-varying coefficients were tabulated on at build time (build with a longer experiment)",
+                   bad_stop ? "stopTime" : "startTime", bad_stop ? stopTime : startTime, TV_T0, TV_T1);
+            return fmi2Error;
+        }
+    }
+#endif
     c->s.t = startTime;
     c->s.ud_t = startTime; /* derivatives set before this call are for the first step */
     c->s.stop_defined = stopTimeDefined ? 1 : 0;
@@ -222,6 +234,14 @@ fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
             return fmi2Error;
         }
         value[i] = get_one(c, vr[i]);
+#ifdef LSC_TIME_VARYING
+        /* the residual and der(x) from the tables: NAN outside the horizon, not finite for a lambda too large */
+        if (!isfinite(value[i]) && vr_kind(vr[i]) >= 5) {
+            logmsg(c, fmi2Error, "fmi2GetReal: value reference %u is not finite at t = %.17g (lambda = %g; the "
+                   "horizon of the tables is [%.17g, %.17g])", vr[i], c->s.t, c->s.lam, TV_T0, TV_T1);
+            return fmi2Error;
+        }
+#endif
     }
     return fmi2OK;
 }
@@ -321,6 +341,13 @@ fmi2Status fmi2SetBoolean(fmi2Component comp, const fmi2ValueReference vr[], siz
             logmsg(c, fmi2Error, "fmi2SetBoolean: unknown value reference %u", vr[i]);
             return fmi2Error;
         }
+#ifdef LSC_TIME_VARYING
+        if (value[i]) {
+            logmsg(c, fmi2Error, "fmi2SetBoolean: project_initial is not available in an FMU with time-varying "
+                   "coefficients (its tables hold the residual, not the projector): start from consistent values");
+            return fmi2Error;
+        }
+#endif
         c->s.project_initial = value[i] ? 1 : 0;
     }
     return fmi2OK;

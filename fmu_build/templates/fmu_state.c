@@ -116,13 +116,15 @@ fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
         logmsg(c, fmi2Error, "fmi2FreeFMUstate: the state was freed already");
         return fmi2Error;
     }
-    if (state_header_ok(s)) { /* a block of this FMU (new_state): kept, marked freed */
-        s->magic = STATE_FREED;
-        ((StateBlock *)s)->next = c->retired;
-        c->retired = (StateBlock *)s;
-    } else {
-        c->cb.freeMemory(s); /* not this FMU's: given back as it is */
+    if (!state_header_ok(s) || s->check != 0) { /* another FMU's (its owner frees it) or serialized bytes */
+        logmsg(c, fmi2Error, "fmi2FreeFMUstate: not a state of this FMU (magic number, size or GUID hash differ, or "
+               "serialized bytes)");
+        return fmi2Error;
     }
+    /* a block of this FMU (new_state): kept, marked freed */
+    s->magic = STATE_FREED;
+    ((StateBlock *)s)->next = c->retired;
+    c->retired = (StateBlock *)s;
     *FMUstate = NULL;
     return fmi2OK;
 }
