@@ -372,9 +372,6 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     if dae.is_constant:
         G0, G1, W0, W1, comp, lam_tunable = _affine_maps(dae, spec.method, spec.lam, k)
         tv = None
-    elif fmi_version == 3:
-        raise NativeTargetError("time-varying A or B are built for FMI 2.0 only (fmi_version=2): the FMI 3.0 layer "
-                                "is not yet tested with the time-varying runtime")
     else:  # time-varying: tables over the horizon; the constant arrays are zeros the C runtime does not read
         tv = _native_tv.prepare(dae, spec, k, NativeTargetError)
         G0, G1, W0, W1, comp, lam_tunable = tv["placeholders"]
@@ -392,6 +389,10 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     note = f"native C{', FMI 3.0' if fmi_version == 3 else ''}, constant A and B; {spec.method} completion, {lam_note}.{fixed_note}"
     if tv is not None:  # the tables enter the header before the GUID is its hash
         header, note = _native_tv.finish_header(header, tv), _native_tv.note(spec, tv, lam_note)
+        if fmi_version == 3:  # past the horizon fmi3DoStep discards, or returns early at its end where allowed
+            note = note.replace("native C,", "native C, FMI 3.0,", 1) + (
+                " Steps past the horizon: fmi3Discard with terminateSimulation, or an early return at its end "
+                "where the importer allows early return.")
     variables = _variables(spec, fpars=fpars, kpars=kpars, vr=info["vr"], lam_tunable=lam_tunable,
                            method=spec.method, linear=info["linear"])
     digest = hashlib.sha256()

@@ -38,6 +38,7 @@ typedef char lsc3_int32_is_fmi2Integer[sizeof(fmi3Int32) == sizeof(fmi2Integer) 
 typedef struct {
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
+    int early_return;            /* earlyReturnAllowed of fmi3InstantiateCoSimulation */
 } Host3;
 
 /* core function names (the start of a message) and their FMI 3.0 counterparts, longest first */
@@ -108,7 +109,8 @@ static int nullargs(Instance *c, const char *f, const void *a, const char *an, c
 const char *fmi3GetVersion(void) { return fmi3Version; }
 
 static fmi3Instance instantiate(fmi3String instanceName, fmi2Type type, fmi3String token, fmi3Boolean loggingOn,
-                                fmi3InstanceEnvironment instanceEnvironment, fmi3LogMessageCallback logMessage) {
+                                fmi3InstanceEnvironment instanceEnvironment, fmi3LogMessageCallback logMessage,
+                                fmi3Boolean earlyReturnAllowed) {
     Host3 *host;
     fmi2CallbackFunctions cb;
     Instance *c;
@@ -128,6 +130,7 @@ static fmi3Instance instantiate(fmi3String instanceName, fmi2Type type, fmi3Stri
     if (host == NULL) return NULL;
     host->env = instanceEnvironment;
     host->log = logMessage;
+    host->early_return = earlyReturnAllowed ? 1 : 0;
     cb.logger = forward_log;
     cb.allocateMemory = calloc;
     cb.freeMemory = free;
@@ -143,7 +146,8 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                                           fmi3InstanceEnvironment instanceEnvironment, fmi3LogMessageCallback logMessage) {
     (void)resourcePath;
     (void)visible;
-    return instantiate(instanceName, fmi2ModelExchange, instantiationToken, loggingOn, instanceEnvironment, logMessage);
+    return instantiate(instanceName, fmi2ModelExchange, instantiationToken, loggingOn, instanceEnvironment, logMessage,
+                       fmi3False);
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
@@ -154,7 +158,6 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     const char *why = NULL;
     (void)resourcePath;
     (void)visible;
-    (void)earlyReturnAllowed; /* steps never return early: allowed or not is the same */
     (void)requiredIntermediateVariables;
     (void)intermediateUpdate;
     if (eventModeUsed) why = "eventModeUsed is true, but this FMU has no Event Mode in Co-Simulation (hasEventMode=false)";
@@ -164,7 +167,8 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
         if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError", why);
         return NULL;
     }
-    return instantiate(instanceName, fmi2CoSimulation, instantiationToken, loggingOn, instanceEnvironment, logMessage);
+    return instantiate(instanceName, fmi2CoSimulation, instantiationToken, loggingOn, instanceEnvironment, logMessage,
+                       earlyReturnAllowed);
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
@@ -547,22 +551,52 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueRefere
     return status3(fmi2GetRealOutputDerivatives(c, vr, nvr, (const fmi2Integer *)orders, values));
 }
 
-/* The step is the core's fmi2DoStep. It never returns early and never needs event handling; after a
- * discard lastSuccessfulTime is the step's start (the FMU stays there), and terminateSimulation says
- * that no retry can succeed as things are (fmi2Terminated of the FMI 2.0 API). */
+#ifdef LSC_TIME_VARYING
+/* A step that ends past the horizon of the time-varying tables, from a point before its end, for an importer that
+ * allows early return: the FMU steps to the end of the horizon and returns early there with terminateSimulation
+ * (the FMI 3.0 way to say "this far and no further"). 1 if it did (status in *s), 0 if the core takes the step as
+ * asked (it refuses a step past the horizon: fmi3Discard, the FMU unchanged). A step that also ends after the
+ * stop time is left to the core, which refuses it as an error. */
+static int early_return_at_horizon(Instance *c, double t, double h, fmi2Boolean noSet, fmi2Status *s) {
+    const Host3 *host = (const Host3 *)c->cb.componentEnvironment;
+    const double end = TV_T1;
+    if (!host->early_return || !(c->s.phase & StepComplete) || !isfinite(t) || !isfinite(h)
+        || !(t + h > end + TV_TIME_SLACK(end) + 1e-12 * h) || !(t < end - TV_TIME_SLACK(end))
+        || (c->s.stop_defined && t + h > c->s.t_stop)) return 0;
+    *s = fmi2DoStep(c, t, end - t, noSet);
+    if (*s == fmi2OK)
+        logmsg(c, fmi2Warning, "fmi3DoStep: the step from %.17g to %.17g leaves the horizon [%.17g, %.17g] the "
+               "time-varying coefficients were tabulated on at build time: returned early at its end, "
+               "terminateSimulation is true (build with a longer experiment stop)", t, t + h, TV_T0, end);
+    return 1;
+}
+#endif
+
+/* The step is the core's fmi2DoStep. It returns early only at the end of the horizon of time-varying tables (when the
+ * importer allows it) and never needs event handling; after a discard lastSuccessfulTime is the step's start (the FMU
+ * is unchanged), and terminateSimulation says that no retry can succeed as things are (fmi2Terminated of the FMI 2.0
+ * API: a step past the horizon, the same step discarded twice). */
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
                       fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *eventHandlingNeeded,
                       fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
     Instance *c = (Instance *)instance;
+    const fmi2Boolean noSet = noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False;
     fmi2Status s;
     if (!allowed(c, "fmi3DoStep", ANY_ALIVE) || wrong_type(c, "fmi3DoStep", fmi2CoSimulation)) return fmi3Error;
     if (nullargs(c, "fmi3DoStep", eventHandlingNeeded, "eventHandlingNeeded", terminateSimulation, "terminateSimulation")
         || nullargs(c, "fmi3DoStep", earlyReturn, "earlyReturn", lastSuccessfulTime, "lastSuccessfulTime"))
         return fmi3Error;
-    s = fmi2DoStep(c, currentCommunicationPoint, communicationStepSize,
-                   noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False);
     *eventHandlingNeeded = fmi3False;
     *earlyReturn = fmi3False;
+#ifdef LSC_TIME_VARYING
+    if (early_return_at_horizon(c, currentCommunicationPoint, communicationStepSize, noSet, &s)) {
+        *earlyReturn = s == fmi2OK;
+        *terminateSimulation = s == fmi2OK || c->s.terminal != 0;
+        *lastSuccessfulTime = c->s.t;
+        return status3(s);
+    }
+#endif
+    s = fmi2DoStep(c, currentCommunicationPoint, communicationStepSize, noSet);
     *terminateSimulation = c->s.terminal != 0;
     *lastSuccessfulTime = c->s.t;
     return status3(s);
