@@ -4,7 +4,7 @@ Used by test_native_timevarying_fmi3.py. Reads a scenario from stdin, {"kind": .
   simulate: {"fmu", "fmi_type", "stop", "dt", "outputs", "start_values", "early_return_allowed", "rtol"}
             -> {"time", name: [...], "error", "logs"} (fmpy's simulate_fmu; an exception is reported, not raised)
   steps:    {"fmu", "dt", "steps", "outputs", "set_at": {"i": {name: value}}, "start_values": {name: value},
-             "early_return_allowed", "derivative_orders": [orders]}
+             "early_return_allowed", "derivative_orders": [orders]}: steps from the points i dt
             -> per raw fmi3DoStep call its status, flags, lastSuccessfulTime and the outputs after it (as
                float.hex), the outputs' derivatives at the end, "logs"; the host stops stepping at
                terminateSimulation or after the second refused step, then terminates and frees the instance.
@@ -74,8 +74,8 @@ def steps(sc, logs):
         step = _do_step(fmu, t, sc["dt"])
         step["values"] = [v.hex() for v in fmu.getFloat64(vrs)]
         out.append(step)
-        if step["status"] == 0:
-            t = step["lastSuccessfulTime"]
+        if step["status"] == 0:  # on the grid i dt + dt, as the FMI 2.0 runner, unless it returned early
+            t = step["lastSuccessfulTime"] if step["earlyReturn"] else i * sc["dt"] + sc["dt"]
         else:
             refused += 1
         if step["terminateSimulation"] or refused == 2:

@@ -599,5 +599,13 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     s = fmi2DoStep(c, currentCommunicationPoint, communicationStepSize, noSet);
     *terminateSimulation = c->s.terminal != 0;
     *lastSuccessfulTime = c->s.t;
+#ifdef LSC_TIME_VARYING
+    if (s == fmi2OK && communicationStepSize > 0.0 && !(c->s.t < TV_T1 - TV_TIME_SLACK(TV_T1))) {
+        /* at the end of the tables no step can follow: the importer is asked to stop here, not at the next step */
+        logmsg(c, fmi2Warning, "fmi3DoStep: reached %.17g, the end of the horizon the time-varying coefficients were "
+               "tabulated on at build time: terminateSimulation is true (build with a longer experiment stop)", c->s.t);
+        *terminateSimulation = fmi3True;
+    }
+#endif
     return status3(s);
 }
