@@ -10,6 +10,8 @@ Used by test_native_timevarying_fmi3.py. Reads a scenario from stdin, {"kind": .
                terminateSimulation or after the second refused step, then terminates and frees the instance.
   discard_twice: {"fmu", "dt", "start_values", "outputs"}: the first step twice (both discarded), then lambda
             set back and the step again -> the three steps and the outputs before, between and after.
+  me_sequence: {"fmu", "t", "t_end": [times]}: the Model Exchange state machine call by call, right and wrong orders, and the
+            Event Mode calls on a Co-Simulation instance -> {"calls": {name: status or [status, *flags]}}
 """
 import json
 import sys
@@ -105,6 +107,63 @@ def discard_twice(sc, logs):
     return {"steps": out, "values": values}
 
 
+def me_sequence(sc, logs):
+    """The FMI 3.0 Model Exchange state machine, call by call: each call's status (0 OK, 3 Error) and the flags."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi1 import FMICallException
+    from fmpy.fmi3 import FMU3Model
+
+    calls = {}
+
+    def call(name, f):
+        try:
+            out = f()
+            calls[name] = 0 if out is None or not isinstance(out, tuple) else [0, *out]
+        except FMICallException as exc:
+            calls[name] = exc.status
+
+    md = read_model_description(sc["fmu"])
+    fmu = FMU3Model(guid=md.guid, unzipDirectory=extract(sc["fmu"]), modelIdentifier=md.modelExchange.modelIdentifier,
+                    instanceName="me3")
+    fmu.instantiate(logMessage=lambda env, status, category, message: logs.append(message.decode()))
+    n = len(md.derivatives)
+    call("enterEventMode_instantiated", fmu.enterEventMode)
+    call("enterInitializationMode", lambda: fmu.enterInitializationMode(startTime=0.0))
+    call("enterContinuousTimeMode_initialization", fmu.enterContinuousTimeMode)
+    call("exitInitializationMode", fmu.exitInitializationMode)
+    call("completedIntegratorStep_event", fmu.completedIntegratorStep)
+    call("enterEventMode_event", fmu.enterEventMode)
+    call("setContinuousStates_event", lambda: fmu.setContinuousStates((c_double * n)(), n))
+    call("updateDiscreteStates", fmu.updateDiscreteStates)
+    call("enterContinuousTimeMode", fmu.enterContinuousTimeMode)
+    call("updateDiscreteStates_continuous", fmu.updateDiscreteStates)
+    call("enterContinuousTimeMode_continuous", fmu.enterContinuousTimeMode)
+    call("setTime", lambda: fmu.setTime(sc["t"]))
+    der = (c_double * n)()
+    call("getContinuousStateDerivatives", lambda: fmu.getContinuousStateDerivatives(der, n))
+    calls["derivatives"] = list(der)
+    call("completedIntegratorStep", fmu.completedIntegratorStep)
+    call("enterEventMode", fmu.enterEventMode)
+    call("updateDiscreteStates_again", fmu.updateDiscreteStates)
+    call("enterContinuousTimeMode_again", fmu.enterContinuousTimeMode)
+    for k, t in enumerate(sc.get("t_end", [])):  # the end of the horizon of time-varying tables, and past it
+        call(f"setTime_end{k}", lambda: fmu.setTime(t))
+        call(f"completedIntegratorStep_end{k}", fmu.completedIntegratorStep)
+        call(f"getContinuousStateDerivatives_end{k}", lambda: fmu.getContinuousStateDerivatives(der, n))
+    call("terminate", fmu.terminate)
+    fmu.freeInstance()
+    cs, _ = _slave(sc["fmu"], logs)
+    cs.enterInitializationMode(startTime=0.0)
+    cs.exitInitializationMode()
+    call("cs_enterEventMode", lambda: cs.fmi3EnterEventMode(cs.component))
+    flags, when = [c_bool() for _ in range(5)], c_double()
+    call("cs_updateDiscreteStates", lambda: cs.fmi3UpdateDiscreteStates(cs.component, *map(byref, flags), byref(when)))
+    call("cs_step_after", lambda: cs.doStep(0.0, 0.01))  # the refused calls changed nothing
+    cs.terminate()
+    cs.freeInstance()
+    return {"calls": calls}
+
+
 def main():
     sc = json.load(sys.stdin)
     if sc.get("block"):
@@ -117,7 +176,8 @@ def main():
         except ImportError:
             blocked[name] = True
     logs = []
-    out = {"simulate": simulate, "steps": steps, "discard_twice": discard_twice}[sc["kind"]](sc, logs)
+    out = {"simulate": simulate, "steps": steps, "discard_twice": discard_twice,
+           "me_sequence": me_sequence}[sc["kind"]](sc, logs)
     out.update(blocked=blocked, logs=logs)
     print(json.dumps(out))
 

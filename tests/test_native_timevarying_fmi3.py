@@ -35,7 +35,7 @@ def run(scenario, runner="native3_tv_runner.py", timeout=300):
     proc = subprocess.run([sys.executable, str(HERE / runner)], input=json.dumps(scenario), capture_output=True,
                           text=True, timeout=timeout, cwd=HERE)
     assert proc.returncode == 0, proc.stderr[-3000:]  # the host exits cleanly, whatever the FMU refused
-    return json.loads(proc.stdout)
+    return json.loads(proc.stdout.strip().splitlines()[-1])  # (fmpy's CVode prints its failures on stdout)
 
 
 @pytest.fixture(scope="module")
@@ -250,3 +250,24 @@ def test_c_master_under_address_and_ub_sanitizers(built, tmp_path):
         x = x + DT * (G @ x + g)
     assert rel_err(me, x) < 1e-9
     assert "leaves the horizon" in proc.stderr and "returned early at its end" in proc.stderr
+
+
+def test_model_exchange_event_mode_and_the_horizon(built):
+    """The FMI 3.0 Model Exchange state machine on the time-varying FMU: no events, no time events; the derivatives
+    are G(t) x + g(t); at the horizon's end fmi3CompletedIntegratorStep asks to stop, past it the derivatives are
+    refused with the reason."""
+    d = PROBLEMS["Tv1"][0]
+    r = run({"kind": "me_sequence", "fmu": str(built["Tv1", 3]), "t": 0.5, "t_end": [HORIZON, HORIZON + 0.05]})
+    calls = r["calls"]
+    no_event = [0, False, False, False, False, False, 0.0]  # need update, terminate, nominals, values, next time
+    assert calls["updateDiscreteStates"] == calls["updateDiscreteStates_again"] == no_event
+    assert calls["completedIntegratorStep"] == [0, False, False]
+    comp = lsc.complete(_numeric_dae(parse_spec(d)), "alternative", lam=2.0)
+    G, g = comp.matrices(0.5)
+    x0 = np.array([s["start"] for s in parse_spec(d).states])
+    assert rel_err(np.array(calls["derivatives"]), G @ x0 + g) < 1e-10
+    assert calls["completedIntegratorStep_end0"] == [0, False, True] and calls["getContinuousStateDerivatives_end0"] == 0
+    assert calls["completedIntegratorStep_end1"] == [0, False, True] and calls["getContinuousStateDerivatives_end1"] == 3
+    logs = "\n".join(r["logs"])
+    assert "fmi3CompletedIntegratorStep: reached 2.2000000000000002, the end of the horizon" in logs
+    assert "fmi3GetContinuousStateDerivatives: t = 2.25 is outside the horizon" in logs

@@ -208,7 +208,20 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) { return status3(fm
 fmi3Status fmi3Terminate(fmi3Instance instance) { return status3(fmi2Terminate(instance)); }
 fmi3Status fmi3Reset(fmi3Instance instance) { return status3(fmi2Reset(instance)); }
 
-fmi3Status fmi3EnterEventMode(fmi3Instance instance) { return status3(fmi2EnterEventMode(instance)); }
+#define NO_CS_EVENT_MODE "this FMU has no Event Mode in Co-Simulation (hasEventMode=false, eventModeUsed is false)"
+
+/* Model Exchange: from Continuous-Time Mode only (the FMI 3.0 state machine; Event Mode is entered once per
+ * event); Co-Simulation: refused, there is no Event Mode there */
+fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
+    Instance *c = (Instance *)instance;
+    if (!allowed(c, "fmi3EnterEventMode", ANY_ALIVE)) return fmi3Error;
+    if (c->type == fmi2CoSimulation) {
+        logmsg(c, fmi2Error, "fmi3EnterEventMode: %s", NO_CS_EVENT_MODE);
+        return fmi3Error;
+    }
+    if (!allowed(c, "fmi3EnterEventMode", ContinuousTimeMode)) return fmi3Error;
+    return status3(fmi2EnterEventMode(instance));
+}
 
 /* ---- get and set ------------------------------------------------------------- */
 
@@ -470,6 +483,10 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
     fmi2Status s;
     const char *f = "fmi3UpdateDiscreteStates";
     if (!allowed(c, f, ANY_ALIVE)) return fmi3Error;
+    if (c->type == fmi2CoSimulation) {
+        logmsg(c, fmi2Error, "%s: %s", f, NO_CS_EVENT_MODE);
+        return fmi3Error;
+    }
     if (nullargs(c, f, discreteStatesNeedUpdate, "discreteStatesNeedUpdate", terminateSimulation, "terminateSimulation")
         || nullargs(c, f, nominalsOfContinuousStatesChanged, "nominalsOfContinuousStatesChanged",
                     valuesOfContinuousStatesChanged, "valuesOfContinuousStatesChanged")
@@ -498,6 +515,17 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetF
     if (s != fmi2OK) return status3(s);
     *enterEventMode = event != fmi2False;
     *terminateSimulation = stop != fmi2False;
+#ifdef LSC_TIME_VARYING
+    {
+        const Instance *c = (const Instance *)instance;
+        if (!(c->s.t < TV_T1 - TV_TIME_SLACK(TV_T1))) { /* no derivative past the tables: stop here */
+            logmsg((Instance *)instance, fmi2Warning, "fmi3CompletedIntegratorStep: reached %.17g, the end of the "
+                   "horizon the time-varying coefficients were tabulated on at build time: terminateSimulation is "
+                   "true (build with a longer experiment stop)", c->s.t);
+            *terminateSimulation = fmi3True;
+        }
+    }
+#endif
     return fmi3OK;
 }
 
