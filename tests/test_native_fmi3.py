@@ -54,7 +54,7 @@ def test_validates_clean_and_is_fmi3(built):
         assert {"sources/fmi3Functions.c", "sources/buildDescription.xml", "sources/model.h"} <= names
         assert 'fmiVersion="3.0"' in xml and "instantiationToken=" in xml
         for tag in ("<ModelExchange", "<CoSimulation", "<Output ", "<ContinuousStateDerivative ", "<InitialUnknown ",
-                    'causality="independent"'):
+                    'causality="independent"', 'mightReturnEarlyFromDoStep="false"'):
             assert tag in xml, tag
 
 

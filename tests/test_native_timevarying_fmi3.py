@@ -63,6 +63,7 @@ def test_validates_clean_and_describes_the_tables(built):
         assert "early return" in root.get("description")
         assert root.find("DefaultExperiment").attrib == {"startTime": "0.0", "stopTime": "2.0", "stepSize": "0.01"}
         assert root.find("CoSimulation").get("maxOutputDerivativeOrder") == "1"  # x' = G x + g only
+        assert root.find("CoSimulation").get("mightReturnEarlyFromDoStep") == "true"  # at the horizon's end
         assert root.find("ModelExchange") is not None
         n = len(PROBLEMS[name][0]["states"])
         assert len(root.find("ModelStructure").findall("ContinuousStateDerivative")) == n

@@ -23,6 +23,7 @@ import sys
 import tempfile
 import uuid
 import zipfile
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -405,7 +406,8 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     header = header.replace(placeholder, guid)
     flags_common = dict(needsExecutionTool=False, canBeInstantiatedOnlyOncePerProcess=False, canNotUseMemoryManagementFunctions=False,
                         canGetAndSetFMUstate=True, canSerializeFMUstate=True, providesDirectionalDerivative=False)
-    describe = _describe3 if fmi_version == 3 else model_description
+    # FMI 3.0: a time-varying FMU returns early at the end of its tables' horizon where the importer allows it
+    describe = partial(_describe3, might_return_early=tv is not None) if fmi_version == 3 else model_description
     xml = describe(
         model_name=ident, guid=guid, description=f"{spec.description or ident} [{note}]", model_identifier=ident,
         variables=variables, source_files=["fmi2Functions.c"],
@@ -465,7 +467,7 @@ def _variables3(variables, nr):
 
 
 def _describe3(*, model_name, guid, description, model_identifier, variables, source_files, model_exchange,
-               co_simulation, experiment, log_categories):
+               co_simulation, experiment, log_categories, might_return_early=False):
     """`model_description3` with the FMI 3.0 names of the interfaces' capability flags."""
     del source_files  # FMI 3.0 lists them in sources/buildDescription.xml
     common = dict(canGetAndSetFMUState=True, canSerializeFMUState=True, needsExecutionTool=False,
@@ -475,4 +477,5 @@ def _describe3(*, model_name, guid, description, model_identifier, variables, so
         variables=variables, experiment=experiment, log_categories=log_categories,
         model_exchange=dict(common, needsCompletedIntegratorStep=not model_exchange["completedIntegratorStepNotNeeded"]),
         co_simulation=dict(common, canHandleVariableCommunicationStepSize=True,
-                           maxOutputDerivativeOrder=co_simulation["maxOutputDerivativeOrder"], hasEventMode=False))
+                           maxOutputDerivativeOrder=co_simulation["maxOutputDerivativeOrder"], hasEventMode=False,
+                           mightReturnEarlyFromDoStep=might_return_early))
