@@ -137,6 +137,12 @@ int main(int argc, char **argv) {
             printf("early %.17g %d %d %d", last, (int)st, (int)early, (int)stop);
             for (i = 0; i < nx; i++) printf(" %.17g", xs[i]);
             printf("\n");
+            /* from the horizon's end no step can be taken: refused, the FMU unchanged */
+            next = last;
+            EXPECT(fmi3DoStep(e, next, dt, fmi3False, &event, &stop, &early, &last), fmi3Discard);
+            if (!stop || early || last != next) return 9;
+            OK(fmi3GetFloat64(e, vr, (size_t)nx, xb, (size_t)nx));
+            if (memcmp(xs, xb, sizeof(double) * (size_t)nx) != 0) return 9;
             OK(fmi3Terminate(e));
             fmi3FreeInstance(e);
         }
