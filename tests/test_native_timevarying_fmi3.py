@@ -272,3 +272,34 @@ def test_model_exchange_event_mode_and_the_horizon(built):
     logs = "\n".join(r["logs"])
     assert "fmi3CompletedIntegratorStep: reached 2.2000000000000002, the end of the horizon" in logs
     assert "fmi3GetContinuousStateDerivatives: t = 2.25 is outside the horizon" in logs
+
+
+def _toml(d):
+    """The spec dict as TOML text (strings, numbers and lists of them are all it holds)."""
+    def value(v):
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, list):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return repr(float(v))
+
+    lines = []
+    for section, body in d.items():
+        if section == "states":
+            for name, attrs in body.items():
+                lines += [f"[states.{name}]", *[f"{k} = {value(v)}" for k, v in attrs.items()]]
+        else:
+            lines += [f"[{section}]", *[f"{k} = {value(v)}" for k, v in body.items()]]
+    return "\n".join(lines) + "\n"
+
+
+def test_command_line_builds_a_time_varying_fmi3_fmu(tmp_path, capsys):
+    from fmu_build.__main__ import main
+
+    spec = tmp_path / "rot2.toml"
+    spec.write_text(_toml(PROBLEMS["Rot2"][0]))
+    assert main(["build", str(spec), "-o", str(tmp_path / "out"), "--native", "--fmi-version", "3"]) == 0
+    assert "native C, FMI 3.0, time-varying A and B tabulated on [0, 2.2]" in capsys.readouterr().err
+    with zipfile.ZipFile(tmp_path / "out" / "Rot2.fmu") as zf:
+        assert 'fmiVersion="3.0"' in zf.read("modelDescription.xml").decode()
+        assert "#define LSC_TIME_VARYING 1" in zf.read("sources/model.h").decode()
