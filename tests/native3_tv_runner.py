@@ -4,7 +4,7 @@ Used by test_native_timevarying_fmi3.py. Reads a scenario from stdin, {"kind": .
   simulate: {"fmu", "fmi_type", "stop", "dt", "outputs", "start_values", "early_return_allowed", "rtol"}
             -> {"time", name: [...], "error", "logs"} (fmpy's simulate_fmu; an exception is reported, not raised)
   steps:    {"fmu", "dt", "steps", "outputs", "set_at": {"i": {name: value}}, "start_values": {name: value},
-             "early_return_allowed", "derivative_orders": [orders]}: steps from the points i dt
+             "early_return_allowed", "derivative_orders": [orders], "stop_time"}: steps from the points i dt
             -> per raw fmi3DoStep call its status, flags, lastSuccessfulTime and the outputs after it (as
                float.hex), the outputs' derivatives at the end, "logs"; the host stops stepping at
                terminateSimulation or after the second refused step, then terminates and frees the instance.
@@ -67,12 +67,15 @@ def steps(sc, logs):
     vrs = [vr[n] for n in sc["outputs"]]
     if sc.get("start_values"):
         fmu.setFloat64([vr[k] for k in sc["start_values"]], list(sc["start_values"].values()))
-    fmu.enterInitializationMode(startTime=0.0)
+    fmu.enterInitializationMode(startTime=0.0, stopTime=sc.get("stop_time"))
     fmu.exitInitializationMode()
     t, out, refused = 0.0, [], 0
     for i in range(sc["steps"]):
         for name, value in sc.get("set_at", {}).get(str(i), {}).items():
-            fmu.setFloat64([vr[name]], [value])
+            try:
+                fmu.setFloat64([vr[name]], [value])
+            except Exception as exc:  # a refused value (fmi3Error): recorded, the run goes on
+                logs.append(f"runner: set {name} = {value} refused: {exc}")
         step = _do_step(fmu, t, sc["dt"])
         step["values"] = [v.hex() for v in fmu.getFloat64(vrs)]
         out.append(step)

@@ -165,10 +165,8 @@ def test_step_past_the_horizon_is_discarded_with_a_logged_reason(built):
     assert [s["status"] for s in steps] == [0] * 7 + [2]  # 2.1 + 0.3 leaves [0, 2.2]
     last = steps[-1]
     assert last["terminateSimulation"] and not last["earlyReturn"] and not last["eventHandlingNeeded"]
-    # the FMU is where it was: the state bit for bit, its time the step's start (the importer's communication point,
-    # which the FMU takes as its time when it is within a few ulps of it)
-    assert last["values"] == steps[-2]["values"] and last["lastSuccessfulTime"] == last["t"]
-    assert abs(last["t"] - steps[-2]["lastSuccessfulTime"]) <= 1e-15
+    # the FMU is where it was: the state bit for bit, its time too (2.1, the importer's point is 2.0999999999999996)
+    assert last["values"] == steps[-2]["values"] and last["lastSuccessfulTime"] == steps[-2]["lastSuccessfulTime"]
     assert any("leaves the horizon [0, 2.2000000000000002]" in m for m in r["logs"])
     assert any("terminateSimulation is now true" in m for m in r["logs"])
 
@@ -184,6 +182,24 @@ def test_step_past_the_horizon_returns_early_at_its_end_where_allowed(built):
     assert last["lastSuccessfulTime"] == HORIZON
     assert rel_err(_hex([last["values"]]), _exact("Rot2", [HORIZON])) < 1e-8
     assert any("returned early at its end, terminateSimulation is true" in m for m in r["logs"])
+
+
+def test_early_return_at_the_horizon_keeps_the_other_refusals(built):
+    """Where early return is allowed, a step past the horizon is still refused for what the core refuses: past the
+    stop time set in fmi3EnterInitializationMode (fmi3Error), an invalid value (fmi3Discard, then terminateSimulation
+    on the same step again); neither returns early."""
+    d = PROBLEMS["Rot2"][0]
+    sc = {"kind": "steps", "fmu": str(built["Rot2", 3]), "dt": 0.3, "steps": 12, "outputs": _names(d),
+          "early_return_allowed": True}
+    r = run(dict(sc, stop_time=2.3))  # 2.1 + 0.3 ends after the stop time 2.3 (and past the horizon 2.2)
+    assert [s["status"] for s in r["steps"]] == [0] * 7 + [3, 3]
+    assert any("ends after the stop time 2.2999999999999998" in m for m in r["logs"])
+    r = run(dict(sc, set_at={"7": {"lambda": -1.0}}))
+    steps = r["steps"]
+    assert [s["status"] for s in steps] == [0] * 7 + [2, 2]
+    assert not any(s["earlyReturn"] for s in steps) and [s["terminateSimulation"] for s in steps[7:]] == [False, True]
+    assert steps[8]["values"] == steps[6]["values"] and steps[8]["lastSuccessfulTime"] == steps[6]["lastSuccessfulTime"]
+    assert any("was set to an invalid value" in m for m in r["logs"])
 
 
 @pytest.mark.parametrize("early", [False, True])

@@ -601,14 +601,15 @@ static int early_return_at_horizon(Instance *c, double t, double h, fmi2Boolean 
 #endif
 
 /* The step is the core's fmi2DoStep. It returns early only at the end of the horizon of time-varying tables (when the
- * importer allows it) and never needs event handling; after a discard lastSuccessfulTime is the step's start (the FMU
- * is unchanged), and terminateSimulation says that no retry can succeed as things are (fmi2Terminated of the FMI 2.0
+ * importer allows it) and never needs event handling; after a discard lastSuccessfulTime is the FMU time before the
+ * call (the FMU is unchanged), and terminateSimulation says that no retry can succeed as things are (fmi2Terminated of the FMI 2.0
  * API: a step past the horizon, the same step discarded twice). */
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
                       fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *eventHandlingNeeded,
                       fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
     Instance *c = (Instance *)instance;
     const fmi2Boolean noSet = noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False;
+    double t_before, ud_t_before;
     fmi2Status s;
     if (!allowed(c, "fmi3DoStep", ANY_ALIVE) || wrong_type(c, "fmi3DoStep", fmi2CoSimulation)) return fmi3Error;
     if (nullargs(c, "fmi3DoStep", eventHandlingNeeded, "eventHandlingNeeded", terminateSimulation, "terminateSimulation")
@@ -616,8 +617,13 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
         return fmi3Error;
     *eventHandlingNeeded = fmi3False;
     *earlyReturn = fmi3False;
+    /* the core takes the master's communication point as the FMU time (a few ulps from it) before stepping; after
+     * a discard the FMU is as before the call (FMI 3.0), its time included */
+    t_before = c->s.t;
+    ud_t_before = c->s.ud_t;
 #ifdef LSC_TIME_VARYING
     if (early_return_at_horizon(c, currentCommunicationPoint, communicationStepSize, noSet, &s)) {
+        if (s == fmi2Discard) { c->s.t = t_before; c->s.ud_t = ud_t_before; }
         *earlyReturn = s == fmi2OK;
         *terminateSimulation = s == fmi2OK || c->s.terminal != 0;
         *lastSuccessfulTime = c->s.t;
@@ -625,6 +631,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     }
 #endif
     s = fmi2DoStep(c, currentCommunicationPoint, communicationStepSize, noSet);
+    if (s == fmi2Discard) { c->s.t = t_before; c->s.ud_t = ud_t_before; }
     *terminateSimulation = c->s.terminal != 0;
     *lastSuccessfulTime = c->s.t;
 #ifdef LSC_TIME_VARYING
