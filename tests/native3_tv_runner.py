@@ -10,8 +10,8 @@ Used by test_native_timevarying_fmi3.py. Reads a scenario from stdin, {"kind": .
                terminateSimulation or after the second refused step, then terminates and frees the instance.
   discard_twice: {"fmu", "dt", "start_values", "outputs"}: the first step twice (both discarded), then lambda
             set back and the step again -> the three steps and the outputs before, between and after.
-  me_sequence: {"fmu", "t", "t_end": [times]}: the Model Exchange state machine call by call, right and wrong orders, and the
-            Event Mode calls on a Co-Simulation instance -> {"calls": {name: status or [status, *flags]}}
+  me_sequence: {"fmu", "t", "t_end": [times]}: the Model Exchange state machine call by call, right and wrong
+            orders, and the Event Mode calls on a Co-Simulation instance -> {"calls": {name: status or [status, *flags]}}
 """
 import json
 import sys

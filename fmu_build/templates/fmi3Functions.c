@@ -600,10 +600,10 @@ static int early_return_at_horizon(Instance *c, double t, double h, fmi2Boolean 
 }
 #endif
 
-/* The step is the core's fmi2DoStep. It returns early only at the end of the horizon of time-varying tables (when the
- * importer allows it) and never needs event handling; after a discard lastSuccessfulTime is the FMU time before the
- * call (the FMU is unchanged), and terminateSimulation says that no retry can succeed as things are (fmi2Terminated of the FMI 2.0
- * API: a step past the horizon, the same step discarded twice). */
+/* The step is the core's fmi2DoStep. It returns early only at the end of the horizon of time-varying tables (when
+ * the importer allows it) and never needs event handling; after a discard lastSuccessfulTime is the FMU time before
+ * the call (the FMU is unchanged), and terminateSimulation says that no retry can succeed as things are
+ * (fmi2Terminated of the FMI 2.0 API: a step past the horizon, the same step discarded twice). */
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
                       fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *eventHandlingNeeded,
                       fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
