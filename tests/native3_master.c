@@ -1,14 +1,16 @@
 /* A minimal FMI 3.0 master for native lsc FMUs (tests, run under AddressSanitizer and UBSan).
  *
- *   native3_master LIB.so TOKEN STEPS DT NX VR_X...
+ *   native3_master LIB.so TOKEN STEPS DT NX VR_X... [--horizon]
  *
  * dlopens the FMU's binary and runs three instances interleaved: two Co-Simulation
  * instances (the second with lambda doubled, rolled back through a serialized state
  * halfway) and one Model Exchange instance (explicit Euler on the FMU's derivatives
  * with the same step). Prints "t x..." of the first instance after each step, then
  * "me x..." at the end. Also makes calls a host must not make (NULL instance, wrong
- * sizes, wrong order, an interface it does not offer) and checks they are refused. Exit status 0 only if every call
- * returned what it must. */
+ * sizes, wrong order, an interface it does not offer) and checks they are refused. With --horizon (an FMU with
+ * time-varying tables) the first instance then steps on until the FMU refuses or asks to stop, and a fourth one,
+ * allowing early return, takes one step far past the horizon; prints "horizon t status terminate" and
+ * "early t status earlyReturn terminate". Exit status 0 only if every call returned what it must. */
 #include <dlfcn.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -113,6 +115,37 @@ int main(int argc, char **argv) {
             printf("\n");
         }
         OK(fmi3GetOutputDerivatives(a, vr, 1, &order, dx, 1));
+        if (argc > 6 + nx && strcmp(argv[6 + nx], "--horizon") == 0) {
+            fmi3Instance e;
+            fmi3Status st = fmi3OK;
+            for (k = 0; k < 1000000 && st == fmi3OK; k++) {
+                st = fmi3DoStep(a, t, dt, fmi3False, &event, &stop, &early, &last);
+                if (st == fmi3OK) t = last;
+                if (st == fmi3OK && stop) break;
+            }
+            /* refused: the FMU is unchanged and says no retry helps; or it stopped at the horizon's end */
+            if (st == fmi3Discard ? (!stop || last != t) : st != fmi3OK) return 8;
+            OK(fmi3GetFloat64(a, vr, (size_t)nx, xa, (size_t)nx));
+            printf("horizon %.17g %d %d\n", t, (int)st, (int)stop);
+            e = fmi3InstantiateCoSimulation("e", argv[2], NULL, fmi3False, fmi3False, fmi3False, fmi3True, NULL, 0,
+                                            NULL, logger, NULL);
+            if (!e) return 4;
+            OK(fmi3EnterInitializationMode(e, fmi3False, 0.0, 0.0, fmi3False, 0.0));
+            OK(fmi3ExitInitializationMode(e));
+            st = fmi3DoStep(e, 0.0, 1e6, fmi3False, &event, &stop, &early, &last);
+            OK(fmi3GetFloat64(e, vr, (size_t)nx, xs, (size_t)nx));
+            printf("early %.17g %d %d %d", last, (int)st, (int)early, (int)stop);
+            for (i = 0; i < nx; i++) printf(" %.17g", xs[i]);
+            printf("\n");
+            /* from the horizon's end no step can be taken: refused, the FMU unchanged */
+            next = last;
+            EXPECT(fmi3DoStep(e, next, dt, fmi3False, &event, &stop, &early, &last), fmi3Discard);
+            if (!stop || early || last != next) return 9;
+            OK(fmi3GetFloat64(e, vr, (size_t)nx, xb, (size_t)nx));
+            if (memcmp(xs, xb, sizeof(double) * (size_t)nx) != 0) return 9;
+            OK(fmi3Terminate(e));
+            fmi3FreeInstance(e);
+        }
         EXPECT(fmi3DoStep(a, t, -dt, fmi3False, &event, &stop, &early, &last), fmi3Error);
         printf("me");
         for (i = 0; i < nx; i++) printf(" %.17g", xm[i]);

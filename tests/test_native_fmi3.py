@@ -55,7 +55,7 @@ def test_validates_clean_and_is_fmi3(built):
         assert {"sources/fmi3Functions.c", "sources/buildDescription.xml", "sources/model.h"} <= names
         assert 'fmiVersion="3.0"' in xml and "instantiationToken=" in xml
         for tag in ("<ModelExchange", "<CoSimulation", "<Output ", "<ContinuousStateDerivative ", "<InitialUnknown ",
-                    'causality="independent"'):
+                    'causality="independent"', 'mightReturnEarlyFromDoStep="false"'):
             assert tag in xml, tag
 
 
@@ -164,6 +164,36 @@ def test_bad_model_exchange_calls_are_refused(built):
     for reason in ("x[0] = nan is not finite", "nx = 4, expected 3", "no event indicators", "time nan is not finite",
                    "in Event Mode only"):
         assert reason in logs, reason
+
+
+def test_model_exchange_state_machine(built):
+    """The FMI 3.0 Model Exchange state machine call by call (tests/native3_tv_runner.py): Event Mode after
+    initialization, fmi3UpdateDiscreteStates without events or a next event time, Continuous-Time Mode and back by
+    fmi3EnterEventMode from it only; every call out of order refused with the reason, and the Event Mode calls on
+    a Co-Simulation instance (hasEventMode=false) too."""
+    proc = subprocess.run([sys.executable, str(HERE / "native3_tv_runner.py")], capture_output=True, text=True,
+                          input=json.dumps({"kind": "me_sequence", "fmu": str(built["prescribed_path", 3]), "t": 0.5}),
+                          timeout=300, cwd=HERE)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    no_event = [0, False, False, False, False, False, 0.0]  # need update, terminate, nominals, values, next time
+    assert out["calls"] == {
+        "enterEventMode_instantiated": 3, "enterInitializationMode": 0, "enterContinuousTimeMode_initialization": 3,
+        "exitInitializationMode": 0, "completedIntegratorStep_event": 3, "enterEventMode_event": 3,
+        "setContinuousStates_event": 3, "updateDiscreteStates": no_event, "enterContinuousTimeMode": 0,
+        "updateDiscreteStates_continuous": 3, "enterContinuousTimeMode_continuous": 3, "setTime": 0,
+        "getContinuousStateDerivatives": 0, "derivatives": out["calls"]["derivatives"],
+        "completedIntegratorStep": [0, False, False], "enterEventMode": 0, "updateDiscreteStates_again": no_event,
+        "enterContinuousTimeMode_again": 0, "terminate": 0, "cs_enterEventMode": 3, "cs_updateDiscreteStates": 3,
+        "cs_step_after": [0, False, False, False, 0.01]}
+    assert np.all(np.isfinite(out["calls"]["derivatives"]))
+    logs = out["logs"]
+    for f in ("fmi3EnterEventMode", "fmi3EnterContinuousTimeMode", "fmi3CompletedIntegratorStep",
+              "fmi3SetContinuousStates", "fmi3UpdateDiscreteStates"):
+        assert f"{f}: not allowed in the current state of the instance (FMI 3.0 call sequence)" in logs, f
+    assert sum("not allowed in the current state" in m for m in logs) == 7  # one line per refused call
+    for f in ("fmi3EnterEventMode", "fmi3UpdateDiscreteStates"):
+        assert f"{f}: this FMU has no Event Mode in Co-Simulation (hasEventMode=false, eventModeUsed is false)" in logs
 
 
 def test_do_step_contract_on_a_forcing_that_turns_infinite(tmp_path):

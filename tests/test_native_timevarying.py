@@ -205,13 +205,6 @@ def test_refuses_inputs_and_tunable_parameters(tmp_path):
         build_fmu(with_par, tmp_path, target="native")
 
 
-def test_fmi3_build_of_a_time_varying_spec_is_refused(tmp_path):
-    """The FMI 3.0 layer is not tested with the time-varying runtime: refused, nothing left behind."""
-    with pytest.raises(NativeTargetError, match="FMI 2.0 only"):
-        build_fmu(PROBLEMS["Tv1"][0], tmp_path, target="native", fmi_version=3)
-    assert not list(tmp_path.glob("*.fmu*"))
-
-
 def test_refuses_tables_beyond_the_piece_limit(tmp_path, monkeypatch):
     monkeypatch.setattr(_native_tv, "DEGREES", (8,))
     monkeypatch.setattr(_native_tv, "MAX_PIECES", 4)

@@ -23,6 +23,7 @@ import sys
 import tempfile
 import uuid
 import zipfile
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -372,9 +373,6 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     if dae.is_constant:
         G0, G1, W0, W1, comp, lam_tunable = _affine_maps(dae, spec.method, spec.lam, k)
         tv = None
-    elif fmi_version == 3:
-        raise NativeTargetError("time-varying A or B are built for FMI 2.0 only (fmi_version=2): the FMI 3.0 layer "
-                                "is not yet tested with the time-varying runtime")
     else:  # time-varying: tables over the horizon; the constant arrays are zeros the C runtime does not read
         tv = _native_tv.prepare(dae, spec, k, NativeTargetError)
         G0, G1, W0, W1, comp, lam_tunable = tv["placeholders"]
@@ -392,6 +390,10 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     note = f"native C{', FMI 3.0' if fmi_version == 3 else ''}, constant A and B; {spec.method} completion, {lam_note}.{fixed_note}"
     if tv is not None:  # the tables enter the header before the GUID is its hash
         header, note = _native_tv.finish_header(header, tv), _native_tv.note(spec, tv, lam_note)
+        if fmi_version == 3:  # past the horizon fmi3DoStep discards, or returns early at its end where allowed
+            note = note.replace("native C,", "native C, FMI 3.0,", 1) + (
+                " Steps past the horizon: fmi3Discard with terminateSimulation, or an early return at its end "
+                "where the importer allows early return.")
     variables = _variables(spec, fpars=fpars, kpars=kpars, vr=info["vr"], lam_tunable=lam_tunable,
                            method=spec.method, linear=info["linear"])
     digest = hashlib.sha256()
@@ -404,7 +406,8 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     header = header.replace(placeholder, guid)
     flags_common = dict(needsExecutionTool=False, canBeInstantiatedOnlyOncePerProcess=False, canNotUseMemoryManagementFunctions=False,
                         canGetAndSetFMUstate=True, canSerializeFMUstate=True, providesDirectionalDerivative=False)
-    describe = _describe3 if fmi_version == 3 else model_description
+    # FMI 3.0: a time-varying FMU returns early at the end of its tables' horizon where the importer allows it
+    describe = partial(_describe3, might_return_early=tv is not None) if fmi_version == 3 else model_description
     xml = describe(
         model_name=ident, guid=guid, description=f"{spec.description or ident} [{note}]", model_identifier=ident,
         variables=variables, source_files=["fmi2Functions.c"],
@@ -464,7 +467,7 @@ def _variables3(variables, nr):
 
 
 def _describe3(*, model_name, guid, description, model_identifier, variables, source_files, model_exchange,
-               co_simulation, experiment, log_categories):
+               co_simulation, experiment, log_categories, might_return_early=False):
     """`model_description3` with the FMI 3.0 names of the interfaces' capability flags."""
     del source_files  # FMI 3.0 lists them in sources/buildDescription.xml
     common = dict(canGetAndSetFMUState=True, canSerializeFMUState=True, needsExecutionTool=False,
@@ -474,4 +477,5 @@ def _describe3(*, model_name, guid, description, model_identifier, variables, so
         variables=variables, experiment=experiment, log_categories=log_categories,
         model_exchange=dict(common, needsCompletedIntegratorStep=not model_exchange["completedIntegratorStepNotNeeded"]),
         co_simulation=dict(common, canHandleVariableCommunicationStepSize=True,
-                           maxOutputDerivativeOrder=co_simulation["maxOutputDerivativeOrder"], hasEventMode=False))
+                           maxOutputDerivativeOrder=co_simulation["maxOutputDerivativeOrder"], hasEventMode=False,
+                           mightReturnEarlyFromDoStep=might_return_early))

@@ -38,6 +38,7 @@ typedef char lsc3_int32_is_fmi2Integer[sizeof(fmi3Int32) == sizeof(fmi2Integer) 
 typedef struct {
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
+    int early_return;            /* earlyReturnAllowed of fmi3InstantiateCoSimulation */
 } Host3;
 
 /* core function names (the start of a message) and their FMI 3.0 counterparts, longest first */
@@ -108,7 +109,8 @@ static int nullargs(Instance *c, const char *f, const void *a, const char *an, c
 const char *fmi3GetVersion(void) { return fmi3Version; }
 
 static fmi3Instance instantiate(fmi3String instanceName, fmi2Type type, fmi3String token, fmi3Boolean loggingOn,
-                                fmi3InstanceEnvironment instanceEnvironment, fmi3LogMessageCallback logMessage) {
+                                fmi3InstanceEnvironment instanceEnvironment, fmi3LogMessageCallback logMessage,
+                                fmi3Boolean earlyReturnAllowed) {
     Host3 *host;
     fmi2CallbackFunctions cb;
     Instance *c;
@@ -128,6 +130,7 @@ static fmi3Instance instantiate(fmi3String instanceName, fmi2Type type, fmi3Stri
     if (host == NULL) return NULL;
     host->env = instanceEnvironment;
     host->log = logMessage;
+    host->early_return = earlyReturnAllowed ? 1 : 0;
     cb.logger = forward_log;
     cb.allocateMemory = calloc;
     cb.freeMemory = free;
@@ -143,7 +146,8 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                                           fmi3InstanceEnvironment instanceEnvironment, fmi3LogMessageCallback logMessage) {
     (void)resourcePath;
     (void)visible;
-    return instantiate(instanceName, fmi2ModelExchange, instantiationToken, loggingOn, instanceEnvironment, logMessage);
+    return instantiate(instanceName, fmi2ModelExchange, instantiationToken, loggingOn, instanceEnvironment, logMessage,
+                       fmi3False);
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
@@ -154,7 +158,6 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     const char *why = NULL;
     (void)resourcePath;
     (void)visible;
-    (void)earlyReturnAllowed; /* steps never return early: allowed or not is the same */
     (void)requiredIntermediateVariables;
     (void)intermediateUpdate;
     if (eventModeUsed) why = "eventModeUsed is true, but this FMU has no Event Mode in Co-Simulation (hasEventMode=false)";
@@ -164,7 +167,8 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
         if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError", why);
         return NULL;
     }
-    return instantiate(instanceName, fmi2CoSimulation, instantiationToken, loggingOn, instanceEnvironment, logMessage);
+    return instantiate(instanceName, fmi2CoSimulation, instantiationToken, loggingOn, instanceEnvironment, logMessage,
+                       earlyReturnAllowed);
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
@@ -204,7 +208,20 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) { return status3(fm
 fmi3Status fmi3Terminate(fmi3Instance instance) { return status3(fmi2Terminate(instance)); }
 fmi3Status fmi3Reset(fmi3Instance instance) { return status3(fmi2Reset(instance)); }
 
-fmi3Status fmi3EnterEventMode(fmi3Instance instance) { return status3(fmi2EnterEventMode(instance)); }
+#define NO_CS_EVENT_MODE "this FMU has no Event Mode in Co-Simulation (hasEventMode=false, eventModeUsed is false)"
+
+/* Model Exchange: from Continuous-Time Mode only (the FMI 3.0 state machine; Event Mode is entered once per
+ * event); Co-Simulation: refused, there is no Event Mode there */
+fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
+    Instance *c = (Instance *)instance;
+    if (!allowed(c, "fmi3EnterEventMode", ANY_ALIVE)) return fmi3Error;
+    if (c->type == fmi2CoSimulation) {
+        logmsg(c, fmi2Error, "fmi3EnterEventMode: %s", NO_CS_EVENT_MODE);
+        return fmi3Error;
+    }
+    if (!allowed(c, "fmi3EnterEventMode", ContinuousTimeMode)) return fmi3Error;
+    return status3(fmi2EnterEventMode(instance));
+}
 
 /* ---- get and set ------------------------------------------------------------- */
 
@@ -466,6 +483,10 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
     fmi2Status s;
     const char *f = "fmi3UpdateDiscreteStates";
     if (!allowed(c, f, ANY_ALIVE)) return fmi3Error;
+    if (c->type == fmi2CoSimulation) {
+        logmsg(c, fmi2Error, "%s: %s", f, NO_CS_EVENT_MODE);
+        return fmi3Error;
+    }
     if (nullargs(c, f, discreteStatesNeedUpdate, "discreteStatesNeedUpdate", terminateSimulation, "terminateSimulation")
         || nullargs(c, f, nominalsOfContinuousStatesChanged, "nominalsOfContinuousStatesChanged",
                     valuesOfContinuousStatesChanged, "valuesOfContinuousStatesChanged")
@@ -494,6 +515,17 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetF
     if (s != fmi2OK) return status3(s);
     *enterEventMode = event != fmi2False;
     *terminateSimulation = stop != fmi2False;
+#ifdef LSC_TIME_VARYING
+    {
+        const Instance *c = (const Instance *)instance;
+        if (!(c->s.t < TV_T1 - TV_TIME_SLACK(TV_T1))) { /* no derivative past the tables: stop here */
+            logmsg((Instance *)instance, fmi2Warning, "fmi3CompletedIntegratorStep: reached %.17g, the end of the "
+                   "horizon the time-varying coefficients were tabulated on at build time: terminateSimulation is "
+                   "true (build with a longer experiment stop)", c->s.t);
+            *terminateSimulation = fmi3True;
+        }
+    }
+#endif
     return fmi3OK;
 }
 
@@ -547,23 +579,68 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueRefere
     return status3(fmi2GetRealOutputDerivatives(c, vr, nvr, (const fmi2Integer *)orders, values));
 }
 
-/* The step is the core's fmi2DoStep. It never returns early and never needs event handling; after a
- * discard lastSuccessfulTime is the step's start (the FMU stays there), and terminateSimulation says
- * that no retry can succeed as things are (fmi2Terminated of the FMI 2.0 API). */
+#ifdef LSC_TIME_VARYING
+/* A step that ends past the horizon of the time-varying tables, from a point before its end, for an importer that
+ * allows early return: the FMU steps to the end of the horizon and returns early there with terminateSimulation
+ * (the FMI 3.0 way to say "this far and no further"). 1 if it did (status in *s), 0 if the core takes the step as
+ * asked (it refuses a step past the horizon: fmi3Discard, the FMU unchanged). A step that also ends after the
+ * stop time is left to the core, which refuses it as an error. */
+static int early_return_at_horizon(Instance *c, double t, double h, fmi2Boolean noSet, fmi2Status *s) {
+    const Host3 *host = (const Host3 *)c->cb.componentEnvironment;
+    const double end = TV_T1;
+    if (!host->early_return || !(c->s.phase & StepComplete) || !isfinite(t) || !isfinite(h)
+        || !(t + h > end + TV_TIME_SLACK(end) + 1e-12 * h) || !(t < end - TV_TIME_SLACK(end))
+        || (c->s.stop_defined && t + h > c->s.t_stop)) return 0;
+    *s = fmi2DoStep(c, t, end - t, noSet);
+    if (*s == fmi2OK)
+        logmsg(c, fmi2Warning, "fmi3DoStep: the step from %.17g to %.17g leaves the horizon [%.17g, %.17g] the "
+               "time-varying coefficients were tabulated on at build time: returned early at its end, "
+               "terminateSimulation is true (build with a longer experiment stop)", t, t + h, TV_T0, end);
+    return 1;
+}
+#endif
+
+/* The step is the core's fmi2DoStep. It returns early only at the end of the horizon of time-varying tables (when
+ * the importer allows it) and never needs event handling; after a discard lastSuccessfulTime is the FMU time before
+ * the call (the FMU is unchanged), and terminateSimulation says that no retry can succeed as things are
+ * (fmi2Terminated of the FMI 2.0 API: a step past the horizon, the same step discarded twice). */
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
                       fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *eventHandlingNeeded,
                       fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
     Instance *c = (Instance *)instance;
+    const fmi2Boolean noSet = noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False;
+    double t_before, ud_t_before;
     fmi2Status s;
     if (!allowed(c, "fmi3DoStep", ANY_ALIVE) || wrong_type(c, "fmi3DoStep", fmi2CoSimulation)) return fmi3Error;
     if (nullargs(c, "fmi3DoStep", eventHandlingNeeded, "eventHandlingNeeded", terminateSimulation, "terminateSimulation")
         || nullargs(c, "fmi3DoStep", earlyReturn, "earlyReturn", lastSuccessfulTime, "lastSuccessfulTime"))
         return fmi3Error;
-    s = fmi2DoStep(c, currentCommunicationPoint, communicationStepSize,
-                   noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False);
     *eventHandlingNeeded = fmi3False;
     *earlyReturn = fmi3False;
+    /* the core takes the master's communication point as the FMU time (a few ulps from it) before stepping; after
+     * a discard the FMU is as before the call (FMI 3.0), its time included */
+    t_before = c->s.t;
+    ud_t_before = c->s.ud_t;
+#ifdef LSC_TIME_VARYING
+    if (early_return_at_horizon(c, currentCommunicationPoint, communicationStepSize, noSet, &s)) {
+        if (s == fmi2Discard) { c->s.t = t_before; c->s.ud_t = ud_t_before; }
+        *earlyReturn = s == fmi2OK;
+        *terminateSimulation = s == fmi2OK || c->s.terminal != 0;
+        *lastSuccessfulTime = c->s.t;
+        return status3(s);
+    }
+#endif
+    s = fmi2DoStep(c, currentCommunicationPoint, communicationStepSize, noSet);
+    if (s == fmi2Discard) { c->s.t = t_before; c->s.ud_t = ud_t_before; }
     *terminateSimulation = c->s.terminal != 0;
     *lastSuccessfulTime = c->s.t;
+#ifdef LSC_TIME_VARYING
+    if (s == fmi2OK && communicationStepSize > 0.0 && !(c->s.t < TV_T1 - TV_TIME_SLACK(TV_T1))) {
+        /* at the end of the tables no step can follow: the importer is asked to stop here, not at the next step */
+        logmsg(c, fmi2Warning, "fmi3DoStep: reached %.17g, the end of the horizon the time-varying coefficients were "
+               "tabulated on at build time: terminateSimulation is true (build with a longer experiment stop)", c->s.t);
+        *terminateSimulation = fmi3True;
+    }
+#endif
     return status3(s);
 }
