@@ -139,7 +139,8 @@ def _estimated(name, fmu, H, startup):
     first UDEG + 1 steps (until the FMU's history polynomial has its points), values only after."""
     steps = int(round(STOP / H))
     nud, udeg = _define(fmu, "NF"), _define(fmu, "UDEG")
-    jets = [j if (startup and i <= udeg) else j[:1] for i, j in enumerate(_jets(name, [i * H for i in range(steps)], nud))]
+    jets = _jets(name, [i * H for i in range(steps)], nud)
+    jets = [j if (startup and i <= udeg) else j[:1] for i, j in enumerate(jets)]
     r = run({"fmu": str(fmu), "dt": H, "steps": steps, "outputs": _names(name), "inputs": {"u": jets},
              "send_derivatives": True, "block": BLOCK})
     assert set(r["status"]) == {"ok"}

@@ -1,7 +1,8 @@
 """Time-varying coefficients for the native target: piecewise Chebyshev tables of the completion.
 
 Over the experiment's horizon ``[start, stop]`` the FMU needs, as functions of
-``t`` only (no inputs; parameters fixed at their spec values):
+``t`` only (parameters fixed at their spec values; inputs enter through their
+forcing maps, below):
 
 - ``G(t) = G0(t) + lambda G1(t)`` and ``g(t) = g0(t) + lambda g1(t)`` (the parts
   fitted at the well-scaled rates 1 and 2, checked at 0.3, 7 and the spec's
@@ -326,8 +327,9 @@ def note(spec, tab, lam_note):
     degs = [c.shape[0] - 1 for _, _, c in tab["pieces"]]
     return (f"native C, time-varying A and B tabulated on [{tab['t0']:g}, {tab['t1']:g}] (piecewise Chebyshev, "
             f"{len(degs)} piece(s) of degree {min(degs)}-{max(degs)}, coefficient tail <= {TOL:g} relative; "
-            f"sixth-order Magnus steps, the fourth-order one as error estimate); {spec.method} completion, {lam_note}; all parameters fixed at "
-            "their spec values.")
+            f"sixth-order Magnus steps, the fourth-order one as error estimate); {spec.method} completion, {lam_note}; "
+            "all parameters fixed at their spec values."
+            + (f" Inputs in f through their tabulated forcing maps on u, ..., u^({tab['p']})." if tab["nuj"] else ""))
 
 
 def report(tab, target, header):

@@ -52,8 +52,10 @@ static const double *tv_combined(Instance *c) {
             double *dst = c->tv_coef + TV_COFF[p] + (long)k * TV_NG;
             for (e = 0; e < NX * NX; e++) dst[e] = src[e] + c->s.lam * src[NX * NX + e];
             for (e = 0; e < NX; e++) dst[NX * NX + e] = src[2 * NX * NX + e] + c->s.lam * src[2 * NX * NX + NX + e];
-            for (e = 0; e < NX * TV_NUJ; e++) /* the inputs' forcing maps U = U0 + lambda U1 */
-                dst[NX * NX + NX + e] = src[2 * NX * NX + 2 * NX + e] + c->s.lam * src[2 * NX * NX + 2 * NX + NX * TV_NUJ + e];
+            for (e = 0; e < NX * TV_NUJ; e++) { /* the inputs' forcing maps U = U0 + lambda U1 */
+                const double *u0 = src + 2 * NX * NX + 2 * NX;
+                dst[NX * NX + NX + e] = u0[e] + c->s.lam * u0[NX * TV_NUJ + e];
+            }
         }
     }
     c->tv_lam = c->s.lam;
