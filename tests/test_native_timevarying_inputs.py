@@ -247,3 +247,61 @@ def test_refusals_name_what_cannot_be_tabulated(tmp_path, term, where, match):
     with pytest.raises(NativeTargetError, match=match):
         build_fmu(d, tmp_path, target="native")
     assert not list(tmp_path.glob("*.fmu*"))
+
+
+def test_lambda_and_the_inputs_maps_affine_part(built):
+    # off the manifold at lambda = 7 (not a fitting rate): U0 + 7 U1 acts on the input's jets; the library at 7
+    name = "RotForce3"
+    d = PROBLEMS[name][0]
+    x0 = np.array([s["start"] for s in parse_spec(d).states]) + np.array([1e-3, 0, 0, 0, 0])
+    steps = 100
+    r = run({"fmu": str(built[name]), "dt": DT, "steps": steps, "outputs": _names(name),
+             "inputs": {"u": _jets(name, [i * DT for i in range(steps)], _define(built[name], "NF"))},
+             "send_derivatives": True, "start_values": {"lambda": 7.0, "x1_0": float(x0[0])}, "block": BLOCK})
+    assert set(r["status"]) == {"ok"}
+    t = np.array(r["time"])
+    spec = parse_spec(d)
+    f = sp.Matrix(spec.f).subs(spec.input_symbols["u"], PROBLEMS[name][2].subs(T, spec.t))
+    c = lsc.complete(lsc.LinearDAE(sp.Matrix(spec.A), sp.Matrix(spec.B), f), "alternative", lam=7.0)
+    X = lsc.solve_completion(c, (0.0, t[-1]), x0, method="DOP853", t_eval=t, rtol=1e-12, atol=1e-13).x
+    got = np.array(r["values"]).T
+    assert rel_err(got, X) < 1e-8
+    assert np.abs(got[:, -1] - _exact(name, t)[:, -1]).max() > 1e-6  # the start was off: lambda mattered
+
+
+def test_output_derivatives_are_G_x_plus_g_with_the_input(built):
+    name = "RotCanonIn2"
+    steps = 50
+    r = run({"fmu": str(built[name]), "dt": DT, "steps": steps, "outputs": _names(name),
+             "output_derivatives": _names(name), "send_derivatives": True,
+             "inputs": {"u": _jets(name, [i * DT for i in range(steps)], _define(built[name], "NF"))}})
+    xe = sp.Matrix(rotating_canonical_sympy(2)[2])
+    expected = np.array(xe.diff(T).subs(T, r["time"][-1]).evalf(), dtype=float).ravel()
+    assert rel_err(r["derivatives"][0], expected) < 1e-8
+
+
+def test_c_master_under_address_and_ub_sanitizers(built, tmp_path):
+    # the C master sets no input: u stays at its start value, so the run is the library's with f(t, u(0))
+    import os
+    import subprocess
+
+    from test_native import _master, _unpacked
+
+    name = "RotForce3"
+    guid, vrs = _unpacked(built[name], tmp_path)
+    lib = tmp_path / "san.so"
+    proc = subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-fsanitize=address,undefined", "-g",
+                           "-fno-sanitize-recover=undefined", "-shared", "-fPIC", "-I", str(tmp_path / "sources"),
+                           "-o", str(lib), str(tmp_path / "sources" / "fmi2Functions.c"), "-lm"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    exe = _master(tmp_path, sanitize=True)
+    names = _names(name)
+    proc = subprocess.run([str(exe), str(lib), guid, "100", "0.01", str(len(names)), *[str(vrs[n]) for n in names]],
+                          capture_output=True, text=True, timeout=300,
+                          env=dict(os.environ, ASAN_OPTIONS="detect_leaks=1", UBSAN_OPTIONS="halt_on_error=1"))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "runtime error" not in proc.stderr and "AddressSanitizer" not in proc.stderr
+    rows = np.array([[float(v) for v in line.split()] for line in proc.stdout.split("\n") if line.strip()])
+    X, _ = _library(name, np.concatenate([[0.0], rows[:, 0]]), u=PROBLEMS[name][2].subs(T, 0))  # rows: step ends
+    assert rel_err(rows[:, 1:].T, X[:, 1:]) < 1e-8
