@@ -1,10 +1,11 @@
 """Native FMUs with time-varying A(t), B(t) and inputs in f: the exact solution with the input a known function.
 
-Two problems with manufactured exact solutions whose forcing is fed partly through an input ``u`` with a
+Problems with manufactured exact solutions whose forcing is fed partly through an input ``u`` with a
 time-dependent coefficient ``b(t)`` (``f = f_rest(t) + b(t) u``, ``u = u*(t)`` known): positions and
-velocities on a rotating line driven by a force along the line and through the constraint (index 3), and
-the gallery's `rotating_canonical` (written in sympy, tests/test_native_timevarying.py) with one of its
-rotated forcing components through the input (index 2). Each FMU runs in a subprocess
+velocities on a rotating line driven by a force along the line and through the constraint (index 3; also
+with a row and an unknown scaled by 1e4, so that the library equilibrates both), and the gallery's
+`rotating_canonical` (written in sympy, tests/test_native_timevarying.py) with one of its rotated forcing
+components through the input (index 2). Each FMU runs in a subprocess
 (tests/native_runner.py, fmpy) with lsc, sympy, scipy and fmu_build blocked.
 """
 import zipfile
@@ -43,6 +44,15 @@ def _problems():
         [[0, 0, -1, 0, 0], [0, 0, 0, -1, 0], [0, 0, 0, 0, -c], [0, 0, 0, 0, -s], [c, s, 0, 0, 0]],
         [c + 2, sp.sin(2 * T), -s, 2 * sp.cos(2 * T), sp.cos(T / 3)],
         [0, 0, -s, c, sp.Rational(1, 10)], sp.sin(sp.Rational(3, 2) * T) + sp.Rational(3, 10))
+    # the same with the constraint's row times 1e4 and mu / 1e4 as unknown: the library equilibrates rows and
+    # columns, and the input maps are those of the given f and unknowns
+    R, Cs = sp.diag(1, 1, 1, 1, 10 ** 4), sp.diag(1, 1, 1, 1, sp.Rational(1, 10 ** 4))
+    A3, B3 = sp.Matrix(np.diag([1, 1, 1, 1, 0]).tolist()), sp.Matrix(
+        [[0, 0, -1, 0, 0], [0, 0, 0, -1, 0], [0, 0, 0, 0, -c], [0, 0, 0, 0, -s], [c, s, 0, 0, 0]])
+    out["RotForce3Scaled"] = _with_input(
+        "RotForce3Scaled", R * A3 * Cs, R * B3 * Cs,
+        Cs.inv() * sp.Matrix([c + 2, sp.sin(2 * T), -s, 2 * sp.cos(2 * T), sp.cos(T / 3)]),
+        R * sp.Matrix([0, 0, -s, c, sp.Rational(1, 10)]), sp.sin(sp.Rational(3, 2) * T) + sp.Rational(3, 10))
     # the gallery's rotating canonical form: the oscillator's second forcing component, turned by P(t) into
     # the rows 1 and 2, comes through the input
     A, B, xe, f = rotating_canonical_sympy(2)
@@ -113,6 +123,11 @@ def _library(name, times, u=None, x0=None):
     res = lsc.solve_completion(c, (times[0], times[-1]), x0, method="DOP853", t_eval=times, rtol=1e-12, atol=1e-13)
     assert res.success
     return res.x, c
+
+
+def test_the_scaled_problem_is_equilibrated():
+    c = lsc.complete(_numeric_dae(parse_spec(PROBLEMS["RotForce3Scaled"][0])), "alternative", lam=2.0)
+    assert c._row_scales is not None and c._col_scales is not None
 
 
 @pytest.mark.parametrize("name", list(PROBLEMS))
