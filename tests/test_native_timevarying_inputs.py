@@ -320,3 +320,49 @@ def test_c_master_under_address_and_ub_sanitizers(built, tmp_path):
     rows = np.array([[float(v) for v in line.split()] for line in proc.stdout.split("\n") if line.strip()])
     X, _ = _library(name, np.concatenate([[0.0], rows[:, 0]]), u=PROBLEMS[name][2].subs(T, 0))  # rows: step ends
     assert rel_err(rows[:, 1:].T, X[:, 1:]) < 1e-8
+
+
+@pytest.mark.parametrize("method", ["standard", "stabilized"])
+def test_other_completions_with_an_input(tmp_path, method):
+    # fixed lambda: U1 = 0, the maps checked against the library's g at the build; exact input derivatives
+    d = dict(PROBLEMS["RotCanonIn2"][0])
+    d["completion"] = {"method": method, "lam": 2.0} if method == "stabilized" else {"method": method}
+    d["model"] = {"name": "RotCanonIn2" + method.capitalize()}
+    fmu = build_fmu(d, tmp_path, target="native")
+    t, V = _cs(fmu, "RotCanonIn2", stop=1.0)
+    assert rel_err(V[:-1], _exact("RotCanonIn2", t)) < 1e-8
+
+
+def test_model_exchange_refuses_a_derivative_the_input_makes_infinite(built, tmp_path):
+    # u = 1e308 is a finite value; U u overflows: fmi2GetDerivatives says so (fmi2Error), and the host exits cleanly
+    import subprocess
+    import sys
+
+    script = f"""
+from fmpy import extract, read_model_description
+from ctypes import c_double
+from fmpy.fmi2 import FMU2Model
+md = read_model_description({str(built['RotForce3'])!r})
+fmu = FMU2Model(guid=md.guid, unzipDirectory=extract({str(built['RotForce3'])!r}),
+                modelIdentifier=md.modelExchange.modelIdentifier, instanceName="me")
+fmu.instantiate()
+fmu.setupExperiment(startTime=0.0)
+fmu.enterInitializationMode()
+fmu.exitInitializationMode()
+fmu.enterContinuousTimeMode()
+vr = next(v.valueReference for v in md.modelVariables if v.name == "u")
+dx = (c_double * 5)()
+fmu.getDerivatives(dx, 5)
+print("finite", all(abs(d) < 1e300 for d in dx))
+fmu.setReal([vr], [1e308])
+try:
+    fmu.getDerivatives(dx, 5)
+    print("no error", list(dx))
+except Exception as exc:
+    print("refused", exc)
+fmu.terminate()
+fmu.freeInstance()
+"""
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "finite True" in proc.stdout and "refused" in proc.stdout, proc.stdout

@@ -98,6 +98,11 @@ fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real derivatives[], size_t
                "coefficients were tabulated on at build time", c->s.t, TV_T0, TV_T1);
         return fmi2Error;
     }
+    for (i = 0; i < NX; i++) /* an input's extrapolated jet may overflow: refused as for constant A, B */
+        if (!isfinite(derivatives[i])) {
+            logmsg(c, fmi2Error, "fmi2GetDerivatives: non-finite derivative at t = %g", c->s.t);
+            return fmi2Error;
+        }
     return fmi2OK;
 #endif
     form_gw(c);
