@@ -55,6 +55,10 @@ class _Sampler:
         self.error = error
         self.affine = method == "alternative"
         self.inputs = inputs
+        # the checks: the spec's DAE (inputs at their start values) at other rates, or at the fixed rate
+        self.checks = [(r, lsc.complete(dae, method, lam=r, k=k)) for r in (*_CHECK_RATES, float(lam))] \
+            if self.affine else [] if inputs is None else \
+            [(0.0, lsc.complete(dae, method, lam=None if method == "standard" else lam, k=k))]
         dae = dae if inputs is None else inputs[0]  # with inputs: the completion of f0
         if method == "standard":
             self.comps = [lsc.complete(dae, "standard", k=k)]
@@ -62,7 +66,6 @@ class _Sampler:
             self.comps = [lsc.complete(dae, "stabilized", lam=lam, k=k)]
         else:
             self.comps = [lsc.complete(dae, method, lam=r, k=k) for r in (1.0, 2.0)]
-            self.checks = [(r, lsc.complete(dae, method, lam=r, k=k)) for r in (*_CHECK_RATES, float(lam))]
         self.nc = self.comps[0].n_constraints
         self.p = self.comps[0]._order
         self.m = 0 if inputs is None else inputs[1](0.0).shape[0] * (self.p + 1)  # input-jet entries used
@@ -105,24 +108,18 @@ class _Sampler:
         G0, G1, g0, g1, U0, U1 = (v[a:b] for a, b in zip(cut[:-1], cut[1:]))
         return G0.reshape(n, n), G1.reshape(n, n), g0, g1, U0.reshape(n, m), U1.reshape(n, m)
 
-    def check_affine(self, ts, dae, u_start):
+    def check_affine(self, ts, u_start):
         """G(t, lam) = G0 + lam G1 and g likewise at a few times and rates, relative to the terms' size.
 
         With inputs, also the input maps: the tables' g with the inputs held at their start values `u_start`
-        (the jet [u, 0, 0, ...]) against the completion of the spec's DAE `dae` at those values."""
+        (the jet [u, 0, 0, ...]) against the completion of the spec's DAE (inputs at those values)."""
         if not self.affine and self.inputs is None:
             return
-        n, m = self.n, self.m
-        ujet = np.zeros(m)
+        ujet = np.zeros(self.m)
         ujet[:: self.p + 1] = u_start
-        if self.affine:
-            checks = [(r, lsc.complete(dae, "alternative", lam=r, k=self.comps[0].k))
-                      for r, _ in self.checks] if self.inputs is not None else self.checks
-        else:
-            checks = [(0.0, lsc.complete(dae, self.comps[0].method, lam=self.comps[0].lam, k=self.comps[0].k))]
         for t in ts:
             G0, G1, g0, g1, U0, U1 = self._parts(self(t))
-            for rate, comp in checks:
+            for rate, comp in self.checks:
                 G, g = comp.matrices(t)
                 for name, M0, M1, M in (("G", G0, G1, G), ("g", g0 + U0 @ ujet, g1 + U1 @ ujet, g)):
                     scale = max(np.abs(M).max(), np.abs(M0).max() + rate * np.abs(M1).max(), 1.0)
@@ -169,7 +166,7 @@ def fit_tables(dae, method, lam, k, t_span, error, inputs=None, u_start=()):
     """Piecewise Chebyshev coefficients of the sampler's vector on `t_span`; a dict for the header."""
     a, b = map(float, t_span)
     sampler = _Sampler(dae, method, lam, k, error, inputs)
-    sampler.check_affine(np.linspace(a, b, 5), dae, np.asarray(u_start, dtype=float))
+    sampler.check_affine(np.linspace(a, b, 5), np.asarray(u_start, dtype=float))
     values, scale = {}, np.zeros(len(sampler.groups))
 
     def sample(t):
