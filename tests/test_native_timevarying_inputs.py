@@ -38,12 +38,13 @@ def _problems():
     c, s = sp.cos(T), sp.sin(T)
     out = {}
     # index 3: positions q, velocities v, force mu along n(t) = (cos t, sin t); the input pushes along the
-    # line (-sin t, cos t) and moves the constraint n(t).q = f5 (so u'' enters the multiplier)
+    # line (-sin t, cos t) and moves the constraint n(t).q = f5 by cos(t) u / 10 (so (cos(t) u)'' enters the
+    # multiplier: the Leibniz terms of the input maps with their binomial factors)
     out["RotForce3"] = _with_input(
         "RotForce3", np.diag([1, 1, 1, 1, 0]).tolist(),
         [[0, 0, -1, 0, 0], [0, 0, 0, -1, 0], [0, 0, 0, 0, -c], [0, 0, 0, 0, -s], [c, s, 0, 0, 0]],
         [c + 2, sp.sin(2 * T), -s, 2 * sp.cos(2 * T), sp.cos(T / 3)],
-        [0, 0, -s, c, sp.Rational(1, 10)], sp.sin(sp.Rational(3, 2) * T) + sp.Rational(3, 10))
+        [0, 0, -s, c, c / 10], sp.sin(sp.Rational(3, 2) * T) + sp.Rational(3, 10))
     # the same with the constraint's row times 1e4 and mu / 1e4 as unknown: the library equilibrates rows and
     # columns, and the input maps are those of the given f and unknowns
     R, Cs = sp.diag(1, 1, 1, 1, 10 ** 4), sp.diag(1, 1, 1, 1, sp.Rational(1, 10 ** 4))
@@ -52,7 +53,7 @@ def _problems():
     out["RotForce3Scaled"] = _with_input(
         "RotForce3Scaled", R * A3 * Cs, R * B3 * Cs,
         Cs.inv() * sp.Matrix([c + 2, sp.sin(2 * T), -s, 2 * sp.cos(2 * T), sp.cos(T / 3)]),
-        R * sp.Matrix([0, 0, -s, c, sp.Rational(1, 10)]), sp.sin(sp.Rational(3, 2) * T) + sp.Rational(3, 10))
+        R * sp.Matrix([0, 0, -s, c, c / 10]), sp.sin(sp.Rational(3, 2) * T) + sp.Rational(3, 10))
     # the gallery's rotating canonical form: the oscillator's second forcing component, turned by P(t) into
     # the rows 1 and 2, comes through the input
     A, B, xe, f = rotating_canonical_sympy(2)
@@ -164,8 +165,8 @@ def _estimated(name, fmu, H, startup):
 
 def test_estimated_input_derivatives_converge_at_the_order_of_the_history_polynomial(built):
     # derivatives estimated from the polynomial through the last UDEG + 1 = 8 values: u^(j) errs by
-    # O(H^(8 - j)); the index-3 multiplier reads u^(3) (through the constraint n(t).q = ... + u / 10): order 5,
-    # down to the rounding the divided differences amplify (~1e-10 at H = 0.005)
+    # O(H^(8 - j)); the index-3 multiplier reads u^(3) (through the constraint n(t).q = ... + cos(t) u / 10):
+    # order 5, down to the rounding the divided differences amplify (~1e-10 at H = 0.005)
     name = "RotForce3"
     err = [_estimated(name, built[name], H, startup=True) for H in (0.04, 0.02, 0.01)]
     orders = np.log2(np.array(err[:-1]) / np.array(err[1:]))
@@ -366,3 +367,22 @@ fmu.freeInstance()
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "finite True" in proc.stdout and "refused" in proc.stdout, proc.stdout
+
+
+def test_the_build_checks_every_column_of_the_input_maps(tmp_path, monkeypatch):
+    # input maps without the Leibniz rule's binomial factors (wrong where b(t) varies in a row whose derivatives
+    # the completion uses): the build's check against the library, on an input polynomial of degree p, refuses
+    from fmu_build.targets import _native_tv
+
+    def without_binomials(X, b, p):
+        n = b.shape[2]
+        out = np.zeros((X.shape[0], b.shape[0] * (p + 1)))
+        for i in range(b.shape[0]):
+            for j in range(p + 1):
+                out[:, i * (p + 1) + j] = sum(X[:, d * n:(d + 1) * n] @ b[i, d - j] for d in range(j, p + 1))
+        return out
+
+    monkeypatch.setattr(_native_tv, "_input_columns", without_binomials)
+    with pytest.raises(NativeTargetError, match="does not reproduce g"):
+        build_fmu(PROBLEMS["RotForce3"][0], tmp_path, target="native")
+    assert not list(tmp_path.glob("*.fmu*"))

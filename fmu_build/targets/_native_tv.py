@@ -27,6 +27,8 @@ piece shorter than `MIN_PIECE` of the horizon, is refused with a
 `NativeTargetError` naming the limit.
 """
 
+import math
+
 import numpy as np
 
 import lsc
@@ -46,8 +48,7 @@ _AFFINE_RTOL = 1e-9
 class _Sampler:
     """The vector [G0, G1, g0, g1, U0, U1 | M, m, s, C^T V, V^T c_g0, V^T V] at t, from completions at fixed rates.
 
-    `inputs` (None without inputs in f): ``(f0_dae, b)`` with the DAE of ``f0 = f(u = 0)`` and ``b(t)``, the
-    derivatives ``b_i^(m)(t)`` of the inputs' coefficients in f, shape (nu, p + 1, n).
+    `inputs` (None without inputs in f): ``(f0_dae, b, check_dae, ujet)`` from `_inputs`.
     """
 
     def __init__(self, dae, method, lam, k, error, inputs=None):
@@ -55,10 +56,11 @@ class _Sampler:
         self.error = error
         self.affine = method == "alternative"
         self.inputs = inputs
-        # the checks: the spec's DAE (inputs at their start values) at other rates, or at the fixed rate
-        self.checks = [(r, lsc.complete(dae, method, lam=r, k=k)) for r in (*_CHECK_RATES, float(lam))] \
+        # the checks: the spec's DAE (with inputs: the inputs a known polynomial) at other rates, or at the fixed one
+        check = dae if inputs is None else inputs[2]
+        self.checks = [(r, lsc.complete(check, method, lam=r, k=k)) for r in (*_CHECK_RATES, float(lam))] \
             if self.affine else [] if inputs is None else \
-            [(0.0, lsc.complete(dae, method, lam=None if method == "standard" else lam, k=k))]
+            [(0.0, lsc.complete(check, method, lam=None if method == "standard" else lam, k=k))]
         dae = dae if inputs is None else inputs[0]  # with inputs: the completion of f0
         if method == "standard":
             self.comps = [lsc.complete(dae, "standard", k=k)]
@@ -108,17 +110,16 @@ class _Sampler:
         G0, G1, g0, g1, U0, U1 = (v[a:b] for a, b in zip(cut[:-1], cut[1:]))
         return G0.reshape(n, n), G1.reshape(n, n), g0, g1, U0.reshape(n, m), U1.reshape(n, m)
 
-    def check_affine(self, ts, u_start):
+    def check_affine(self, ts):
         """G(t, lam) = G0 + lam G1 and g likewise at a few times and rates, relative to the terms' size.
 
-        With inputs, also the input maps: the tables' g with the inputs held at their start values `u_start`
-        (the jet [u, 0, 0, ...]) against the completion of the spec's DAE (inputs at those values)."""
+        With inputs, also every column of the input maps: the tables' g on the jet of a polynomial input of
+        degree p against the library's completion of f with that input."""
         if not self.affine and self.inputs is None:
             return
-        ujet = np.zeros(self.m)
-        ujet[:: self.p + 1] = u_start
         for t in ts:
             G0, G1, g0, g1, U0, U1 = self._parts(self(t))
+            ujet = self.inputs[3](t) if self.inputs is not None else np.zeros(0)
             for rate, comp in self.checks:
                 G, g = comp.matrices(t)
                 for name, M0, M1, M in (("G", G0, G1, G), ("g", g0 + U0 @ ujet, g1 + U1 @ ujet, g)):
@@ -162,11 +163,11 @@ def _input_columns(X, b, p):
     return out
 
 
-def fit_tables(dae, method, lam, k, t_span, error, inputs=None, u_start=()):
+def fit_tables(dae, method, lam, k, t_span, error, inputs=None):
     """Piecewise Chebyshev coefficients of the sampler's vector on `t_span`; a dict for the header."""
     a, b = map(float, t_span)
     sampler = _Sampler(dae, method, lam, k, error, inputs)
-    sampler.check_affine(np.linspace(a, b, 5), np.asarray(u_start, dtype=float))
+    sampler.check_affine(np.linspace(a, b, 5))
     values, scale = {}, np.zeros(len(sampler.groups))
 
     def sample(t):
@@ -262,9 +263,11 @@ def check_expressible(spec, fix_parameters, error):
     return [p["name"] for p in spec.parameters]
 
 
-def _inputs(spec, dae, p):
-    """``(f0_dae, b)`` for `_Sampler`: the DAE with ``f0 = f(u = 0)`` and ``b(t)``, shape (nu, p + 1, n), the
-    derivatives 0..p of the inputs' coefficients ``b_i = df/du_i`` (functions of t; parameters at their values)."""
+def _inputs(spec, p):
+    """``(f0_dae, b, check_dae, ujet)`` for `_Sampler`: the DAE with ``f0 = f(u = 0)``; ``b(t)``, shape
+    (nu, p + 1, n), the derivatives 0..p of the inputs' coefficients ``b_i = df/du_i`` (functions of t;
+    parameters at their values); the DAE with each input a polynomial of degree p in t and ``ujet(t)``, its
+    jet [u_i^(j)] (index i * (p + 1) + j), for the build's check of the maps."""
     import sympy
 
     values = {spec.symbols[q["name"]]: q["value"] for q in spec.parameters}
@@ -283,8 +286,20 @@ def _inputs(spec, dae, p):
     def b(t):
         return np.array([[float(e) for e in r] for r in fn(t)], dtype=float).reshape(shape)
 
-    del dae  # its f holds the inputs at their start values
-    return lsc.LinearDAE(num(spec.A), num(spec.B), f0), b
+    # u_i(t) = start_i + sum_(1 <= j <= p) c_ij (t - t0)^j / j!, all derivatives up to p present
+    t0 = float(spec.experiment["start"])
+    coef = np.array([[u["start"]] + [(-0.5) ** j * (i + 1) for j in range(1, p + 1)]
+                     for i, u in enumerate(spec.inputs)])
+    poly = {usym: sum(sympy.Float(coef[i, j]) * (spec.t - t0) ** j / sympy.factorial(j) for j in range(p + 1))
+            for i, usym in enumerate(spec.input_symbols.values())}
+
+    def ujet(t):
+        s = t - t0
+        return np.array([sum(coef[i, q] * s ** (q - j) / math.factorial(q - j) for q in range(j, p + 1))
+                         for i in range(coef.shape[0]) for j in range(p + 1)])
+
+    A, B = num(spec.A), num(spec.B)
+    return lsc.LinearDAE(A, B, f0), b, lsc.LinearDAE(A, B, sympy.Matrix(f.subs(poly))), ujet
 
 
 def prepare(dae, spec, k, error):
@@ -295,11 +310,11 @@ def prepare(dae, spec, k, error):
     start = time.perf_counter()
     a, b = float(spec.experiment["start"]), float(spec.experiment["stop"])
     span = (a, b + HORIZON_MARGIN * (b - a))  # Model Exchange integrators evaluate a little past the stop time
-    inputs, u_start = None, [u["start"] for u in spec.inputs]
+    inputs = None
     if spec.inputs:
         order = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=k)._order
-        inputs = _inputs(spec, dae, order)
-    tab = fit_tables(dae, spec.method, spec.lam, k, span, error, inputs, u_start)
+        inputs = _inputs(spec, order)
+    tab = fit_tables(dae, spec.method, spec.lam, k, span, error, inputs)
     n = dae.n
     # with inputs, the constant runtime's input jets (lengths from the order p, as for constant coefficients)
     comp = SimpleNamespace(_order=tab["p"] if spec.inputs else 0, _W_c=np.zeros((0, n)),
