@@ -5,8 +5,8 @@ time-dependent coefficient ``b(t)`` (``f = f_rest(t) + b(t) u``, ``u = u*(t)`` k
 velocities on a rotating line driven by a force along the line and through the constraint (index 3; also
 with a row and an unknown scaled by 1e4, so that the library equilibrates both), and the gallery's
 `rotating_canonical` (written in sympy, tests/test_native_timevarying.py) with one of its rotated forcing
-components through the input (index 2). Each FMU runs in a subprocess
-(tests/native_runner.py, fmpy) with lsc, sympy, scipy and fmu_build blocked.
+components through the input (index 2). Each FMU runs in a subprocess (tests/native_runner.py, fmpy;
+the accuracy runs with lsc, sympy, scipy and fmu_build blocked).
 """
 import zipfile
 
