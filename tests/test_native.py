@@ -180,7 +180,7 @@ def test_fmu_file_has_the_mode_of_an_ordinary_file(built, tmp_path):
 
 
 @pytest.mark.parametrize("spec, fix, message", [
-    ({"A": [["1 + t"]], "B": [[1]], "f": [0]}, False, "time-varying A or B: it has the input(s) a"),
+    ({"A": [["1 + t"]], "B": [[1]], "f": [0]}, False, "time-varying A or B: the tunable parameter(s) m would be fixed"),
     ({"A": [[1]], "B": [["a"]], "f": [0]}, False, "B depends on the input(s) a"),
     ({"A": [["m"]], "B": [[1]], "f": [0]}, False, "tunable parameter(s) m enter A or B"),
 ])

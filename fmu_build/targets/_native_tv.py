@@ -1,7 +1,8 @@
 """Time-varying coefficients for the native target: piecewise Chebyshev tables of the completion.
 
 Over the experiment's horizon ``[start, stop]`` the FMU needs, as functions of
-``t`` only (no inputs; parameters fixed at their spec values):
+``t`` only (parameters fixed at their spec values; inputs enter through their
+forcing maps, below):
 
 - ``G(t) = G0(t) + lambda G1(t)`` and ``g(t) = g0(t) + lambda g1(t)`` (the parts
   fitted at the well-scaled rates 1 and 2, checked at 0.3, 7 and the spec's
@@ -11,12 +12,22 @@ Over the experiment's horizon ``[start, stop]`` the FMU needs, as functions of
   space basis ``Z2`` of the derivative array may rotate from one time to the
   next, its Gram products do not).
 
+With inputs in ``f`` (``f = f0(t) + sum_i b_i(t) u_i``, affine in the inputs,
+checked at build time), ``g0``, ``g1`` are those of ``f0`` and the forcing maps
+of the inputs ride along: ``g(t) = g0 + lambda g1 + sum_(i,j) (U0 + lambda U1)_(i,j)
+u_i^(j)`` for ``j <= p`` (``p = k`` plus the completion's extra order), with
+``U_(i,j) = sum_(d>=j) C(d, j) W_d b_i^(d-j)`` from the completion's map ``W``
+of ``[f; f'; ...; f^(p)]`` (`_maps_at`); the residual's Gram form gets the terms
+of ``c_g = c_g0 + V u``: ``C^T V``, ``V^T c_g0`` and ``V^T V``.
+
 Each is sampled at Chebyshev extreme points; a piece is accepted when the last
 three coefficients are below `TOL` relative to the largest value of the group
 on the horizon, else it is halved. More than `MAX_PIECES` pieces, or a
 piece shorter than `MIN_PIECE` of the horizon, is refused with a
 `NativeTargetError` naming the limit.
 """
+
+import math
 
 import numpy as np
 
@@ -35,64 +46,127 @@ _AFFINE_RTOL = 1e-9
 
 
 class _Sampler:
-    """The vector [G0, G1, g0, g1 | M, m, s] at t, from completions at fixed rates."""
+    """The vector [G0, G1, g0, g1, U0, U1 | M, m, s, C^T V, V^T c_g0, V^T V] at t, from completions at fixed rates.
 
-    def __init__(self, dae, method, lam, k, error):
+    `inputs` (None without inputs in f): ``(f0_dae, b, check_dae, ujet)`` from `_inputs`.
+    """
+
+    def __init__(self, dae, method, lam, k, error, inputs=None):
         self.n = n = dae.n
         self.error = error
         self.affine = method == "alternative"
+        self.inputs = inputs
+        # the checks: the spec's DAE (with inputs: the inputs a known polynomial) at other rates, or at the fixed one
+        check = dae if inputs is None else inputs[2]
+        self.checks = [(r, lsc.complete(check, method, lam=r, k=k)) for r in (*_CHECK_RATES, float(lam))] \
+            if self.affine else [] if inputs is None else \
+            [(0.0, lsc.complete(check, method, lam=None if method == "standard" else lam, k=k))]
+        dae = dae if inputs is None else inputs[0]  # with inputs: the completion of f0
         if method == "standard":
             self.comps = [lsc.complete(dae, "standard", k=k)]
         elif method == "stabilized":
             self.comps = [lsc.complete(dae, "stabilized", lam=lam, k=k)]
         else:
             self.comps = [lsc.complete(dae, method, lam=r, k=k) for r in (1.0, 2.0)]
-            self.checks = [(r, lsc.complete(dae, method, lam=r, k=k)) for r in (*_CHECK_RATES, float(lam))]
         self.nc = self.comps[0].n_constraints
-        self.ndyn = 2 * n * n + 2 * n
-        self.nres = n * n + n + 1
+        self.p = self.comps[0]._order
+        self.m = 0 if inputs is None else inputs[1](0.0).shape[0] * (self.p + 1)  # input-jet entries used
+        m = self.m
+        self.ndyn = 2 * n * n + 2 * n + 2 * n * m
+        self.nres = n * n + n + 1 + n * m + m + m * m
+        # the input maps share the groups (dynamics, residual) of g and c_g: an input that does not reach the
+        # constraints leaves rounding noise there, which a group of its own would ask to resolve
         self.groups = [(0, self.ndyn), (self.ndyn, self.ndyn + self.nres)]
+
+    def _dynamics(self, comp, t):
+        """G, g, the input maps U (n x m) and, for the residual, C, c_g and V at t from one completion."""
+        if self.inputs is None:
+            G, g = comp.matrices(t)
+            fac = comp._evaluate(t)[0]
+            return G, g, np.zeros((self.n, 0)), fac.C, fac.cg, np.zeros((fac.cg.shape[0], 0))
+        G, W, C, cmap = _maps_at(comp, t)
+        f0 = self.inputs[0].f.jet(t, self.p).reshape(-1)
+        b = self.inputs[1](t)
+        return G, W @ f0, _input_columns(W, b, self.p), C, cmap @ f0, _input_columns(cmap, b, self.p)
 
     def __call__(self, t):
         n = self.n
         try:
-            G, g = self.comps[0].matrices(t)
+            G, g, U, C, cg, V = self._dynamics(self.comps[0], t)
             if self.affine:
-                Gb, gb = self.comps[1].matrices(t)
-                G1, g1 = Gb - G, gb - g
-                G0, g0 = G - G1, g - g1
+                Gb, gb, Ub = self._dynamics(self.comps[1], t)[:3]
+                G1, g1, U1 = Gb - G, gb - g, Ub - U
+                G0, g0, U0 = G - G1, g - g1, U - U1
             else:
-                G0, g0, G1, g1 = G, g, np.zeros((n, n)), np.zeros(n)
-            fac = self.comps[0]._evaluate(t)[0]
+                G0, g0, U0, G1, g1, U1 = G, g, U, np.zeros((n, n)), np.zeros(n), np.zeros_like(U)
         except ValueError as exc:
             raise self.error(f"the completion cannot be evaluated at t = {t!r} on the horizon: {exc}") from exc
-        C, cg = fac.C, fac.cg
-        return np.concatenate([G0.ravel(), G1.ravel(), g0, g1, (C.T @ C).ravel(), C.T @ cg, [cg @ cg]])
+        return np.concatenate([G0.ravel(), G1.ravel(), g0, g1, U0.ravel(), U1.ravel(), (C.T @ C).ravel(), C.T @ cg,
+                               [cg @ cg], (C.T @ V).ravel(), V.T @ cg, (V.T @ V).ravel()])
+
+    def _parts(self, v):
+        n, m = self.n, self.m
+        cut = np.cumsum([0, n * n, n * n, n, n, n * m, n * m])
+        G0, G1, g0, g1, U0, U1 = (v[a:b] for a, b in zip(cut[:-1], cut[1:]))
+        return G0.reshape(n, n), G1.reshape(n, n), g0, g1, U0.reshape(n, m), U1.reshape(n, m)
 
     def check_affine(self, ts):
-        """G(t, lam) = G0 + lam G1 and g likewise at a few times and rates, relative to the terms' size."""
-        if not self.affine:
+        """G(t, lam) = G0 + lam G1 and g likewise at a few times and rates, relative to the terms' size.
+
+        With inputs, also every column of the input maps: the tables' g on the jet of a polynomial input of
+        degree p against the library's completion of f with that input."""
+        if not self.affine and self.inputs is None:
             return
-        n = self.n
         for t in ts:
-            v = self(t)
-            G0, G1 = v[: n * n].reshape(n, n), v[n * n: 2 * n * n].reshape(n, n)
-            g0, g1 = v[2 * n * n: 2 * n * n + n], v[2 * n * n + n: self.ndyn]
+            G0, G1, g0, g1, U0, U1 = self._parts(self(t))
+            ujet = self.inputs[3](t) if self.inputs is not None else np.zeros(0)
             for rate, comp in self.checks:
                 G, g = comp.matrices(t)
-                for name, M0, M1, M in (("G", G0, G1, G), ("g", g0, g1, g)):
+                for name, M0, M1, M in (("G", G0, G1, G), ("g", g0 + U0 @ ujet, g1 + U1 @ ujet, g)):
                     scale = max(np.abs(M).max(), np.abs(M0).max() + rate * np.abs(M1).max(), 1.0)
                     err = np.abs(M0 + rate * M1 - M).max() / scale
                     if not err <= _AFFINE_RTOL:
-                        raise self.error(f"{name}(t, lambda) of the alternative completion is not affine in lambda "
+                        what = "is not affine in lambda" if self.inputs is None else \
+                            "with its input maps is not affine in lambda or does not reproduce g"
+                        raise self.error(f"{name}(t, lambda) of the {self.comps[0].method} completion {what} "
                                          f"(relative misfit {err:.1e} at t = {t:g}, lambda = {rate:g}); build with "
                                          "target='pythonfmu'")
 
 
-def fit_tables(dae, method, lam, k, t_span, error):
+def _maps_at(comp, t):
+    """``(G, W, C, cmap)`` of a time-varying completion at t: ``x' = G x + W [f; ...; f^(p)]``, ``c = C x -
+    cmap [f; ...; f^(p)]``, in the given unknowns and f (the library's own maps, as for constant coefficients)."""
+    from lsc._completion import _Factors
+    from lsc._problem import unscale_columns
+
+    fac = _Factors(comp._eq, comp.k, t, comp.extra_order, comp.rcond, expected_rank=comp._rank)
+    G, W = comp._maps(fac, t)
+    if comp._col_scales is not None:
+        G, W = unscale_columns(fac, G, W, comp._col_scales)
+    cmap = fac.cg
+    if comp._row_scales is not None:
+        columns = np.tile(comp._row_scales, comp._order + 1)
+        W, cmap = W * columns, cmap * columns
+    return G, W, fac.C, cmap
+
+
+def _input_columns(X, b, p):
+    """Columns ``(i, j)`` (i * (p + 1) + j) of the map of input i's derivative j from a map X of [f; ...; f^(p)]:
+    ``f^(d) = ... + sum_j C(d, j) b_i^(d-j) u_i^(j)`` (Leibniz)."""
+    from math import comb
+
+    n = b.shape[2]
+    out = np.zeros((X.shape[0], b.shape[0] * (p + 1)))
+    for i in range(b.shape[0]):
+        for j in range(p + 1):
+            out[:, i * (p + 1) + j] = sum(comb(d, j) * X[:, d * n:(d + 1) * n] @ b[i, d - j] for d in range(j, p + 1))
+    return out
+
+
+def fit_tables(dae, method, lam, k, t_span, error, inputs=None):
     """Piecewise Chebyshev coefficients of the sampler's vector on `t_span`; a dict for the header."""
     a, b = map(float, t_span)
-    sampler = _Sampler(dae, method, lam, k, error)
+    sampler = _Sampler(dae, method, lam, k, error, inputs)
     sampler.check_affine(np.linspace(a, b, 5))
     values, scale = {}, np.zeros(len(sampler.groups))
 
@@ -133,7 +207,7 @@ def fit_tables(dae, method, lam, k, t_span, error):
         todo += [(mid, hi), (lo, mid)]
     done.sort(key=lambda p: p[0])
     return dict(pieces=done, n=sampler.n, nv=sampler.ndyn + sampler.nres, ndyn=sampler.ndyn,
-                evaluations=len(values), t0=a, t1=b)
+                evaluations=len(values), t0=a, t1=b, p=sampler.p, nuj=sampler.m)
 
 
 def header_section(tab):
@@ -144,7 +218,7 @@ def header_section(tab):
     degs = [c.shape[0] - 1 for _, _, c in pieces]
     offs = np.concatenate([[0], np.cumsum([(d + 1) * nv for d in degs])[:-1]]).astype(int)
     coef = np.concatenate([c.reshape(-1) for _, _, c in pieces])
-    ng = tab["n"] * tab["n"] + tab["n"]  # G and g combined at one lambda (the C runtime's cache)
+    ng = tab["n"] * tab["n"] + tab["n"] + tab["n"] * tab["nuj"]  # G, g, U combined at one lambda (the C cache)
     coffs = np.concatenate([[0], np.cumsum([(d + 1) * ng for d in degs])[:-1]]).astype(int)
     fmt = lambda vals: ", ".join(repr(float(v)) for v in vals)  # noqa: E731 - local formatter
     return "\n".join([
@@ -152,6 +226,8 @@ def header_section(tab):
         "#define LSC_TIME_VARYING 1",
         f"#define TV_NPIECE {len(pieces)}", f"#define TV_NV {nv}", f"#define TV_NDYN {tab['ndyn']}",
         f"#define TV_MAXDEG {max(degs)}",
+        "/* input-jet entries u_i^(j), j <= TV_P, the forcing maps U act on (index i * (TV_P + 1) + j) */",
+        f"#define TV_P {tab['p']}", f"#define TV_NUJ {tab['nuj']}",
         f"#define TV_T0 {tab['t0']!r}", f"#define TV_T1 {tab['t1']!r}",
         f"static const double TV_BREAKS[{len(breaks)}] = {{{fmt(breaks)}}};",
         f"static const int TV_DEG[{len(degs)}] = {{{', '.join(map(str, degs))}}};",
@@ -164,10 +240,19 @@ def header_section(tab):
 
 def check_expressible(spec, fix_parameters, error):
     """Refuse what the time-varying native FMU cannot hold; return the parameters it fixes (all of them)."""
+    import sympy
+
     problems = []
-    if spec.inputs:
-        problems.append(f"it has the input(s) {', '.join(u['name'] for u in spec.inputs)} (the time-varying native "
-                        "FMU tabulates the forcing over the horizon, so f must be a function of t only)")
+    for mname in ("A", "B"):
+        used = sorted(str(s) for s in getattr(spec, mname).free_symbols if str(s) in spec.input_symbols)
+        if used:
+            problems.append(f"{mname} depends on the input(s) {', '.join(used)}")
+    inputs = set(spec.input_symbols.values())
+    nonaffine = sorted(name for name, u in spec.input_symbols.items()
+                       if any(e.free_symbols & inputs for e in sympy.Matrix(spec.f).diff(u)))
+    if nonaffine:
+        problems.append(f"f is not affine in the input(s) {', '.join(nonaffine)} (the time-varying native FMU "
+                        "tabulates the forcing maps of the inputs: f = f0(t) + sum b_i(t) u_i)")
     tunable = sorted(p["name"] for p in spec.parameters if p["tunable"])
     if tunable and not fix_parameters:
         problems.append(f"the tunable parameter(s) {', '.join(tunable)} would be fixed in the tables (pass "
@@ -178,6 +263,45 @@ def check_expressible(spec, fix_parameters, error):
     return [p["name"] for p in spec.parameters]
 
 
+def _inputs(spec, p):
+    """``(f0_dae, b, check_dae, ujet)`` for `_Sampler`: the DAE with ``f0 = f(u = 0)``; ``b(t)``, shape
+    (nu, p + 1, n), the derivatives 0..p of the inputs' coefficients ``b_i = df/du_i`` (functions of t;
+    parameters at their values); the DAE with each input a polynomial of degree p in t and ``ujet(t)``, its
+    jet [u_i^(j)] (index i * (p + 1) + j), for the build's check of the maps."""
+    import sympy
+
+    values = {spec.symbols[q["name"]]: q["value"] for q in spec.parameters}
+
+    def num(M):  # as fmu_build._model._numeric_dae: arrays where constant, sympy in t otherwise
+        M = sympy.Matrix(M).subs(values)
+        return np.array(M.tolist(), dtype=float) if not M.free_symbols else M
+
+    f = sympy.Matrix(spec.f).subs(values)
+    f0 = num(f.subs({u: 0 for u in spec.input_symbols.values()}))
+    f0 = f0.reshape(-1) if isinstance(f0, np.ndarray) else f0
+    rows = [f.diff(u).diff(spec.t, d) if d else f.diff(u) for u in spec.input_symbols.values() for d in range(p + 1)]
+    fn = sympy.lambdify(spec.t, [list(r) for r in rows], "numpy")
+    shape = (len(spec.input_symbols), p + 1, spec.n)
+
+    def b(t):
+        return np.array([[float(e) for e in r] for r in fn(t)], dtype=float).reshape(shape)
+
+    # u_i(t) = start_i + sum_(1 <= j <= p) c_ij (t - t0)^j / j!, all derivatives up to p present
+    t0 = float(spec.experiment["start"])
+    coef = np.array([[u["start"]] + [(-0.5) ** j * (i + 1) for j in range(1, p + 1)]
+                     for i, u in enumerate(spec.inputs)])
+    poly = {usym: sum(sympy.Float(coef[i, j]) * (spec.t - t0) ** j / sympy.factorial(j) for j in range(p + 1))
+            for i, usym in enumerate(spec.input_symbols.values())}
+
+    def ujet(t):
+        s = t - t0
+        return np.array([sum(coef[i, q] * s ** (q - j) / math.factorial(q - j) for q in range(j, p + 1))
+                         for i in range(coef.shape[0]) for j in range(p + 1)])
+
+    A, B = num(spec.A), num(spec.B)
+    return lsc.LinearDAE(A, B, f0), b, lsc.LinearDAE(A, B, sympy.Matrix(f.subs(poly))), ujet
+
+
 def prepare(dae, spec, k, error):
     """The tables over the experiment's horizon and zero placeholders for the constant-coefficient arrays."""
     import time
@@ -186,10 +310,16 @@ def prepare(dae, spec, k, error):
     start = time.perf_counter()
     a, b = float(spec.experiment["start"]), float(spec.experiment["stop"])
     span = (a, b + HORIZON_MARGIN * (b - a))  # Model Exchange integrators evaluate a little past the stop time
-    tab = fit_tables(dae, spec.method, spec.lam, k, span, error)
+    inputs = None
+    if spec.inputs:
+        order = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=k)._order
+        inputs = _inputs(spec, order)
+    tab = fit_tables(dae, spec.method, spec.lam, k, span, error, inputs)
     n = dae.n
-    comp = SimpleNamespace(_order=0, _W_c=np.zeros((0, n)), _std=SimpleNamespace(C=np.zeros((0, n)), C_pinv=None))
-    Z, ZW = np.zeros((n, n)), np.zeros((n, n))
+    # with inputs, the constant runtime's input jets (lengths from the order p, as for constant coefficients)
+    comp = SimpleNamespace(_order=tab["p"] if spec.inputs else 0, _W_c=np.zeros((0, n)),
+                           _std=SimpleNamespace(C=np.zeros((0, n)), C_pinv=None))
+    Z, ZW = np.zeros((n, n)), np.zeros((n, n * (comp._order + 1)))
     tab["placeholders"] = (Z, Z, ZW, ZW, comp, spec.method == "alternative")
     tab["fit_seconds"] = time.perf_counter() - start
     return tab
@@ -209,8 +339,9 @@ def note(spec, tab, lam_note):
     degs = [c.shape[0] - 1 for _, _, c in tab["pieces"]]
     return (f"native C, time-varying A and B tabulated on [{tab['t0']:g}, {tab['t1']:g}] (piecewise Chebyshev, "
             f"{len(degs)} piece(s) of degree {min(degs)}-{max(degs)}, coefficient tail <= {TOL:g} relative; "
-            f"sixth-order Magnus steps, the fourth-order one as error estimate); {spec.method} completion, {lam_note}; all parameters fixed at "
-            "their spec values.")
+            f"sixth-order Magnus steps, the fourth-order one as error estimate); {spec.method} completion, {lam_note}; "
+            "all parameters fixed at their spec values."
+            + (f" Inputs in f through their tabulated forcing maps on u, ..., u^({tab['p']})." if tab["nuj"] else ""))
 
 
 def report(tab, target, header):

@@ -204,8 +204,9 @@ def _is_linear_in_states(expr, state_symbols, spec):
         return False
 
 
-def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars, kpars):
-    """The generated part: sizes, value references, matrices and the C of f and the outputs."""
+def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars, kpars, f_jet=True):
+    """The generated part: sizes, value references, matrices and the C of f and the outputs (`f_jet` False: no
+    C of f's jet, which the time-varying runtime does not call: its forcing is tabulated)."""
     import sympy
 
     n = spec.n
@@ -260,7 +261,7 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars
     for i, (uname, usym) in enumerate(spec.input_symbols.items()):
         for j in range(nfe):
             names[sympy.Symbol(_mangled("u", uname, j), real=True)] = f"u[{i * nfe + j}]"
-    derivs = _derivatives_with_inputs(f, spec.t, spec.input_symbols, nfe)
+    derivs = _derivatives_with_inputs(f, spec.t, spec.input_symbols, nfe) if f_jet else []
     exprs, targets = [], []
     for d, D in enumerate(derivs):
         for i in range(n):
@@ -382,7 +383,7 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     # the fixed sources) and of the variables the model description declares: any change gives another GUID
     placeholder = "{00000000-0000-0000-0000-000000000000}"
     header, info = _model_header(spec, ident=ident, guid=placeholder, G0=G0, G1=G1, W0=W0, W1=W1, comp=comp,
-                                 lam_tunable=lam_tunable, fpars=fpars, kpars=kpars)
+                                 lam_tunable=lam_tunable, fpars=fpars, kpars=kpars, f_jet=tv is None)
     fixed_note = (f" Parameters in A or B fixed at their spec values: {', '.join(kpars)}." if kpars else "")
     lam_note = {"alternative": "lambda tunable (G and the forcing map are affine in lambda, checked at build time)",
                 "stabilized": "lambda fixed at build time (the stabilized completion is not affine in lambda)",

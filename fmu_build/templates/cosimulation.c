@@ -183,8 +183,9 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     if (c->s.ud_t == c->s.t) c->s.ud_t = t;
     c->s.t = t;
 #ifdef LSC_TIME_VARYING
+    record_inputs(c, t);
     switch (tv_do_step(c, t, h)) {
-    case 0: c->s.t = t + h; changed(c); return fmi2OK;
+    case 0: c->s.t = t + h; changed(c); memset(c->s.u_fresh, 0, sizeof c->s.u_fresh); return fmi2OK;
     case 1: return discard(c, h, 0);
     default: return discard(c, h, 1);
     }

@@ -103,7 +103,7 @@ static double residual_norm(Instance *c, const double *x) {
     double s = 0.0;
     int i, j;
 #ifdef LSC_TIME_VARYING
-    return tv_residual(c->s.t, x);
+    return tv_residual(c, c->s.t, x);
 #endif
     eval_f(c, c->s.t);
     for (i = 0; i < NC; i++) {

@@ -98,7 +98,7 @@ fmi2Status fmi2GetDerivatives(fmi2Component comp, fmi2Real derivatives[], size_t
                "coefficients were tabulated on at build time", c->s.t, TV_T0, TV_T1);
         return fmi2Error;
     }
-    for (i = 0; i < NX; i++) {
+    for (i = 0; i < NX; i++) { /* a huge lambda or an input's extrapolated jet may overflow */
         if (!isfinite(derivatives[i])) {
             logmsg(c, fmi2Error, "fmi2GetDerivatives: the derivative of state %d is not finite at t = %g (lambda = %g)",
                    i + 1, c->s.t, c->s.lam);

@@ -11,6 +11,8 @@
 #define TV_MAX_LEVEL 14
 #define TV_TIME_SLACK(t) (TIME_ULPS * DBL_EPSILON * fmax(fabs(t), 1.0))
 
+static void input_jets(Instance *c, double t); /* lsc_model.c: the inputs' jets at t into c->uj */
+
 /* The piece of t and its local variable s in [-1, 1]; -1 outside the horizon */
 static int tv_piece(double t, double *s) {
     int lo = 0, hi = TV_NPIECE - 1;
@@ -50,6 +52,10 @@ static const double *tv_combined(Instance *c) {
             double *dst = c->tv_coef + TV_COFF[p] + (long)k * TV_NG;
             for (e = 0; e < NX * NX; e++) dst[e] = src[e] + c->s.lam * src[NX * NX + e];
             for (e = 0; e < NX; e++) dst[NX * NX + e] = src[2 * NX * NX + e] + c->s.lam * src[2 * NX * NX + NX + e];
+            for (e = 0; e < NX * TV_NUJ; e++) { /* the inputs' forcing maps U = U0 + lambda U1 */
+                const double *u0 = src + 2 * NX * NX + 2 * NX;
+                dst[NX * NX + NX + e] = u0[e] + c->s.lam * u0[NX * TV_NUJ + e];
+            }
         }
     }
     c->tv_lam = c->s.lam;
@@ -79,40 +85,57 @@ static void tv_clenshaw3(const double *coef, int deg, const double *s, double *o
         for (v = 0; v < TV_NG; v++) out[q * TV_NG + v] = coef[v] + s[q] * b1[q][v] - b2[q][v];
 }
 
-/* the augmented matrix [[G, g], [0, 0]] (TV_M x TV_M) from G and g (TV_NG values) */
-static void tv_augment(const double *v, double *a) {
+/* The input-jet entries u_i^(j), j <= TV_P, at t into uv (TV_NUJ values; none without inputs): the constant
+ * runtime's jets (input_jets: in Co-Simulation the polynomial of the step's jet shifted to t, the master's
+ * derivatives where sent, else the history estimate; in Model Exchange the history polynomial at t) */
+static void tv_input_vector(Instance *c, double t, double *uv) {
+    int i, j;
+    if (NU == 0 || TV_NUJ == 0) return;
+    input_jets(c, t);
+    for (i = 0; i < NU; i++)
+        for (j = 0; j <= TV_P; j++) uv[i * (TV_P + 1) + j] = c->uj[i * NFE + j];
+}
+
+/* the augmented matrix [[G, g + U u], [0, 0]] (TV_M x TV_M) from G, g, U (TV_NG values) and the input-jet
+ * entries uv (TV_NUJ values) */
+static void tv_augment(const double *v, const double *uv, double *a) {
     int i, j;
     for (i = 0; i < TV_M * TV_M; i++) a[i] = 0.0;
     for (i = 0; i < NX; i++) {
+        double gi = v[NX * NX + i];
         for (j = 0; j < NX; j++) a[i * TV_M + j] = v[i * NX + j];
-        a[i * TV_M + NX] = v[NX * NX + i];
+        for (j = 0; j < TV_NUJ; j++) gi += v[NX * NX + NX + i * TV_NUJ + j] * uv[j];
+        a[i * TV_M + NX] = gi;
     }
 }
 
 /* the augmented matrices at the three times t[0..2] and the current lambda into a[q * TV_M * TV_M]; 0 or -1 */
 static int tv_augmented3(Instance *c, const double *t, double *a) {
-    double v[3 * TV_NG], s[3];
+    double v[3 * TV_NG], s[3], uv[3 * A1(TV_NUJ)];
     const double *coef = tv_combined(c);
     int p[3], q;
-    for (q = 0; q < 3; q++)
+    for (q = 0; q < 3; q++) {
         if ((p[q] = tv_piece(t[q], s + q)) < 0) return -1;
+        tv_input_vector(c, t[q], uv + q * A1(TV_NUJ));
+    }
     if (p[0] == p[1] && p[1] == p[2]) {
         tv_clenshaw3(coef + TV_COFF[p[0]], TV_DEG[p[0]], s, v);
     } else {
         for (q = 0; q < 3; q++) tv_clenshaw(coef + TV_COFF[p[q]], TV_NG, TV_DEG[p[q]], s[q], 0, TV_NG, v + q * TV_NG);
     }
-    for (q = 0; q < 3; q++) tv_augment(v + q * TV_NG, a + q * TV_M * TV_M);
+    for (q = 0; q < 3; q++) tv_augment(v + q * TV_NG, uv + q * A1(TV_NUJ), a + q * TV_M * TV_M);
     return 0;
 }
 
 /* the augmented matrix at t and the current lambda into a (TV_M x TV_M); 0 or -1 */
 static int tv_augmented(Instance *c, double t, double *a) {
-    double v[TV_NG], s;
+    double v[TV_NG], s, uv[A1(TV_NUJ)];
     const double *coef = tv_combined(c);
     const int p = tv_piece(t, &s);
     if (p < 0) return -1;
     tv_clenshaw(coef + TV_COFF[p], TV_NG, TV_DEG[p], s, 0, TV_NG, v);
-    tv_augment(v, a);
+    tv_input_vector(c, t, uv);
+    tv_augment(v, uv, a);
     return 0;
 }
 
@@ -129,19 +152,28 @@ static int tv_rhs(Instance *c, double t, const double *x, double *dx) {
     return 0;
 }
 
-/* |Z2^T (F x - g)| from the Gram form x^T M x - 2 m^T x + s (NAN outside the horizon) */
-static double tv_residual(double t, const double *x) {
-    double v[TV_NV - TV_NDYN], s, q = 0.0;
+/* |Z2^T (F x - g)| from the Gram form x^T M x - 2 m^T x + s; with inputs c_g = c_g0 + V u adds
+ * -2 x^T (C^T V) u + 2 (V^T c_g0)^T u + u^T (V^T V) u (u: the input-jet entries at t). NAN outside the horizon */
+static double tv_residual(Instance *c, double t, const double *x) {
+    enum { R0 = NX * NX + NX + 1 }; /* the input terms' offset in the residual's part of the table */
+    double v[TV_NV - TV_NDYN], s, q = 0.0, uv[A1(TV_NUJ)];
     const int p = tv_piece(t, &s);
     int i, j;
     if (p < 0) return NAN;
     tv_clenshaw(TV_COEF + TV_OFF[p], TV_NV, TV_DEG[p], s, TV_NDYN, TV_NV, v);
+    tv_input_vector(c, t, uv);
     for (i = 0; i < NX; i++) {
         double r = -2.0 * v[NX * NX + i];
         for (j = 0; j < NX; j++) r += v[i * NX + j] * x[j];
+        for (j = 0; j < TV_NUJ; j++) r -= 2.0 * v[R0 + i * TV_NUJ + j] * uv[j];
         q += r * x[i];
     }
     q += v[NX * NX + NX];
+    for (i = 0; i < TV_NUJ; i++) {
+        double r = 2.0 * v[R0 + NX * TV_NUJ + i];
+        for (j = 0; j < TV_NUJ; j++) r += v[R0 + NX * TV_NUJ + TV_NUJ + i * TV_NUJ + j] * uv[j];
+        q += r * uv[i];
+    }
     return sqrt(q > 0.0 ? q : 0.0);
 }
 
@@ -232,6 +264,16 @@ static int tv_do_step(Instance *c, double t, double h) {
                "time-varying coefficients were tabulated on at build time (build with a longer experiment stop)",
                t, t + h, TV_T0, TV_T1);
         return 2;
+    }
+    if (NU > 0) { /* the inputs' jets the step uses (the history already holds the step start's value) */
+        input_jets(c, t);
+        for (i = 0; i < NU * NFE; i++) {
+            if (!isfinite(c->uj[i])) {
+                logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: derivative %d of input %d is not finite at "
+                       "the step start", t, i % NFE, i / NFE + 1);
+                return 2;
+            }
+        }
     }
     memcpy(x, c->s.x, sizeof(double) * NX);
     x[NX] = 1.0;
