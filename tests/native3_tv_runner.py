@@ -67,7 +67,11 @@ def steps(sc, logs):
     vrs = [vr[n] for n in sc["outputs"]]
     if sc.get("start_values"):
         fmu.setFloat64([vr[k] for k in sc["start_values"]], list(sc["start_values"].values()))
-    fmu.enterInitializationMode(startTime=0.0, stopTime=sc.get("stop_time"))
+    try:
+        fmu.enterInitializationMode(startTime=0.0, stopTime=sc.get("stop_time"))
+    except Exception as exc:  # refused set-up (fmi3Error): recorded, the host goes on and frees the instance
+        fmu.freeInstance()
+        return {"steps": [], "derivatives": {}, "init_error": str(exc)}
     fmu.exitInitializationMode()
     t, out, refused = 0.0, [], 0
     for i in range(sc["steps"]):

@@ -191,9 +191,13 @@ def test_early_return_at_the_horizon_keeps_the_other_refusals(built):
     d = PROBLEMS["Rot2"][0]
     sc = {"kind": "steps", "fmu": str(built["Rot2", 3]), "dt": 0.3, "steps": 12, "outputs": _names(d),
           "early_return_allowed": True}
-    r = run(dict(sc, stop_time=2.3))  # 2.1 + 0.3 ends after the stop time 2.3 (and past the horizon 2.2)
-    assert [s["status"] for s in r["steps"]] == [0] * 7 + [3, 3]
-    assert any("ends after the stop time 2.2999999999999998" in m for m in r["logs"])
+    r = run(dict(sc, stop_time=2.3))  # a stop time past the horizon 2.2 is refused at set-up
+    assert "fmi3EnterInitializationMode" in r["init_error"] and r["steps"] == []
+    assert any("horizon" in m for m in r["logs"])
+    r = run(dict(sc, stop_time=2.0))  # 1.8 + 0.3 ends after the stop time 2.0 (and before the horizon's end)
+    assert [s["status"] for s in r["steps"]] == [0] * 6 + [3, 3]
+    assert not any(s["earlyReturn"] for s in r["steps"])
+    assert any("ends after the stop time 2" in m for m in r["logs"])
     r = run(dict(sc, set_at={"7": {"lambda": -1.0}}))
     steps = r["steps"]
     assert [s["status"] for s in steps] == [0] * 7 + [2, 2]
