@@ -13,9 +13,12 @@ Over the experiment's horizon ``[start, stop]`` the FMU needs, as functions of
 
 Each is sampled at Chebyshev extreme points; a piece is accepted when the last
 three coefficients are below `TOL` relative to the largest value of the group
-on the horizon, else it is halved. More than `MAX_PIECES` pieces, or a
-piece shorter than `MIN_PIECE` of the horizon, is refused with a
-`NativeTargetError` naming the limit.
+on the horizon, else it is halved. The runtime's cost per step is mostly the
+Clenshaw sweep, proportional to the degree, so the tables are first fitted
+with the lowest of `DEGREES` alone within `FAST_PIECES` pieces; where that
+does not suffice, every degree in `DEGREES` may serve a piece. More than
+`MAX_PIECES` pieces, or a piece shorter than `MIN_PIECE` of the horizon, is
+refused with a `NativeTargetError` naming the limit.
 """
 
 import numpy as np
@@ -26,7 +29,8 @@ from lsc._chebyshev import _coefficients, _extreme_points as _points  # the libr
 __all__ = []
 
 TOL = 1e-12           # coefficient tail relative to the group's largest value on the horizon
-DEGREES = (8, 16)  # low degrees, more pieces: the Clenshaw sweep is most of a step's work
+DEGREES = (10, 16)    # low degrees, more pieces: the Clenshaw sweep is most of a step's work
+FAST_PIECES = 64      # pieces of the lowest degree alone (a 5-state model: ~ 64 * 11 * 91 doubles, 0.5 MB of C)
 MAX_PIECES = 1024     # bound of the tables: 1024 pieces of degree 16 of a 10-state model are ~ 5.8 million doubles
 MIN_PIECE = 1e-6      # of the horizon
 HORIZON_MARGIN = 0.1  # the tables reach this fraction of the experiment's length past its stop time
@@ -106,8 +110,8 @@ def fit_tables(dae, method, lam, k, t_span, error):
                 scale[i] = max(scale[i], np.abs(v[lo:hi]).max(initial=0.0))
         return v
 
-    def fit(lo, hi):
-        for m in DEGREES:
+    def fit(lo, hi, degrees):
+        for m in degrees:
             ts = 0.5 * (hi + lo) + 0.5 * (hi - lo) * _points(m)
             ts[0], ts[-1] = hi, lo
             coef = _coefficients(np.array([sample(float(t)) for t in ts]))
@@ -117,20 +121,26 @@ def fit_tables(dae, method, lam, k, t_span, error):
                 return coef
         return None
 
-    todo, done = [(a, b)], []
-    while todo:
-        lo, hi = todo.pop()
-        coef = fit(lo, hi)
-        if coef is not None:
-            done.append((lo, hi, coef))
-            continue
-        if hi - lo <= MIN_PIECE * (b - a) or len(done) + len(todo) + 2 > MAX_PIECES:
-            raise error(f"the completion is not resolved to {TOL:g} by piecewise Chebyshev expansions of degree "
-                        f"<= {DEGREES[-1]} within the limit of {MAX_PIECES} pieces (minimum piece {MIN_PIECE:g} of "
-                        f"the horizon) on [{a:g}, {b:g}]: shorten the horizon (experiment stop) or build with "
-                        "target='pythonfmu'")
-        mid = 0.5 * (lo + hi)
-        todo += [(mid, hi), (lo, mid)]
+    def pieces(degrees, limit):
+        todo, done = [(a, b)], []
+        while todo:
+            lo, hi = todo.pop()
+            coef = fit(lo, hi, degrees)
+            if coef is not None:
+                done.append((lo, hi, coef))
+                continue
+            if hi - lo <= MIN_PIECE * (b - a) or len(done) + len(todo) + 2 > limit:
+                return None
+            mid = 0.5 * (lo + hi)
+            todo += [(mid, hi), (lo, mid)]
+        return done
+
+    done = pieces(DEGREES[:1], min(FAST_PIECES, MAX_PIECES)) or pieces(DEGREES, MAX_PIECES)
+    if done is None:
+        raise error(f"the completion is not resolved to {TOL:g} by piecewise Chebyshev expansions of degree "
+                    f"<= {DEGREES[-1]} within the limit of {MAX_PIECES} pieces (minimum piece {MIN_PIECE:g} of "
+                    f"the horizon) on [{a:g}, {b:g}]: shorten the horizon (experiment stop) or build with "
+                    "target='pythonfmu'")
     done.sort(key=lambda p: p[0])
     return dict(pieces=done, n=sampler.n, nv=sampler.ndyn + sampler.nres, ndyn=sampler.ndyn,
                 evaluations=len(values), t0=a, t1=b)
@@ -196,8 +206,8 @@ def prepare(dae, spec, k, error):
 
 
 def finish_header(header, tab):
-    """The generated header with the tables; output derivatives of order 1 only (x' = G x + g)."""
-    header = header.replace(f"#define MAX_OUTPUT_DERIVATIVE_ORDER {4}", "#define MAX_OUTPUT_DERIVATIVE_ORDER 1")
+    """The generated header with the tables (output derivatives up to the constant target's order, from the
+    derivatives of the tables: x'' = G' x + G x' + g' and so on)."""
     # the first lines describe the model: its A, B are the tables at the end, not the zero G0, W0 placeholders
     header = header.replace("; A, B constant", "; A(t), B(t) time-varying: G, g and the residual from the tables at the "
                             "end (G0, G1, W0, W1 below are unused zeros)", 1)

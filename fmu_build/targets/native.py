@@ -410,7 +410,7 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
         variables=variables, source_files=["fmi2Functions.c"],
         model_exchange=dict(flags_common, completedIntegratorStepNotNeeded=False),
         co_simulation=dict(flags_common, canHandleVariableCommunicationStepSize=True, canInterpolateInputs=True,
-                           maxOutputDerivativeOrder=1 if tv else TAYLOR_DEGREE + 1, canRunAsynchronuously=False),
+                           maxOutputDerivativeOrder=TAYLOR_DEGREE + 1, canRunAsynchronuously=False),
         experiment={"startTime": float(spec.experiment["start"]), "stopTime": float(spec.experiment["stop"]),
                     "stepSize": float(spec.experiment["step"])},
         log_categories=[("logStatusError", "errors"), ("logStatusWarning", "warnings"), ("logAll", "everything")])
