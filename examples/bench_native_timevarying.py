@@ -75,25 +75,35 @@ int main(int argc, char **argv) {
 """
 
 
-def specs():
-    """The time-varying model, and the same model frozen at t = 0.3 (constant A, B), as spec dicts."""
+def specs(blocks=1):
+    """The time-varying model of `blocks` rotating-constraint blocks (5 states each, consecutive blocks coupled by a
+    spring between their positions), and the same model frozen at t = 0.3 (constant A, B), as spec dicts; and the
+    exact solution (sympy)."""
     import sympy as sp
 
     t = sp.Symbol("t")
-    c, s = sp.cos(t), sp.sin(t)
-    A = sp.diag(1, 1, 1, 1, 0)
-    B = sp.Matrix([[0, 0, -1, 0, 0], [0, 0, 0, -1, 0], [0, 0, 0, 0, -c], [0, 0, 0, 0, -s], [c, s, 0, 0, 0]])
-    xe = sp.Matrix([c + 2, sp.sin(2 * t), -s, 2 * sp.cos(2 * t), sp.cos(t / 3)])
+    n = 5 * blocks
+    A, B, xe = sp.zeros(n, n), sp.zeros(n, n), []
+    for k in range(blocks):
+        w = 1 + sp.Rational(k, 2)  # each block's constraint turns at its own rate
+        c, s, o = sp.cos(w * t), sp.sin(w * t), 5 * k
+        A[o:o + 5, o:o + 5] = sp.diag(1, 1, 1, 1, 0)
+        B[o:o + 5, o:o + 5] = sp.Matrix([[0, 0, -1, 0, 0], [0, 0, 0, -1, 0], [0, 0, 0, 0, -c], [0, 0, 0, 0, -s],
+                                         [c, s, 0, 0, 0]])
+        if k:  # a spring between the first position of this block and of the one before
+            B[o + 2, o - 5], B[o + 2, o], B[o - 3, o - 5], B[o - 3, o] = -1, 1, 1, -1
+        xe += [sp.cos(w * t) + 2 + k, sp.sin(2 * t + k), -s, 2 * sp.cos(2 * t + k), sp.cos(t / 3 + k)]
+    xe = sp.Matrix(xe)
 
     def spec(name, A, B):
         f = A * xe.diff(t) + B * xe
-        return {"model": {"name": name}, "states": {f"x{i + 1}": {"start": float(xe[i].subs(t, 0))} for i in range(5)},
-                "equations": {"A": [[str(e) for e in A.row(i)] for i in range(5)],
-                              "B": [[str(e) for e in B.row(i)] for i in range(5)], "f": [str(e) for e in f]},
+        return {"model": {"name": name}, "states": {f"x{i + 1}": {"start": float(xe[i].subs(t, 0))} for i in range(n)},
+                "equations": {"A": [[str(e) for e in A.row(i)] for i in range(n)],
+                              "B": [[str(e) for e in B.row(i)] for i in range(n)], "f": [str(e) for e in f]},
                 "completion": {"method": "alternative", "lam": 2.0},
                 "experiment": {"start": 0.0, "stop": STEPS * DT, "step": DT}}
 
-    return spec("RotTV", A, B), spec("RotConst", A, B.subs(t, sp.Rational(3, 10)).evalf()), xe
+    return spec(f"RotTV{n}", A, B), spec(f"RotConst{n}", A, B.subs(t, sp.Rational(3, 10)).evalf()), xe
 
 
 def build(d, dest, target):

@@ -211,21 +211,25 @@ static void tv_commutator(const double *restrict a, const double *restrict b, do
     }
 }
 
-/* One step over [t, t + h] from y = [x; 1]: y6 by the sixth-order Magnus method at three Gauss points and a
- * bound `est` of |y6 - y4|, y4 the fourth-order one from the same three values (Blanes, Casas, Oteo and Ros,
- * Phys. Rep. 470 (2009), with alpha_1 = h A_2, alpha_2 = sqrt(15) h / 3 (A_3 - A_1),
- * alpha_3 = 10 h / 3 (A_3 - 2 A_2 + A_1)):
- *   Omega6 = alpha_1 + alpha_3 / 12 + [-20 alpha_1 - alpha_3 + C1, alpha_2 + C2] / 240,
- *   C1 = [alpha_1, alpha_2], C2 = -[alpha_1, 2 alpha_3 + C1] / 60;  Omega4 = alpha_1 + alpha_3 / 12 - C1 / 12.
- * |y6 - y4| estimates the error of y4, for small h more than that of y6 (checked against a reference
- * solution: local errors ~ h^7 and h^5). With D = Omega6 - Omega4, exp(Omega6) - exp(Omega4) =
- * int_0^1 exp(s Omega6) D exp((1 - s) Omega4) ds, so |y6 - y4| <= |D y| + |D| |y| (e^(2 m) - 1) with
- * m >= |Omega6|, |Omega4|: for small |Omega| that bound replaces the second exponential; beyond, y4 is formed. */
-static int tv_magnus(Instance *c, double t, double h, const double *y, double *y6, double *est) {
+/* One step over [t, t + h] from y = [x; 1] into ynew, the sixth- or the fourth-order Magnus step, and `est`, an
+ * estimate of the error of y4 (Blanes, Casas, Oteo and Ros, Phys. Rep. 470 (2009); three Gauss points,
+ * alpha_1 = h A_2, alpha_2 = sqrt(15) h / 3 (A_3 - A_1), alpha_3 = 10 h / 3 (A_3 - 2 A_2 + A_1)):
+ *   Omega4 = alpha_1 + alpha_3 / 12 - C1 / 12,  C1 = [alpha_1, alpha_2],
+ *   Omega6 = alpha_1 + alpha_3 / 12 + [W, V] / 240,  W = -20 alpha_1 + W',  W' = C1 - alpha_3,
+ *   V = alpha_2 + C2,  C2 = -[alpha_1, P] / 60,  P = 2 alpha_3 + C1.
+ * y6 = exp(Omega6) y and y4 = exp(Omega4) y have local errors ~ h^7 and h^5 (checked against a reference
+ * solution), so |y6 - y4| estimates the error of y4. With D = Omega6 - Omega4 = -[alpha_1, C2] / 12 +
+ * [W', V] / 240 (the terms of order h^3 cancel: D ~ h^5) and exp(Omega6) - exp(Omega4) =
+ * int_0^1 exp(s Omega6) D exp((1 - s) Omega4) ds:
+ *   |y6 - y4| <= |D| |y| e^m <= (2 |alpha_1| |C2| / 12 + 2 |W'| |V| / 240) |y| e^m,  m = |Omega4| + |D|,
+ * from norms alone. Where that bound is below `bound` (short steps) y4 is taken: one commutator. Otherwise
+ * the other two commutators give y6, taken with est = |D y| + |D| |y| (e^(2 m) - 1) (again a bound of
+ * |y6 - y4|; m = |Omega6| + |D|) for small |Omega|, or |y6 - y4| from the second exponential. */
+static int tv_magnus(Instance *c, double t, double h, const double *y, double bound, double *ynew, double *est) {
     const double r = sqrt(15.0) / 10.0;
-    double v[TV_NODES * TV_NG], a1[TV_R], a2[TV_R], a3[TV_R], c1[TV_R], w[TV_R], u[TV_R], d[TV_R];
+    double v[TV_NODES * TV_NG], a1[TV_R], a2[TV_R], a3[TV_R], c1[TV_R], om4[TV_R], w[TV_R], p[TV_R];
     const double ts[TV_NODES] = {t + (0.5 - r) * h, t + 0.5 * h, t + (0.5 + r) * h};
-    double n6, nd, e = 0.0;
+    double n4, n1, nc2, nd, nv, yn = 0.0, e = 0.0;
     int i, j;
     if (tv_values(c, ts, TV_NODES, v) != 0) return -1;
     tv_augment(v, a1);
@@ -237,34 +241,43 @@ static int tv_magnus(Instance *c, double t, double h, const double *y, double *y
         a1[i] = al1; a2[i] = al2; a3[i] = al3;
     }
     tv_commutator(a1, a2, c1);
-    for (i = 0; i < TV_R; i++) w[i] = 2.0 * a3[i] + c1[i];
-    tv_commutator(a1, w, u); /* -60 C2 */
     for (i = 0; i < TV_R; i++) {
-        w[i] = -20.0 * a1[i] - a3[i] + c1[i];
-        u[i] = a2[i] - u[i] / 60.0;
+        om4[i] = a1[i] + a3[i] / 12.0 - c1[i] / 12.0;
+        w[i] = c1[i] - a3[i]; /* W' */
+        p[i] = 2.0 * a3[i] + c1[i];
     }
-    tv_commutator(w, u, d); /* 240 (Omega6 - alpha_1 - alpha_3 / 12) */
+    for (i = 0; i < TV_M; i++) yn = fabs(y[i]) > yn ? fabs(y[i]) : yn;
+    n4 = tv_norm(om4);
+    n1 = tv_norm(a1);
+    nc2 = 2.0 * n1 * tv_norm(p) / 60.0;                         /* >= |C2| */
+    nv = tv_norm(a2) + nc2;                                     /* >= |V| */
+    nd = 2.0 * n1 * nc2 / 12.0 + 2.0 * tv_norm(w) * nv / 240.0; /* >= |D| */
+    *est = nd * yn * exp(n4 + nd);
+    if (*est <= bound) return tv_expv(c, om4, n4, y, ynew); /* y4, as close to y6 as the bound asks */
+    tv_commutator(a1, p, v); /* -60 C2 */
     for (i = 0; i < TV_R; i++) {
-        w[i] = a1[i] + a3[i] / 12.0 + d[i] / 240.0; /* Omega6 */
-        d[i] = c1[i] / 12.0 + d[i] / 240.0;         /* D = Omega6 - Omega4 */
+        v[i] = a2[i] - v[i] / 60.0; /* V */
+        w[i] -= 20.0 * a1[i];       /* W */
     }
-    n6 = tv_norm(w);
-    nd = tv_norm(d);
-    if (tv_expv(c, w, n6, y, y6) != 0) return -1;
-    if (n6 + nd <= 0.25) {
-        double yn = 0.0;
-        for (i = 0; i < TV_M; i++) yn = fabs(y[i]) > yn ? fabs(y[i]) : yn;
+    tv_commutator(w, v, a2); /* 240 (Omega6 - alpha_1 - alpha_3 / 12) */
+    for (i = 0; i < TV_R; i++) {
+        w[i] = a1[i] + a3[i] / 12.0 + a2[i] / 240.0; /* Omega6 */
+        p[i] = w[i] - om4[i];                        /* D */
+    }
+    n1 = tv_norm(w);
+    nd = tv_norm(p);
+    if (tv_expv(c, w, n1, y, ynew) != 0) return -1;
+    if (n1 + nd <= 0.25) {
         for (i = 0; i < NX; i++) {
             double dy = 0.0;
-            for (j = 0; j < TV_M; j++) dy += d[i * TV_M + j] * y[j];
+            for (j = 0; j < TV_M; j++) dy += p[i * TV_M + j] * y[j];
             e = fabs(dy) > e ? fabs(dy) : e;
         }
-        *est = e + nd * yn * expm1(2.0 * (n6 + nd));
+        *est = e + nd * yn * expm1(2.0 * (n1 + nd));
         return 0;
     }
-    for (i = 0; i < TV_R; i++) w[i] -= d[i]; /* Omega4 */
-    if (tv_expv(c, w, tv_norm(w), y, u) != 0) return -1;
-    for (i = 0; i < NX; i++) e = fabs(y6[i] - u[i]) > e ? fabs(y6[i] - u[i]) : e;
+    if (tv_expv(c, om4, n4, y, a3) != 0) return -1; /* y4 */
+    for (i = 0; i < NX; i++) e = fabs(ynew[i] - a3[i]) > e ? fabs(ynew[i] - a3[i]) : e;
     *est = e;
     return 0;
 }
@@ -272,7 +285,7 @@ static int tv_magnus(Instance *c, double t, double h, const double *y, double *y
 /* Co-Simulation step from c->s.t = t to t + h: 0 done, 1 discard (the step may succeed shorter or with other
  * values), 2 discard for good (past the horizon). Deterministic in the state: a restored state steps the same. */
 static int tv_do_step(Instance *c, double t, double h) {
-    double x[TV_M], y6[TV_M];
+    double x[TV_M], xn[TV_M];
     int i, level = 0;
     long idx = 0;
     if (t + h > TV_T1 + TV_TIME_SLACK(TV_T1) + 1e-12 * h || t < TV_T0 - TV_TIME_SLACK(TV_T0)) {
@@ -286,10 +299,10 @@ static int tv_do_step(Instance *c, double t, double h) {
     while (idx < (1L << level)) {
         const double H = ldexp(h, -level), ts = t + (double)idx * H;
         double est = 0.0, size = 0.0;
+        for (i = 0; i < NX; i++) size = fabs(x[i]) > size ? fabs(x[i]) : size;
         /* beyond |Omega| ~ pi (lambda H large) the Magnus series need not converge and the exponentials may
          * overflow: a failed step counts as an infinite estimate, so the level goes up */
-        if (tv_magnus(c, ts, H, x, y6, &est) != 0) est = INFINITY;
-        for (i = 0; i < NX; i++) size = fabs(x[i]) > size ? fabs(x[i]) : size;
+        if (tv_magnus(c, ts, H, x, c->s.tol * (1.0 + size), xn, &est) != 0) est = INFINITY;
         if (!(est <= c->s.tol * (1.0 + size))) {
             if (level + 1 > TV_MAX_LEVEL) {
                 logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: estimated error %g with 2^%d sub-steps (lambda "
@@ -301,7 +314,7 @@ static int tv_do_step(Instance *c, double t, double h) {
             idx <<= 1;
             continue;
         }
-        memcpy(x, y6, sizeof(double) * NX);
+        memcpy(x, xn, sizeof(double) * NX);
         idx++;
     }
     memcpy(c->s.x, x, sizeof(double) * NX);
