@@ -271,6 +271,18 @@ def test_long_communication_steps_are_subdivided_to_the_tolerance(built):
     assert rel_err(np.array(r["values"]).T, _exact("Rot3", r["time"])) < 1e-8
 
 
+@pytest.mark.parametrize("name", ["Rot3", "RotCanon2"])
+def test_short_communication_steps_take_the_fourth_order_step_within_the_tolerance(built, name):
+    # steps of 0.001: the norm bound of |y6 - y4| (~ h^5) is below the tolerance, so each step is one fourth-order
+    # Magnus step (one commutator; steps of 0.01 and 0.25 above take the sixth-order one, with sub-steps)
+    d = PROBLEMS[name][0]
+    r = run({"fmu": str(built[name]), "dt": 0.001, "steps": 2000, "outputs": _names(d), "block": BLOCK})
+    assert set(r["status"]) == {"ok"}
+    got = np.array(r["values"]).T
+    assert rel_err(got, _exact(name, r["time"])) < 1e-8
+    assert rel_err(got[:, ::50], _library(d, r["time"][::50])) < 1e-8
+
+
 # x^(d) needs the (d-1)-th derivative of the tables, whose error grows ~ k^(2(d-1)) over the coefficients' ~ 1e-12:
 # measured on the four problems at t = 0.73 and 1.5: at most 1.4e-14, 3.7e-13, 8e-11, 1.8e-9 for d = 1..4
 DERIVATIVE_RTOL = {1: 1e-12, 2: 1e-10, 3: 1e-8, 4: 1e-6}

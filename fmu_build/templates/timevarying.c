@@ -224,7 +224,8 @@ static void tv_commutator(const double *restrict a, const double *restrict b, do
  *   |y6 - y4| <= |D| |y| e^m <= (2 |alpha_1| |C2| / 12 + 2 |W'| |V| / 240) |y| e^m,  m = |Omega4| + |D|,
  * from norms alone. Where that bound is below `bound` (short steps) y4 is taken: one commutator. Otherwise
  * the other two commutators give y6, taken with est = |D y| + |D| |y| (e^(2 m) - 1) (again a bound of
- * |y6 - y4|; m = |Omega6| + |D|) for small |Omega|, or |y6 - y4| from the second exponential. */
+ * |y6 - y4|; m = |Omega6| + |D|) where that is below `bound`, else with est = |y6 - y4| from the second
+ * exponential: never more sub-steps than |y6 - y4| asks for. */
 static int tv_magnus(Instance *c, double t, double h, const double *y, double bound, double *ynew, double *est) {
     const double r = sqrt(15.0) / 10.0;
     double v[TV_NODES * TV_NG], a1[TV_R], a2[TV_R], a3[TV_R], c1[TV_R], om4[TV_R], w[TV_R], p[TV_R];
@@ -274,7 +275,8 @@ static int tv_magnus(Instance *c, double t, double h, const double *y, double bo
             e = fabs(dy) > e ? fabs(dy) : e;
         }
         *est = e + nd * yn * expm1(2.0 * (n1 + nd));
-        return 0;
+        if (*est <= bound) return 0;
+        e = 0.0;
     }
     if (tv_expv(c, om4, n4, y, a3) != 0) return -1; /* y4 */
     for (i = 0; i < NX; i++) e = fabs(ynew[i] - a3[i]) > e ? fabs(ynew[i] - a3[i]) : e;
