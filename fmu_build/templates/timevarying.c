@@ -59,27 +59,32 @@ static const double *tv_combined(Instance *c) {
 
 #define TV_NODES 3 /* at most this many times per sweep (the Gauss points of a step) */
 
-/* The combined tables (TV_NG values: G row-major, then g) at nt <= TV_NODES ascending times of one piece
- * (local variables s[q]) by one Clenshaw sweep: each coefficient is read once for all of them */
-static void tv_clenshaw_nodes(const double *coef, int deg, const double *s, int nt, double *out) {
-    double b1[TV_NODES][TV_NG], b2[TV_NODES][TV_NG];
-    int k, v, q;
-    for (q = 0; q < nt; q++) {
-        const double two_s = 2.0 * s[q];
-        double *u = b1[q], *w = b2[q];
-        for (v = 0; v < TV_NG; v++) u[v] = w[v] = 0.0;
-        /* two terms per pass, b_k and b_(k+1) taking turns in u and w: no copies */
-        for (k = deg; k >= 2; k -= 2) {
-            const double *ck = coef + (long)k * TV_NG, *ck1 = ck - TV_NG;
-            for (v = 0; v < TV_NG; v++) w[v] = ck[v] + two_s * u[v] - w[v];
-            for (v = 0; v < TV_NG; v++) u[v] = ck1[v] + two_s * w[v] - u[v];
+/* The combined tables (TV_NG values: G row-major, then g) at the TV_NODES times of one piece (local variables
+ * s[q]) by one Clenshaw sweep for the three: each coefficient is read once for all of them, two degrees per
+ * pass (u holds b_(k+1) and w b_(k+2) before the pass for k, k - 1; b_(deg+1) = b_(deg+2) = 0) */
+static void tv_clenshaw_nodes(const double *coef, int deg, const double *s, double *out) {
+    double u0[TV_NG], w0[TV_NG], u1[TV_NG], w1[TV_NG], u2[TV_NG], w2[TV_NG];
+    const double s0 = 2.0 * s[0], s1 = 2.0 * s[1], s2 = 2.0 * s[2];
+    int k = deg, v;
+    for (v = 0; v < TV_NG; v++) {
+        u0[v] = u1[v] = u2[v] = k % 2 ? coef[(long)k * TV_NG + v] : 0.0; /* odd degree: b_deg = c_deg */
+        w0[v] = w1[v] = w2[v] = 0.0;
+    }
+    for (k -= k % 2; k >= 2; k -= 2) {
+        const double *ck = coef + (long)k * TV_NG, *ck1 = ck - TV_NG;
+        for (v = 0; v < TV_NG; v++) {
+            w0[v] = ck[v] + s0 * u0[v] - w0[v];
+            u0[v] = ck1[v] + s0 * w0[v] - u0[v];
+            w1[v] = ck[v] + s1 * u1[v] - w1[v];
+            u1[v] = ck1[v] + s1 * w1[v] - u1[v];
+            w2[v] = ck[v] + s2 * u2[v] - w2[v];
+            u2[v] = ck1[v] + s2 * w2[v] - u2[v];
         }
-        if (k == 1) { /* odd degree: one more, then b_1 is in w and b_2 in u */
-            for (v = 0; v < TV_NG; v++) w[v] = coef[TV_NG + v] + two_s * u[v] - w[v];
-            for (v = 0; v < TV_NG; v++) out[q * TV_NG + v] = coef[v] + s[q] * w[v] - u[v];
-        } else { /* even degree: b_1 is in u and b_2 in w */
-            for (v = 0; v < TV_NG; v++) out[q * TV_NG + v] = coef[v] + s[q] * u[v] - w[v];
-        }
+    }
+    for (v = 0; v < TV_NG; v++) { /* c_0 + s b_1 - b_2 */
+        out[v] = coef[v] + s[0] * u0[v] - w0[v];
+        out[TV_NG + v] = coef[v] + s[1] * u1[v] - w1[v];
+        out[2 * TV_NG + v] = coef[v] + s[2] * u2[v] - w2[v];
     }
 }
 
@@ -96,12 +101,14 @@ static int tv_values(Instance *c, const double *t, int nt, double *out) {
             const double sq = (2.0 * t[q] - TV_BREAKS[p] - TV_BREAKS[p + 1]) / (TV_BREAKS[p + 1] - TV_BREAKS[p]);
             s[q] = sq > 1.0 ? 1.0 : sq;
         }
-        tv_clenshaw_nodes(coef + TV_COFF[p], TV_DEG[p], s, nt, out);
-        return 0;
+        if (nt == TV_NODES) {
+            tv_clenshaw_nodes(coef + TV_COFF[p], TV_DEG[p], s, out);
+            return 0;
+        }
     }
     for (q = 0; q < nt; q++) {
         if ((p = tv_piece(t[q], s + q)) < 0) return -1;
-        tv_clenshaw_nodes(coef + TV_COFF[p], TV_DEG[p], s + q, 1, out + q * TV_NG);
+        tv_clenshaw(coef + TV_COFF[p], TV_NG, TV_DEG[p], s[q], 0, TV_NG, out + q * TV_NG);
     }
     return 0;
 }
@@ -147,7 +154,7 @@ static double tv_residual(double t, const double *x) {
 
 #define TV_R (NX * TV_M) /* values of an augmented matrix held by its first NX rows */
 
-/* the infinity norm of an augmented matrix (its first NX rows) */
+/* the infinity norm of an augmented matrix (its first NX rows; the last row is zero) */
 static double tv_norm(const double *a) {
     double best = 0.0;
     int i, j;
@@ -159,7 +166,7 @@ static double tv_norm(const double *a) {
     return best;
 }
 
-/* z = exp(om) y for y = [x; 1] (TV_M values) and om of norm `norm` (tv_norm); 0 or -1 */
+/* z = exp(om) y for y = [x; 1] (TV_M values) and om of norm at most `norm` (tv_norm); 0 or -1 */
 static int tv_expv(Instance *c, const double *om, double norm, const double *y, double *z) {
     int i, j, k;
     if (norm <= 1.0) {
@@ -200,7 +207,20 @@ static int tv_expv(Instance *c, const double *om, double norm, const double *y, 
  * or b meets only that zero row: l < NX) */
 static void tv_commutator(const double *restrict a, const double *restrict b, double *restrict r) {
     int i, j, l;
-    for (i = 0; i < NX; i++) {
+    for (i = 0; i + 1 < NX; i += 2) { /* two rows per pass: each row l of a and b is read once for both */
+        double *ri = r + i * TV_M, *rn = ri + TV_M;
+        for (j = 0; j < 2 * TV_M; j++) ri[j] = 0.0;
+        for (l = 0; l < NX; l++) {
+            const double ail = a[i * TV_M + l], bil = b[i * TV_M + l];
+            const double anl = a[(i + 1) * TV_M + l], bnl = b[(i + 1) * TV_M + l];
+            const double *al = a + l * TV_M, *bl = b + l * TV_M;
+            for (j = 0; j < TV_M; j++) {
+                ri[j] += ail * bl[j] - bil * al[j];
+                rn[j] += anl * bl[j] - bnl * al[j];
+            }
+        }
+    }
+    for (; i < NX; i++) {
         double *ri = r + i * TV_M;
         for (j = 0; j < TV_M; j++) ri[j] = 0.0;
         for (l = 0; l < NX; l++) {
@@ -230,7 +250,7 @@ static int tv_magnus(Instance *c, double t, double h, const double *y, double bo
     const double r = sqrt(15.0) / 10.0;
     double v[TV_NODES * TV_NG], a1[TV_R], a2[TV_R], a3[TV_R], c1[TV_R], om4[TV_R], w[TV_R], p[TV_R];
     const double ts[TV_NODES] = {t + (0.5 - r) * h, t + 0.5 * h, t + (0.5 + r) * h};
-    double n4, n1, nc2, nd, nv, yn = 0.0, e = 0.0;
+    double n1, n3, n4, nc1, nc2, nd, nv, yn = 0.0, e = 0.0;
     int i, j;
     if (tv_values(c, ts, TV_NODES, v) != 0) return -1;
     tv_augment(v, a1);
@@ -248,11 +268,13 @@ static int tv_magnus(Instance *c, double t, double h, const double *y, double bo
         p[i] = 2.0 * a3[i] + c1[i];
     }
     for (i = 0; i < TV_M; i++) yn = fabs(y[i]) > yn ? fabs(y[i]) : yn;
-    n4 = tv_norm(om4);
     n1 = tv_norm(a1);
-    nc2 = 2.0 * n1 * tv_norm(p) / 60.0;                         /* >= |C2| */
+    n3 = tv_norm(a3);
+    nc1 = tv_norm(c1);
+    n4 = n1 + (n3 + nc1) / 12.0;                                /* >= |Omega4| */
+    nc2 = 2.0 * n1 * (2.0 * n3 + nc1) / 60.0;                   /* >= |C2| (|P| <= 2 |alpha_3| + |C1|) */
     nv = tv_norm(a2) + nc2;                                     /* >= |V| */
-    nd = 2.0 * n1 * nc2 / 12.0 + 2.0 * tv_norm(w) * nv / 240.0; /* >= |D| */
+    nd = 2.0 * n1 * nc2 / 12.0 + 2.0 * (nc1 + n3) * nv / 240.0; /* >= |D| (|W'| <= |C1| + |alpha_3|) */
     *est = nd * yn * exp(n4 + nd);
     if (*est <= bound) return tv_expv(c, om4, n4, y, ynew); /* y4, as close to y6 as the bound asks */
     tv_commutator(a1, p, v); /* -60 C2 */
