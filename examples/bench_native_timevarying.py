@@ -210,7 +210,8 @@ def _run(out_dir, work):
                                         for d in (tv_spec, const_spec))
         (tv_us, tv_y), (const_us, _) = best_interleaved([command(tv, work, exe), command(const, work, exe)], REPEATS)
         tv_ins, const_ins = (instructions_per_step(f, work, exe) for f in (tv, const))
-        rows += [(n, "native, time-varying A(t), B(t)", tv_us, tv_ins, tv_s, tv.stat().st_size, f"{tv_y - x1_exact:.1e}"),
+        rows += [(n, "native, time-varying A(t), B(t)", tv_us, tv_ins, tv_s, tv.stat().st_size,
+                  f"{tv_y - x1_exact:.1e}"),
                  # the constant model (frozen at t = 0.3) has another solution: no exact value to compare with
                  (n, "native, constant A, B (same size)", const_us, const_ins, const_s, const.stat().st_size, "-")]
         with zipfile.ZipFile(tv) as zf:
@@ -226,11 +227,12 @@ def _run(out_dir, work):
                          f"{py_y - x1_exact:.1e}"))
     print(f"{STEPS} steps of {DT} of index-3 models with rotating constraints, best of {REPEATS} (pythonfmu: 2); "
           f"machine shared with other jobs (2 cores)\n")
-    print("| states | FMU | per step (us) | instructions per step | build (s) | FMU size (kB) | x1 at the end - exact |")
+    print("| states | FMU | per step (us) | instructions per step | build (s) | FMU size (kB) "
+          "| x1 at the end - exact |")
     print("|---|---|---|---|---|---|---|")
     for n, label, us, ins, seconds, size, err in rows:
-        print(f"| {n} | {label} | {us:.2f} | {'-' if ins is None else f'{ins:,.0f}'} | {seconds:.2f} | {size / 1024:.0f} "
-              f"| {err} |")
+        ins = "-" if ins is None else f"{ins:,.0f}"
+        print(f"| {n} | {label} | {us:.2f} | {ins} | {seconds:.2f} | {size / 1024:.0f} | {err} |")
     print()
     for n, time_ratio, ins_ratio, _ in ratios:
         ins = "" if ins_ratio is None else f", instructions {ins_ratio:.1f}x"

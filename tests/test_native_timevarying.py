@@ -224,6 +224,19 @@ def test_refuses_tables_beyond_the_piece_limit(tmp_path, monkeypatch):
     assert not list(tmp_path.glob("*.fmu*"))
 
 
+def test_tables_beyond_the_fast_budget_take_higher_degrees(tmp_path, monkeypatch):
+    # no room for pieces of the lowest degree alone: the fit falls back to every degree of DEGREES
+    monkeypatch.setattr(_native_tv, "FAST_COEFFICIENTS", 0)
+    d = PROBLEMS["Rot3"][0]
+    fmu = build_fmu(d, tmp_path, target="native")
+    with zipfile.ZipFile(fmu) as zf:
+        description = zf.read("modelDescription.xml").decode()
+    assert f"-{_native_tv.DEGREES[-1]}, coefficient tail" in description  # pieces up to the highest degree
+    r = run({"fmu": str(fmu), "dt": DT, "steps": 200, "outputs": _names(d), "block": BLOCK})
+    assert set(r["status"]) == {"ok"}
+    assert rel_err(np.array(r["values"]).T, _exact("Rot3", r["time"])) < 1e-8
+
+
 @pytest.mark.parametrize("method", ["standard", "stabilized"])
 def test_other_completions_fixed_lambda(tmp_path, method):
     d, _ = _spec("Rot2" + method.capitalize(), *[PROBLEMS_SOURCES["Rot2"][k] for k in ("A", "B", "xe")], method=method)

@@ -15,8 +15,8 @@ Each is sampled at Chebyshev extreme points; a piece is accepted when the last
 three coefficients are below `TOL` relative to the largest value of the group
 on the horizon, else it is halved. The runtime's cost per step is mostly the
 Clenshaw sweep, proportional to the degree, so the tables are first fitted
-with the lowest of `DEGREES` alone within `FAST_PIECES` pieces; where that
-does not suffice, every degree in `DEGREES` may serve a piece. More than
+with the lowest of `DEGREES` alone within `FAST_COEFFICIENTS` coefficients;
+where that does not suffice, every degree in `DEGREES` may serve a piece. More than
 `MAX_PIECES` pieces, or a piece shorter than `MIN_PIECE` of the horizon, is
 refused with a `NativeTargetError` naming the limit.
 """
@@ -30,7 +30,7 @@ __all__ = []
 
 TOL = 1e-12           # coefficient tail relative to the group's largest value on the horizon
 DEGREES = (10, 16)    # low degrees, more pieces: the Clenshaw sweep is most of a step's work
-FAST_PIECES = 64      # pieces of the lowest degree alone (a 5-state model: ~ 64 * 11 * 91 doubles, 0.5 MB of C)
+FAST_COEFFICIENTS = 150_000  # tables of the lowest degree alone up to this size (~ 25 bytes of C each)
 MAX_PIECES = 1024     # bound of the tables: 1024 pieces of degree 16 of a 10-state model are ~ 5.8 million doubles
 MIN_PIECE = 1e-6      # of the horizon
 HORIZON_MARGIN = 0.1  # the tables reach this fraction of the experiment's length past its stop time
@@ -135,7 +135,8 @@ def fit_tables(dae, method, lam, k, t_span, error):
             todo += [(mid, hi), (lo, mid)]
         return done
 
-    done = pieces(DEGREES[:1], min(FAST_PIECES, MAX_PIECES)) or pieces(DEGREES, MAX_PIECES)
+    fast = FAST_COEFFICIENTS // ((DEGREES[0] + 1) * (sampler.ndyn + sampler.nres))
+    done = (fast >= 1 and pieces(DEGREES[:1], min(fast, MAX_PIECES))) or pieces(DEGREES, MAX_PIECES)
     if done is None:
         raise error(f"the completion is not resolved to {TOL:g} by piecewise Chebyshev expansions of degree "
                     f"<= {DEGREES[-1]} within the limit of {MAX_PIECES} pieces (minimum piece {MIN_PIECE:g} of "
@@ -219,7 +220,8 @@ def note(spec, tab, lam_note):
     degs = [c.shape[0] - 1 for _, _, c in tab["pieces"]]
     return (f"native C, time-varying A and B tabulated on [{tab['t0']:g}, {tab['t1']:g}] (piecewise Chebyshev, "
             f"{len(degs)} piece(s) of degree {min(degs)}-{max(degs)}, coefficient tail <= {TOL:g} relative; "
-            f"sixth-order Magnus steps, the fourth-order one as error estimate); {spec.method} completion, {lam_note}; all parameters fixed at "
+            f"sixth-order Magnus steps, fourth-order where a bound of their difference is below the tolerance, "
+            f"sub-steps until the error estimate is); {spec.method} completion, {lam_note}; all parameters fixed at "
             "their spec values.")
 
 

@@ -1,9 +1,10 @@
 /* Time-varying coefficients: G(t) = G0(t) + lambda G1(t), g(t) = g0(t) + lambda g1(t) and the residual's
- * Gram form from piecewise Chebyshev tables over the horizon [TV_T0, TV_T1] (model.h), evaluated by
- * Clenshaw's recurrence; Co-Simulation steps by the sixth-order Magnus method on the augmented system
- * y = [x; 1], the fourth-order one from the same three values as the error estimate (sub-steps h / 2^level
- * until it is below tol (1 + |x|)). Compiled only when model.h defines LSC_TIME_VARYING; part of the one translation unit
- * of fmi2Functions.c. No allocation: work arrays on the stack, sized by model.h. */
+ * Gram form from piecewise Chebyshev tables over the horizon [TV_T0, TV_T1] (model.h), evaluated by Clenshaw's
+ * recurrence; Co-Simulation steps by the Magnus methods of order 6 and 4 from three Gauss points on the
+ * augmented system y = [x; 1] (the fourth-order step where a bound of the two steps' difference is below the
+ * tolerance, the sixth-order one otherwise; sub-steps h / 2^level until the estimate is below tol (1 + |x|)).
+ * Compiled only when model.h defines LSC_TIME_VARYING; part of the one translation unit of fmi2Functions.c.
+ * No allocation: work arrays on the stack, sized by model.h. */
 
 #define TV_M (NX + 1) /* order of the augmented system */
 /* at most 2^14 sub-steps per communication step: the Magnus series asks for lambda H below
@@ -181,7 +182,11 @@ static int tv_expv(Instance *c, const double *om, double norm, const double *y, 
                 for (j = 0; j < TV_M; j++) v += om[i * TV_M + j] * term[j];
                 next[i] = v / (double)k;
             }
-            for (i = 0; i < NX; i++) { term[i] = next[i]; z[i] += next[i]; tn = fabs(next[i]) > tn ? fabs(next[i]) : tn; }
+            for (i = 0; i < NX; i++) {
+                term[i] = next[i];
+                z[i] += next[i];
+                tn = fabs(next[i]) > tn ? fabs(next[i]) : tn;
+            }
             term[NX] = 0.0;
             if (tn <= 1e-17 * yn) break;
         }
