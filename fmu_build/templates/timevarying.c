@@ -90,7 +90,8 @@ static void tv_clenshaw_nodes(const double *coef, int deg, const double *s, doub
 }
 
 /* The table values (TV_NG each, at the current lambda) at nt <= TV_NODES ascending times t[q] into
- * out[q * TV_NG]: the one place the runtime reads G and g; 0, or -1 outside the horizon */
+ * out[q * TV_NG]: where the steps and Model Exchange read G and g (the output derivatives read the tables'
+ * derivatives by tv_values_jet); 0, or -1 outside the horizon */
 static int tv_values(Instance *c, const double *t, int nt, double *out) {
     const double *coef = tv_combined(c);
     double s[TV_NODES];
