@@ -14,9 +14,10 @@ Over the experiment's horizon ``[start, stop]`` the FMU needs, as functions of
 Each is sampled at Chebyshev extreme points; a piece is accepted when the last
 three coefficients are below `TOL` relative to the largest value of the group
 on the horizon, else it is halved. The runtime's cost per step is mostly the
-Clenshaw sweep, proportional to the degree, so the tables are first fitted
-with the lowest of `DEGREES` alone within `FAST_COEFFICIENTS` coefficients;
-where that does not suffice, every degree in `DEGREES` may serve a piece. More than
+Clenshaw sweep, proportional to the degree: pieces of a higher degree are
+then split into pieces of the lowest of `DEGREES` where the tables stay
+within `FAST_COEFFICIENTS` coefficients (the split chosen on the piece's own
+expansion, then fitted to samples). More than
 `MAX_PIECES` pieces, or a piece shorter than `MIN_PIECE` of the horizon, is
 refused with a `NativeTargetError` naming the limit.
 """
@@ -30,7 +31,7 @@ __all__ = []
 
 TOL = 1e-12           # coefficient tail relative to the group's largest value on the horizon
 DEGREES = (10, 16)    # low degrees, more pieces: the Clenshaw sweep is most of a step's work
-FAST_COEFFICIENTS = 150_000  # tables of the lowest degree alone up to this size (~ 25 bytes of C each)
+FAST_COEFFICIENTS = 150_000  # pieces split to the lowest degree up to this size (~ 25 bytes of C each)
 MAX_PIECES = 1024     # bound of the tables: 1024 pieces of degree 16 of a 10-state model are ~ 5.8 million doubles
 MIN_PIECE = 1e-6      # of the horizon
 HORIZON_MARGIN = 0.1  # the tables reach this fraction of the experiment's length past its stop time
@@ -110,41 +111,68 @@ def fit_tables(dae, method, lam, k, t_span, error):
                 scale[i] = max(scale[i], np.abs(v[lo:hi]).max(initial=0.0))
         return v
 
+    def tail_ok(coef):
+        tail = np.abs(coef[-3:])
+        return all(tail[:, g0:g1].max(initial=0.0) <= TOL * max(scale[i], 1e-300)
+                   for i, (g0, g1) in enumerate(sampler.groups))
+
     def fit(lo, hi, degrees):
         for m in degrees:
             ts = 0.5 * (hi + lo) + 0.5 * (hi - lo) * _points(m)
             ts[0], ts[-1] = hi, lo
             coef = _coefficients(np.array([sample(float(t)) for t in ts]))
-            tail = np.abs(coef[-3:])
-            if all(tail[:, g0:g1].max(initial=0.0) <= TOL * max(scale[i], 1e-300)
-                   for i, (g0, g1) in enumerate(sampler.groups)):
+            if tail_ok(coef):
                 return coef
         return None
 
-    def pieces(degrees, limit):
-        todo, done = [(a, b)], []
-        while todo:
-            lo, hi = todo.pop()
-            coef = fit(lo, hi, degrees)
-            if coef is not None:
-                done.append((lo, hi, coef))
-                continue
-            if hi - lo <= MIN_PIECE * (b - a) or len(done) + len(todo) + 2 > limit:
-                return None
-            mid = 0.5 * (lo + hi)
-            todo += [(mid, hi), (lo, mid)]
-        return done
-
-    fast = FAST_COEFFICIENTS // ((DEGREES[0] + 1) * (sampler.ndyn + sampler.nres))
-    done = (fast >= 1 and pieces(DEGREES[:1], min(fast, MAX_PIECES))) or pieces(DEGREES, MAX_PIECES)
-    if done is None:
-        raise error(f"the completion is not resolved to {TOL:g} by piecewise Chebyshev expansions of degree "
-                    f"<= {DEGREES[-1]} within the limit of {MAX_PIECES} pieces (minimum piece {MIN_PIECE:g} of "
-                    f"the horizon) on [{a:g}, {b:g}]: shorten the horizon (experiment stop) or build with "
-                    "target='pythonfmu'")
+    todo, done = [(a, b)], []
+    while todo:
+        lo, hi = todo.pop()
+        coef = fit(lo, hi, DEGREES)
+        if coef is not None:
+            done.append((lo, hi, coef))
+            continue
+        if hi - lo <= MIN_PIECE * (b - a) or len(done) + len(todo) + 2 > MAX_PIECES:
+            raise error(f"the completion is not resolved to {TOL:g} by piecewise Chebyshev expansions of degree "
+                        f"<= {DEGREES[-1]} within the limit of {MAX_PIECES} pieces (minimum piece {MIN_PIECE:g} of "
+                        f"the horizon) on [{a:g}, {b:g}]: shorten the horizon (experiment stop) or build with "
+                        "target='pythonfmu'")
+        mid = 0.5 * (lo + hi)
+        todo += [(mid, hi), (lo, mid)]
     done.sort(key=lambda p: p[0])
+    fast = min(FAST_COEFFICIENTS // ((DEGREES[0] + 1) * (sampler.ndyn + sampler.nres)), MAX_PIECES)
+    done = _lowest_degree(done, fast, tail_ok, lambda lo, hi: fit(lo, hi, DEGREES[:1]))
     return dict(pieces=done, n=sampler.n, nv=sampler.ndyn + sampler.nres, ndyn=sampler.ndyn,
                 evaluations=len(values), t0=a, t1=b)
+
+
+def _lowest_degree(pieces, limit, tail_ok, refit):
+    """`pieces` with those of a degree above ``DEGREES[0]`` split into 2, 4, ... pieces of that degree while
+    the tables stay within `limit` pieces: the split is chosen on the piece's own expansion (no evaluation
+    of the completion), then fitted to samples of the completion (`refit`); a piece whose parts do not fit
+    keeps its degree."""
+    m0, out = DEGREES[0], []
+    for i, (lo, hi, coef) in enumerate(pieces):
+        room, parts, split = limit - len(out) - (len(pieces) - i), 2, None
+        while coef.shape[0] - 1 > m0 and parts - 1 <= room:
+            edges = np.linspace(lo, hi, parts + 1)
+            if all(tail_ok(_coefficients(_expansion_at_points(coef, lo, hi, l, h, m0)))
+                   for l, h in zip(edges[:-1], edges[1:])):
+                fits = [(l, h, refit(l, h)) for l, h in zip(edges[:-1], edges[1:])]
+                split = fits if all(f is not None for _, _, f in fits) else None
+                break
+            parts *= 2
+        out += split or [(lo, hi, coef)]
+    return out
+
+
+def _expansion_at_points(coef, lo, hi, l, h, m):
+    """The piece's expansion (`coef` on [lo, hi]) at the m + 1 Chebyshev extreme points of [l, h], in the order
+    `fit_tables` samples them."""
+    ts = 0.5 * (h + l) + 0.5 * (h - l) * _points(m)
+    ts[0], ts[-1] = h, l
+    x = np.clip((2.0 * ts - lo - hi) / (hi - lo), -1.0, 1.0)
+    return np.polynomial.chebyshev.chebval(x, coef).T
 
 
 def header_section(tab):
