@@ -225,7 +225,7 @@ def test_refuses_tables_beyond_the_piece_limit(tmp_path, monkeypatch):
 
 
 def test_tables_beyond_the_fast_budget_take_higher_degrees(tmp_path, monkeypatch):
-    # no room for pieces of the lowest degree alone: the fit falls back to every degree of DEGREES
+    # no room to split pieces to the lowest degree: they keep the degrees of the first fit (up to the highest)
     monkeypatch.setattr(_native_tv, "FAST_COEFFICIENTS", 0)
     d = PROBLEMS["Rot3"][0]
     fmu = build_fmu(d, tmp_path, target="native")
@@ -296,9 +296,10 @@ def test_short_communication_steps_take_the_fourth_order_step_within_the_toleran
     assert rel_err(got[:, ::50], _library(d, r["time"][::50])) < 1e-8
 
 
-# x^(d) needs the (d-1)-th derivative of the tables, whose error grows ~ k^(2(d-1)) over the coefficients' ~ 1e-12:
-# measured on the four problems at t = 0.73 and 1.5: at most 1.4e-14, 3.7e-13, 8e-11, 1.8e-9 for d = 1..4
-DERIVATIVE_RTOL = {1: 1e-12, 2: 1e-10, 3: 1e-8, 4: 1e-6}
+# x^(d) carries the state's error times |G| and the (d-1)-th derivative of the tables, whose error grows
+# ~ k^(2(d-1)) over the coefficients' ~ 1e-12: measured on the four problems at t = 0.73 and 1.5, at most 6e-12,
+# 3e-12, 1e-10, 7.6e-9 for d = 1..4
+DERIVATIVE_RTOL = {1: 1e-10, 2: 1e-9, 3: 1e-8, 4: 1e-6}
 
 
 @pytest.mark.parametrize("name", list(PROBLEMS))
