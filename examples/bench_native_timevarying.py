@@ -1,16 +1,21 @@
 """Time-varying native FMU per step in a C master, side by side with the constant-coefficient native FMU and pythonfmu.
 
-One index-3 model of five states with a rotating constraint (positions q, velocities v, a force mu
-along n(t) = (cos t, sin t), n(t).q prescribed), built three ways:
+Index-3 models of 5 and 10 states with rotating constraints (positions q, velocities v, a force mu
+along n(t) = (cos wt, sin wt), n(t).q prescribed; the 10-state model is two such blocks turning at
+different rates, coupled by a spring), built three ways:
 
-- ``native`` with time-varying A(t), B(t) (Chebyshev tables, Magnus4 with step doubling in C),
+- ``native`` with time-varying A(t), B(t): piecewise Chebyshev tables evaluated by Clenshaw's
+  recurrence in C, sixth-order Magnus steps (the fourth-order one where a bound of their difference
+  is below the tolerance) with sub-steps until the error estimate is below it,
 - ``native`` of the same size with constant A, B (the model frozen at t = 0.3, forcing in t),
-- ``pythonfmu`` of the time-varying model with its Magnus4 stepper (``solver = 5``).
+- ``pythonfmu`` of the time-varying 5-state model with its Magnus4 stepper (``solver = 5``).
 
 Each runs 10,000 communication steps of 0.0002 in one small C master (dlopen, fmi2DoStep and
-fmi2GetReal per step; the pythonfmu FMU with the libpython preload of ``lsc-fmu env``); the best of
-five runs (two for pythonfmu) is quoted. The build time and FMU size are quoted too. Writes nothing outside ``out/``
-unless ``--docs`` (then also docs/_generated/bench_native_timevarying.md).
+fmi2GetReal per step; the pythonfmu FMU with the libpython preload of ``lsc-fmu env``); the native
+FMUs of one size run in alternation, the best of 15 runs each (two for pythonfmu) is quoted, and
+instructions per step are counted under callgrind (independent of the machine's load). The build time
+and FMU size are quoted too. Writes nothing outside ``out/`` unless ``--docs`` (then also
+docs/_generated/bench_native_timevarying.md).
 """
 import os
 import subprocess
@@ -23,7 +28,8 @@ from xml.etree import ElementTree as ET
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "examples"))
-STEPS, DT, REPEATS = 10000, 0.0002, 5
+STEPS, DT, REPEATS = 10000, 0.0002, 15  # a native run takes milliseconds: many rounds, the best of each
+SIZES = (1, 2)  # blocks of five states
 
 MASTER = r"""
 #include <dlfcn.h>
@@ -75,25 +81,35 @@ int main(int argc, char **argv) {
 """
 
 
-def specs():
-    """The time-varying model, and the same model frozen at t = 0.3 (constant A, B), as spec dicts."""
+def specs(blocks=1):
+    """The time-varying model of `blocks` rotating-constraint blocks (5 states each, consecutive blocks coupled by a
+    spring between their positions), and the same model frozen at t = 0.3 (constant A, B), as spec dicts; and the
+    exact solution (sympy)."""
     import sympy as sp
 
     t = sp.Symbol("t")
-    c, s = sp.cos(t), sp.sin(t)
-    A = sp.diag(1, 1, 1, 1, 0)
-    B = sp.Matrix([[0, 0, -1, 0, 0], [0, 0, 0, -1, 0], [0, 0, 0, 0, -c], [0, 0, 0, 0, -s], [c, s, 0, 0, 0]])
-    xe = sp.Matrix([c + 2, sp.sin(2 * t), -s, 2 * sp.cos(2 * t), sp.cos(t / 3)])
+    n = 5 * blocks
+    A, B, xe = sp.zeros(n, n), sp.zeros(n, n), []
+    for k in range(blocks):
+        w = 1 + sp.Rational(k, 2)  # each block's constraint turns at its own rate
+        c, s, o = sp.cos(w * t), sp.sin(w * t), 5 * k
+        A[o:o + 5, o:o + 5] = sp.diag(1, 1, 1, 1, 0)
+        B[o:o + 5, o:o + 5] = sp.Matrix([[0, 0, -1, 0, 0], [0, 0, 0, -1, 0], [0, 0, 0, 0, -c], [0, 0, 0, 0, -s],
+                                         [c, s, 0, 0, 0]])
+        if k:  # a spring between the first position of this block and of the one before
+            B[o + 2, o - 5], B[o + 2, o], B[o - 3, o - 5], B[o - 3, o] = -1, 1, 1, -1
+        xe += [sp.cos(w * t) + 2 + k, sp.sin(2 * t + k), -s, 2 * sp.cos(2 * t + k), sp.cos(t / 3 + k)]
+    xe = sp.Matrix(xe)
 
     def spec(name, A, B):
         f = A * xe.diff(t) + B * xe
-        return {"model": {"name": name}, "states": {f"x{i + 1}": {"start": float(xe[i].subs(t, 0))} for i in range(5)},
-                "equations": {"A": [[str(e) for e in A.row(i)] for i in range(5)],
-                              "B": [[str(e) for e in B.row(i)] for i in range(5)], "f": [str(e) for e in f]},
+        return {"model": {"name": name}, "states": {f"x{i + 1}": {"start": float(xe[i].subs(t, 0))} for i in range(n)},
+                "equations": {"A": [[str(e) for e in A.row(i)] for i in range(n)],
+                              "B": [[str(e) for e in B.row(i)] for i in range(n)], "f": [str(e) for e in f]},
                 "completion": {"method": "alternative", "lam": 2.0},
                 "experiment": {"start": 0.0, "stop": STEPS * DT, "step": DT}}
 
-    return spec("RotTV", A, B), spec("RotConst", A, B.subs(t, sp.Rational(3, 10)).evalf()), xe
+    return spec(f"RotTV{n}", A, B), spec(f"RotConst{n}", A, B.subs(t, sp.Rational(3, 10)).evalf()), xe
 
 
 def build(d, dest, target):
@@ -104,25 +120,40 @@ def build(d, dest, target):
     return fmu, time.perf_counter() - start
 
 
-def per_step(fmu, work, exe, env=None, integer=None, repeats=REPEATS):
-    """Best per-step time (us) over `repeats` runs, and x1 at the end."""
-    folder = work / fmu.stem
+def unpacked(fmu, work):
+    """The folder under `work` that `fmu` is unpacked in (by target and name: out/<target>/<name>/<name>.fmu)."""
+    return work / f"{fmu.parent.parent.name}-{fmu.stem}"
+
+
+def command(fmu, work, exe, integer=None):
+    """The master's command line for `fmu` (unpacked under `work`)."""
+    folder = unpacked(fmu, work)
     with zipfile.ZipFile(fmu) as zf:
         zf.extractall(folder)
         root = ET.fromstring(zf.read("modelDescription.xml"))
     vrs = {sv.get("name"): sv.get("valueReference") for sv in root.iter("ScalarVariable")}
     lib = next((folder / "binaries").rglob("*.so"))
     cmd = [str(exe), str(lib), root.get("guid"), (folder / "resources").as_uri(), str(STEPS), str(DT), vrs["x1"]]
-    if integer:
-        cmd += [vrs[integer[0]], str(integer[1])]
-    best, y = float("inf"), None
+    return cmd + ([vrs[integer[0]], str(integer[1])] if integer else [])
+
+
+def timed(cmd, env=None):
+    """Per-step time (us) of one run of the master, and x1 at the end."""
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
+    if out.returncode != 0:
+        raise RuntimeError(f"{cmd[1]}: the master failed ({out.returncode}): {out.stderr[-2000:]}")
+    us, y = map(float, out.stdout.split())
+    return us, y
+
+
+def best_interleaved(cmds, repeats, env=None):
+    """Best per-step time of each command over `repeats` rounds, the commands taking turns in every round."""
+    best, last = [float("inf")] * len(cmds), [None] * len(cmds)
     for _ in range(repeats):
-        out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
-        if out.returncode != 0:
-            raise RuntimeError(f"{fmu.name}: the master failed ({out.returncode}): {out.stderr[-2000:]}")
-        us, y = map(float, out.stdout.split())
-        best = min(best, us)
-    return best, y
+        for i, cmd in enumerate(cmds):
+            us, last[i] = timed(cmd, env)
+            best[i] = min(best[i], us)
+    return list(zip(best, last))
 
 
 def instructions_per_step(fmu, work, exe):
@@ -133,7 +164,7 @@ def instructions_per_step(fmu, work, exe):
 
     if shutil.which("valgrind") is None:
         return None
-    folder = work / fmu.stem
+    folder = unpacked(fmu, work)
     root = ET.fromstring((folder / "modelDescription.xml").read_text())
     vr = next(sv.get("valueReference") for sv in root.iter("ScalarVariable") if sv.get("name") == "x1")
     lib = next((folder / "binaries").rglob("*.so"))
@@ -165,37 +196,51 @@ def main():
 
 
 def _run(out_dir, work):
+    import re
+
     (work / "master.c").write_text(MASTER)
     exe = work / "master"
     subprocess.run(["cc", "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-I", str(ROOT / "fmu_build" / "templates"),
                     "-o", str(exe), str(work / "master.c"), "-ldl"], check=True)
-    tv_spec, const_spec, xe = specs()
-    x1_exact = float(xe[0].subs("t", STEPS * DT))
-    rows = []
-    for label, d, target, env, integer in (
-            ("native, time-varying A(t), B(t)", tv_spec, "native", None, None),
-            ("native, constant A, B (same size)", const_spec, "native", None, None),
-            ("pythonfmu Magnus4, time-varying", tv_spec, "pythonfmu", python_env(), ("solver", 5))):
-        fmu, seconds = build(d, out_dir / target / d["model"]["name"], target)
-        us, y = per_step(fmu, work, exe, env, integer, 2 if target == "pythonfmu" else REPEATS)
-        ins = instructions_per_step(fmu, work, exe) if target == "native" else None
-        rows.append((label, us, seconds, fmu.stat().st_size, y, ins))
-        if label.startswith("native, time"):
-            with zipfile.ZipFile(fmu) as zf:
-                header = len(zf.read("sources/model.h"))
-    print(f"{STEPS} steps of {DT} of a 5-state index-3 model with a rotating constraint, best of {REPEATS} (pythonfmu: 2); "
+    rows, notes, ratios = [], [], []
+    for blocks in SIZES:
+        tv_spec, const_spec, xe = specs(blocks)
+        n, x1_exact = 5 * blocks, float(xe[0].subs("t", STEPS * DT))
+        (tv, tv_s), (const, const_s) = (build(d, out_dir / "native" / d["model"]["name"], "native")
+                                        for d in (tv_spec, const_spec))
+        (tv_us, tv_y), (const_us, _) = best_interleaved([command(tv, work, exe), command(const, work, exe)], REPEATS)
+        tv_ins, const_ins = (instructions_per_step(f, work, exe) for f in (tv, const))
+        rows += [(n, "native, time-varying A(t), B(t)", tv_us, tv_ins, tv_s, tv.stat().st_size,
+                  f"{tv_y - x1_exact:.1e}"),
+                 # the constant model (frozen at t = 0.3) has another solution: no exact value to compare with
+                 (n, "native, constant A, B (same size)", const_us, const_ins, const_s, const.stat().st_size, "-")]
+        with zipfile.ZipFile(tv) as zf:
+            header = len(zf.read("sources/model.h"))
+            desc = ET.fromstring(zf.read("modelDescription.xml")).get("description")
+        tables = re.search(r"\d+ piece\(s\) of degree [\d-]+", desc).group(0)
+        notes.append(f"{n} states: tables of {tables}, model.h {header / 1024:.0f} kB")
+        ratios.append((n, tv_us / const_us, tv_ins / const_ins if tv_ins and const_ins else None, tv_us))
+        if blocks == 1:
+            py, py_s = build(tv_spec, out_dir / "pythonfmu" / tv_spec["model"]["name"], "pythonfmu")
+            [(py_us, py_y)] = best_interleaved([command(py, work, exe, ("solver", 5))], 2, python_env())
+            rows.append((n, "pythonfmu Magnus4, time-varying", py_us, None, py_s, py.stat().st_size,
+                         f"{py_y - x1_exact:.1e}"))
+    print(f"{STEPS} steps of {DT} of index-3 models with rotating constraints, best of {REPEATS} (pythonfmu: 2); "
           f"machine shared with other jobs (2 cores)\n")
-    print("| FMU | per step (us) | instructions per step | build (s) | FMU size (kB) | x1 at the end - exact |")
-    print("|---|---|---|---|---|---|")
-    for label, us, seconds, size, y, ins in rows:
-        # the constant model (frozen at t = 0.3) has another solution: no exact value to compare with
-        err = "-" if "constant" in label else f"{y - x1_exact:.1e}"
-        print(f"| {label} | {us:.2f} | {'-' if ins is None else f'{ins:,.0f}'} | {seconds:.2f} | {size / 1024:.0f} | {err} |")
-    tv, const, py = (r[1] for r in rows)
-    if rows[0][5] and rows[1][5]:
-        print(f"\ninstructions per step, time-varying / constant native: {rows[0][5] / rows[1][5]:.1f}x")
-    print(f"\ntime-varying / constant native: {tv / const:.1f}x (goal <= 3x); pythonfmu Magnus4 / time-varying "
-          f"native: {py / tv:.0f}x (goal >= 100x); model.h of the time-varying FMU: {header / 1024:.0f} kB")
+    print("| states | FMU | per step (us) | instructions per step | build (s) | FMU size (kB) "
+          "| x1 at the end - exact |")
+    print("|---|---|---|---|---|---|---|")
+    for n, label, us, ins, seconds, size, err in rows:
+        ins = "-" if ins is None else f"{ins:,.0f}"
+        print(f"| {n} | {label} | {us:.2f} | {ins} | {seconds:.2f} | {size / 1024:.0f} | {err} |")
+    print()
+    for n, time_ratio, ins_ratio, _ in ratios:
+        ins = "" if ins_ratio is None else f", instructions {ins_ratio:.1f}x"
+        print(f"- {n} states, time-varying / constant native: time {time_ratio:.1f}x{ins} (goal <= 3x)")
+    py_us = next(r[2] for r in rows if r[1].startswith("pythonfmu"))
+    print(f"- pythonfmu Magnus4 / time-varying native, 5 states: {py_us / ratios[0][3]:.0f}x (goal >= 100x)")
+    for line in notes:
+        print(f"- {line}")
 
 
 if __name__ == "__main__":

@@ -26,8 +26,12 @@ T = sp.Symbol("t")
 STOP, DT = 2.0, 0.01
 
 
+XE = {}  # the exact solutions in sympy, by model name
+
+
 def _spec(name, A, B, xe, lam=2.0, stop=STOP, method="alternative", f=None):
     A, B, xe = sp.Matrix(A), sp.Matrix(B), sp.Matrix(xe)
+    XE[name] = xe
     f = A * xe.diff(T) + B * xe if f is None else f
     n = A.shape[0]
     rows = lambda M: [[str(e) for e in M.row(i)] for i in range(n)]  # noqa: E731
@@ -213,6 +217,19 @@ def test_refuses_tables_beyond_the_piece_limit(tmp_path, monkeypatch):
     assert not list(tmp_path.glob("*.fmu*"))
 
 
+def test_tables_beyond_the_fast_budget_take_higher_degrees(tmp_path, monkeypatch):
+    # no room to split pieces to the lowest degree: they keep the degrees of the first fit (up to the highest)
+    monkeypatch.setattr(_native_tv, "FAST_COEFFICIENTS", 0)
+    d = PROBLEMS["Rot3"][0]
+    fmu = build_fmu(d, tmp_path, target="native")
+    with zipfile.ZipFile(fmu) as zf:
+        description = zf.read("modelDescription.xml").decode()
+    assert f"-{_native_tv.DEGREES[-1]}, coefficient tail" in description  # pieces up to the highest degree
+    r = run({"fmu": str(fmu), "dt": DT, "steps": 200, "outputs": _names(d), "block": BLOCK})
+    assert set(r["status"]) == {"ok"}
+    assert rel_err(np.array(r["values"]).T, _exact("Rot3", r["time"])) < 1e-8
+
+
 @pytest.mark.parametrize("method", ["standard", "stabilized"])
 def test_other_completions_fixed_lambda(tmp_path, method):
     d, _ = _spec("Rot2" + method.capitalize(), *[PROBLEMS_SOURCES["Rot2"][k] for k in ("A", "B", "xe")], method=method)
@@ -260,13 +277,37 @@ def test_long_communication_steps_are_subdivided_to_the_tolerance(built):
     assert rel_err(np.array(r["values"]).T, _exact("Rot3", r["time"])) < 1e-8
 
 
-def test_output_derivative_is_G_x_plus_g(built):
-    d = PROBLEMS["Rot2"][0]
-    r = run({"fmu": str(built["Rot2"]), "dt": DT, "steps": 50, "outputs": _names(d), "output_derivatives": _names(d)})
-    assert len(r["derivatives"]) == 1  # maxOutputDerivativeOrder 1
-    xe = sp.Matrix(PROBLEMS_SOURCES["Rot2"]["xe"])
-    expected = np.array(xe.diff(T).subs(T, r["time"][-1]).evalf(), dtype=float).ravel()
-    assert rel_err(r["derivatives"][0], expected) < 1e-8
+@pytest.mark.parametrize("name", ["Rot3", "RotCanon2"])
+def test_short_communication_steps_take_the_fourth_order_step_within_the_tolerance(built, name):
+    # steps of 0.001: the norm bound of |y6 - y4| (~ h^5) is below the tolerance, so each step is one fourth-order
+    # Magnus step (one commutator; steps of 0.01 and 0.25 above take the sixth-order one, with sub-steps)
+    d = PROBLEMS[name][0]
+    r = run({"fmu": str(built[name]), "dt": 0.001, "steps": 2000, "outputs": _names(d), "block": BLOCK})
+    assert set(r["status"]) == {"ok"}
+    got = np.array(r["values"]).T
+    assert rel_err(got, _exact(name, r["time"])) < 1e-8
+    assert rel_err(got[:, ::50], _library(d, r["time"][::50])) < 1e-8
+
+
+# x^(d) carries the state's error times |G| and the (d-1)-th derivative of the tables, whose error grows
+# ~ k^(2(d-1)) over the coefficients' ~ 1e-12: measured on the four problems at t = 0.73 and 1.5, at most 6e-12,
+# 3e-12, 1e-10, 7.6e-9 for d = 1..4
+DERIVATIVE_RTOL = {1: 1e-10, 2: 1e-9, 3: 1e-8, 4: 1e-6}
+
+
+@pytest.mark.parametrize("name", list(PROBLEMS))
+def test_output_derivatives_up_to_the_declared_order_are_exact(built, name):
+    # x^(d) = sum_j binomial(d - 1, j) G^(j) x^(d-1-j) + g^(d-1), against the exact solution's derivatives
+    d = PROBLEMS[name][0]
+    with zipfile.ZipFile(built[name]) as zf:
+        assert 'maxOutputDerivativeOrder="4"' in zf.read("modelDescription.xml").decode()
+    r = run({"fmu": str(built[name]), "dt": DT, "steps": 73, "outputs": _names(d), "output_derivatives": _names(d),
+             "block": BLOCK})
+    assert len(r["derivatives"]) == 4, r.get("derivatives_error")
+    xe = XE[name]
+    for order, got in enumerate(r["derivatives"], start=1):
+        expected = np.array(xe.diff(T, order).subs(T, r["time"][-1]).evalf(), dtype=float).ravel()
+        assert rel_err(got, expected) < DERIVATIVE_RTOL[order], (order, got, expected)
 
 
 @pytest.mark.parametrize("lam", [1e2, 1e4])

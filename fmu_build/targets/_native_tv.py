@@ -22,9 +22,13 @@ of ``c_g = c_g0 + V u``: ``C^T V``, ``V^T c_g0`` and ``V^T V``.
 
 Each is sampled at Chebyshev extreme points; a piece is accepted when the last
 three coefficients are below `TOL` relative to the largest value of the group
-on the horizon, else it is halved. More than `MAX_PIECES` pieces, or a
-piece shorter than `MIN_PIECE` of the horizon, is refused with a
-`NativeTargetError` naming the limit.
+on the horizon, else it is halved. The runtime's cost per step is mostly the
+Clenshaw sweep, proportional to the degree: pieces of a higher degree are
+then split into pieces of the lowest of `DEGREES` where the tables stay
+within `FAST_COEFFICIENTS` coefficients (the split chosen on the piece's own
+expansion, then fitted to samples). More than
+`MAX_PIECES` pieces, or a piece shorter than `MIN_PIECE` of the horizon, is
+refused with a `NativeTargetError` naming the limit.
 """
 
 import math
@@ -37,7 +41,8 @@ from lsc._chebyshev import _coefficients, _extreme_points as _points  # the libr
 __all__ = []
 
 TOL = 1e-12           # coefficient tail relative to the group's largest value on the horizon
-DEGREES = (8, 16)  # low degrees, more pieces: the Clenshaw sweep is most of a step's work
+DEGREES = (10, 16)    # low degrees, more pieces: the Clenshaw sweep is most of a step's work
+FAST_COEFFICIENTS = 150_000  # pieces split to the lowest degree up to this size (~ 25 bytes of C each)
 MAX_PIECES = 1024     # bound of the tables: 1024 pieces of degree 16 of a 10-state model are ~ 5.8 million doubles
 MIN_PIECE = 1e-6      # of the horizon
 HORIZON_MARGIN = 0.1  # the tables reach this fraction of the experiment's length past its stop time
@@ -180,21 +185,24 @@ def fit_tables(dae, method, lam, k, t_span, error, inputs=None):
                 scale[i] = max(scale[i], np.abs(v[lo:hi]).max(initial=0.0))
         return v
 
-    def fit(lo, hi):
-        for m in DEGREES:
+    def tail_ok(coef):
+        tail = np.abs(coef[-3:])
+        return all(tail[:, g0:g1].max(initial=0.0) <= TOL * max(scale[i], 1e-300)
+                   for i, (g0, g1) in enumerate(sampler.groups))
+
+    def fit(lo, hi, degrees):
+        for m in degrees:
             ts = 0.5 * (hi + lo) + 0.5 * (hi - lo) * _points(m)
             ts[0], ts[-1] = hi, lo
             coef = _coefficients(np.array([sample(float(t)) for t in ts]))
-            tail = np.abs(coef[-3:])
-            if all(tail[:, g0:g1].max(initial=0.0) <= TOL * max(scale[i], 1e-300)
-                   for i, (g0, g1) in enumerate(sampler.groups)):
+            if tail_ok(coef):
                 return coef
         return None
 
     todo, done = [(a, b)], []
     while todo:
         lo, hi = todo.pop()
-        coef = fit(lo, hi)
+        coef = fit(lo, hi, DEGREES)
         if coef is not None:
             done.append((lo, hi, coef))
             continue
@@ -206,8 +214,39 @@ def fit_tables(dae, method, lam, k, t_span, error, inputs=None):
         mid = 0.5 * (lo + hi)
         todo += [(mid, hi), (lo, mid)]
     done.sort(key=lambda p: p[0])
+    fast = min(FAST_COEFFICIENTS // ((DEGREES[0] + 1) * (sampler.ndyn + sampler.nres)), MAX_PIECES)
+    done = _lowest_degree(done, fast, tail_ok, lambda lo, hi: fit(lo, hi, DEGREES[:1]))
     return dict(pieces=done, n=sampler.n, nv=sampler.ndyn + sampler.nres, ndyn=sampler.ndyn,
                 evaluations=len(values), t0=a, t1=b, p=sampler.p, nuj=sampler.m)
+
+
+def _lowest_degree(pieces, limit, tail_ok, refit):
+    """`pieces` with those of a degree above ``DEGREES[0]`` split into 2, 4, ... pieces of that degree while
+    the tables stay within `limit` pieces: the split is chosen on the piece's own expansion (no evaluation
+    of the completion), then fitted to samples of the completion (`refit`); a piece whose parts do not fit
+    keeps its degree."""
+    m0, out = DEGREES[0], []
+    for i, (lo, hi, coef) in enumerate(pieces):
+        room, parts, split = limit - len(out) - (len(pieces) - i), 2, None
+        while coef.shape[0] - 1 > m0 and parts - 1 <= room:
+            edges = np.linspace(lo, hi, parts + 1)
+            if all(tail_ok(_coefficients(_expansion_at_points(coef, lo, hi, l, h, m0)))
+                   for l, h in zip(edges[:-1], edges[1:])):
+                fits = [(l, h, refit(l, h)) for l, h in zip(edges[:-1], edges[1:])]
+                split = fits if all(f is not None for _, _, f in fits) else None
+                break
+            parts *= 2
+        out += split or [(lo, hi, coef)]
+    return out
+
+
+def _expansion_at_points(coef, lo, hi, l, h, m):
+    """The piece's expansion (`coef` on [lo, hi]) at the m + 1 Chebyshev extreme points of [l, h], in the order
+    `fit_tables` samples them."""
+    ts = 0.5 * (h + l) + 0.5 * (h - l) * _points(m)
+    ts[0], ts[-1] = h, l
+    x = np.clip((2.0 * ts - lo - hi) / (hi - lo), -1.0, 1.0)
+    return np.polynomial.chebyshev.chebval(x, coef).T
 
 
 def header_section(tab):
@@ -326,8 +365,8 @@ def prepare(dae, spec, k, error):
 
 
 def finish_header(header, tab):
-    """The generated header with the tables; output derivatives of order 1 only (x' = G x + g)."""
-    header = header.replace(f"#define MAX_OUTPUT_DERIVATIVE_ORDER {4}", "#define MAX_OUTPUT_DERIVATIVE_ORDER 1")
+    """The generated header with the tables (output derivatives up to the constant target's order, from the
+    derivatives of the tables: x'' = G' x + G x' + g' and so on)."""
     # the first lines describe the model: its A, B are the tables at the end, not the zero G0, W0 placeholders
     header = header.replace("; A, B constant", "; A(t), B(t) time-varying: G, g and the residual from the tables at the "
                             "end (G0, G1, W0, W1 below are unused zeros)", 1)
@@ -339,8 +378,9 @@ def note(spec, tab, lam_note):
     degs = [c.shape[0] - 1 for _, _, c in tab["pieces"]]
     return (f"native C, time-varying A and B tabulated on [{tab['t0']:g}, {tab['t1']:g}] (piecewise Chebyshev, "
             f"{len(degs)} piece(s) of degree {min(degs)}-{max(degs)}, coefficient tail <= {TOL:g} relative; "
-            f"sixth-order Magnus steps, the fourth-order one as error estimate); {spec.method} completion, {lam_note}; "
-            "all parameters fixed at their spec values."
+            f"sixth-order Magnus steps, fourth-order where a bound of their difference is below the tolerance, "
+            f"sub-steps until the error estimate is); {spec.method} completion, {lam_note}; all parameters fixed at "
+            "their spec values."
             + (f" Inputs in f through their tabulated forcing maps on u, ..., u^({tab['p']})." if tab["nuj"] else ""))
 
 

@@ -409,12 +409,14 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
                         canGetAndSetFMUstate=True, canSerializeFMUstate=True, providesDirectionalDerivative=False)
     # FMI 3.0: a time-varying FMU returns early at the end of its tables' horizon where the importer allows it
     describe = partial(_describe3, might_return_early=tv is not None) if fmi_version == 3 else model_description
+    # time-varying with inputs: x' only (higher orders would need the input jet beyond the order it is sent)
+    max_order = 1 if tv is not None and tv["nuj"] else TAYLOR_DEGREE + 1
     xml = describe(
         model_name=ident, guid=guid, description=f"{spec.description or ident} [{note}]", model_identifier=ident,
         variables=variables, source_files=["fmi2Functions.c"],
         model_exchange=dict(flags_common, completedIntegratorStepNotNeeded=False),
         co_simulation=dict(flags_common, canHandleVariableCommunicationStepSize=True, canInterpolateInputs=True,
-                           maxOutputDerivativeOrder=1 if tv else TAYLOR_DEGREE + 1, canRunAsynchronuously=False),
+                           maxOutputDerivativeOrder=max_order, canRunAsynchronuously=False),
         experiment={"startTime": float(spec.experiment["start"]), "stopTime": float(spec.experiment["stop"]),
                     "stepSize": float(spec.experiment["step"])},
         log_categories=[("logStatusError", "errors"), ("logStatusWarning", "warnings"), ("logAll", "everything")])

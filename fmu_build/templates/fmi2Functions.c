@@ -28,7 +28,7 @@
  */
 #include "lsc_fmu.h"
 #ifdef LSC_TIME_VARYING
-#include "timevarying.c" /* G(t), g(t), the residual from Chebyshev tables; Magnus4 steps */
+#include "timevarying.c" /* G(t), g(t), the residual from Chebyshev tables; Magnus steps */
 #endif
 #include "lsc_model.c"
 
