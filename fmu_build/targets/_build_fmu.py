@@ -23,9 +23,10 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
         Override the spec's completion method, rate, model name and ``k``.
     target : {'pythonfmu', 'native'}, optional
         'pythonfmu' (default): Co-Simulation in Python, any coefficients.
-        'native': generated C compiled with the system C compiler, FMI 2.0
+        'native': generated C compiled with the system C compiler,
         Co-Simulation and Model Exchange in one FMU, no Python in the host;
-        constant ``A`` and ``B`` only (see docs/native_fmu.md).
+        constant ``A`` and ``B``, or time-varying ones tabulated over the
+        experiment's horizon (see docs/native_fmu.md).
     fix_parameters : bool, optional
         Native target: fix tunable parameters that enter ``A`` or ``B`` at
         their spec values instead of refusing the spec.
