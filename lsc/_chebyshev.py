@@ -45,6 +45,7 @@ import scipy.fft
 __all__ = []
 
 _FIRST_DEGREE = 8  # the whole interval at 8 and 16 first: most smooth G, g stop there
+_PROBE = 32  # the first piece doubles up to this degree, whatever the prediction
 _MAX_DEGREE = 128
 _TARGET = 32  # the degree pieces are sized for: samples per unit length vary little from 16 to 64
 _MARGIN = 1.05  # a degree chosen from a prediction: the predicted one x 1.05 + 1 (+ 2 from a neighbour)
@@ -242,7 +243,7 @@ class ChebyshevCoefficients:
             decay = _Decay(size, self.tol, 0.5 * (hi - lo), passed)
             if passed:
                 return coef, decay
-            if probing and m < 32:  # 9 and 17 values predict little: 8, 16, 32 on the first piece
+            if probing and m < _PROBE:  # 9 and 17 values predict little: 8, 16, 32 on the first piece
                 m *= 2
                 continue
             # The values of degree m are among those of any multiple of m: the next degree is the least
@@ -250,7 +251,7 @@ class ChebyshevCoefficients:
             # when there is none: from 64 values on, the prediction is reliable (the decay of the first
             # coefficients is rarely the asymptotic one), and this may be the only piece.
             target = m * max(2, math.ceil((_MARGIN * decay.degree(hi - lo) + 1) / m))
-            if target > _MAX_DEGREE and probing and m < 64:
+            if target > _MAX_DEGREE and probing and m < 2 * _PROBE:
                 target = 2 * m
             if target > _MAX_DEGREE:
                 return None, decay
