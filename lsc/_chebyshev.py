@@ -8,25 +8,47 @@ smooth as the coefficients, so a few dozen evaluations at Chebyshev points
 determine them on a piece of the interval to any accuracy; the solver then
 evaluates polynomials (one ``cos`` and one matrix product per call).
 
-Construction is adaptive, as in Chebfun: on a piece, interpolate at the
-``m + 1`` Chebyshev extreme points for ``m = 8, 16, ..., 128`` (nested: each
-degree reuses the previous values) and accept the first degree whose last
-three coefficients are below ``tol`` relative to the largest value of ``G``
-(and, separately, of ``g``); if 128 is not enough, halve the piece. A piece
-that is still unresolved at 1e-6 of the interval's length (a jump in the
-forcing, say), or left when the budget of evaluations is spent, is
+On a piece, the interpolant through the ``m + 1`` Chebyshev extreme points
+is accepted when its last three coefficients are below ``tol`` relative to
+the scale of ``G`` (its largest entry, and at least ``1 / (b - a)``: an
+error ``tol / (b - a)`` in a rate moves the solution by about ``tol`` of
+itself over the interval, and a ``G`` that vanishes to rounding needs no
+more) and, separately, of ``g`` (its largest entry).
+
+The evaluations are what costs. ``G`` and ``g`` are analytic but not entire
+(a completion is rational in the coefficients' values, with complex
+singularities at some distance ``d`` from the real axis), so their
+coefficients decay like ``rho^-j``, ``rho`` fixed by ``d`` and the piece's
+half-length (Trefethen, *Approximation Theory and Approximation Practice*,
+ch. 8), and one long piece needs fewer values than several short ones. The
+first piece is the whole interval at degrees 8, 16, 32 (a cheap ``G``,
+``g`` stops there). When that fails, the decay predicts the degree needed,
+and the next degree is the least multiple of the current one that is
+predicted to be enough (the values of degree ``m`` are among those of any
+multiple of ``m``: 32 may go to 96 where doubling would take 128), up to
+128. Beyond that the interval is split into pieces sized, from left to
+right as a step-size controller would, for about `_TARGET` degrees by the
+slowest decay seen so far, each started at its predicted degree.
+
+A piece that is still unresolved at 1e-6 of the interval's length (a jump in
+the forcing, say), or left when the budget of evaluations is spent, is
 evaluated pointwise, so the interpolant is never silently wrong by more than
 its tolerance.
 """
 
 import bisect
+import math
 
 import numpy as np
 import scipy.fft
 
 __all__ = []
 
-_DEGREES = (8, 16, 32, 64, 128)
+_FIRST_DEGREE = 8  # the whole interval at 8 and 16 first: most smooth G, g stop there
+_PROBE = 32  # the first piece doubles up to this degree, whatever the prediction
+_MAX_DEGREE = 128
+_TARGET = 32  # the degree pieces are sized for: samples per unit length vary little from 16 to 64
+_MARGIN = 1.05  # a degree chosen from a prediction: the predicted one x 1.05 + 1 (+ 2 from a neighbour)
 _MIN_PIECE = 1e-6  # of the interval's length
 
 
@@ -52,6 +74,54 @@ def _coefficients(values):
     return c
 
 
+class _Decay:
+    """Geometric decay ``rho^-j`` of a piece's Chebyshev coefficients, as a singularity distance.
+
+    `e` holds the coefficients' sizes relative to the scales (largest over the entries of ``G``
+    and of ``g``), `tol` the level they must reach. ``rho`` is fitted on the second half of the
+    envelope (``max e[j:]``), down to `tol` when the fit passed or to the tail when it did not:
+    the first coefficients decay faster or slower than the asymptotic rate (an entire part, a
+    few large modes), which a fit from degree 0 would extrapolate. A function analytic in the
+    Bernstein ellipse of parameter ``rho`` around a piece of half-length ``h`` is analytic at
+    distance ``d = h (rho - 1/rho) / 2`` from it, which gives ``rho``, and the degree, on a piece
+    of any other length.
+    """
+
+    def __init__(self, e, tol, half_length, passed):
+        envelope = np.maximum.accumulate(e[::-1])[::-1]
+        above = np.nonzero(envelope > tol)[0]
+        if not above.size:  # resolved at degree 0 (to tol): nothing to extrapolate
+            self.log_ratio, self.distance = 0.0, math.inf
+            return
+        last = int(above[-1]) if passed else e.size - 1
+        level = tol if passed else max(float(envelope[-3]), 1e-300)
+        middle = last // 2
+        drop = math.log(max(float(envelope[middle]), level) / level)
+        rho = math.exp(drop / (last - middle)) if last > middle and drop > 0 else 1.0 + 1e-9
+        # the level at degree 0 of that geometric decay: what the degree on another piece must bring down
+        self.log_ratio = max(math.log(level / tol) + last * math.log(rho), 1e-9)
+        self.distance = half_length * (rho - 1 / rho) / 2
+
+    def degree(self, length):
+        """Degree predicted to resolve a piece of `length`."""
+        if self.log_ratio == 0.0 or self.distance == math.inf:
+            return 1.0
+        delta = 2 * self.distance / length
+        return self.log_ratio / math.log(delta + math.sqrt(1 + delta * delta))
+
+    def length_for(self, degree):
+        """Length of a piece that `degree` is predicted to resolve."""
+        if self.log_ratio == 0.0 or self.distance == math.inf:
+            return math.inf
+        rho = math.exp(self.log_ratio / degree)
+        return 4 * self.distance / (rho - 1 / rho)
+
+
+def _slower(decay, other):
+    """The decay with the nearer singularity: the pieces that follow are sized and started from it."""
+    return other if decay is None or other.distance < decay.distance else decay
+
+
 class ChebyshevCoefficients:
     """``G(t)``, ``g(t)`` of a completion on ``[a, b]``, piecewise Chebyshev to `tol`.
 
@@ -60,9 +130,10 @@ class ChebyshevCoefficients:
     completion : Completion
         A time-varying completion.
     t_span : pair of float
+        The interval, of positive length.
     tol : float
-        Relative accuracy of ``G`` (to ``max |G|``) and of ``g`` (to
-        ``max |g|``) over the interval.
+        Relative accuracy of ``G`` (to ``max(max |G|, 1 / (b - a))``) and
+        of ``g`` (to ``max |g|``) over the interval.
     max_evaluations : int
         Budget of the construction: pieces not resolved when it is spent
         are evaluated pointwise (rounding noise above `tol`, or a forcing
@@ -80,6 +151,17 @@ class ChebyshevCoefficients:
     EvaluationFailed
         When evaluating the completion raises a ValueError (a forcing that
         is not finite, a rank that changes); it holds the time and the error.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from lsc import complete, gallery
+    >>> p = gallery.rotating_canonical(3)
+    >>> c = complete(p.dae, "alternative", lam=1.0)
+    >>> cheb = ChebyshevCoefficients(c, p.t_span, 1e-8)
+    >>> G, g = c.matrices(1.234)
+    >>> bool(np.abs(cheb.matrices(1.234)[0] - G).max() < 1e-7 * np.abs(G).max())
+    True
     """
 
     def __init__(self, completion, t_span, tol, max_evaluations=500):
@@ -88,28 +170,47 @@ class ChebyshevCoefficients:
         self._nn = self.n * self.n  # G's entries come first in a sample, g's after them
         self.tol = tol
         a, b = sorted(map(float, t_span))
+        if not b > a:
+            raise ValueError(f"`t_span` must have positive length; found {t_span!r}.")
         self.evaluations = 0
         self._values = {}  # every evaluation, by time: nested degrees and neighbouring pieces share them
-        self._scale = np.zeros(2)
-        todo, done = [(a, b)], []
-        while todo:
-            lo, hi = todo.pop()
-            if self.evaluations >= max_evaluations:  # not smooth enough (or noisy) to pay off: pointwise
-                done.append((lo, hi, None))
-                continue
-            coef = self._fit(lo, hi)
-            if coef is not None or hi - lo <= _MIN_PIECE * (b - a):
-                done.append((lo, hi, coef))
-            else:
-                mid = 0.5 * (lo + hi)
-                todo += [(mid, hi), (lo, mid)]
-        done.sort(key=lambda piece: piece[0])
+        # A rate's scale is at least 1 / (b - a): an error tol / (b - a) in G moves the solution by
+        # about tol of itself over the interval, and a G that vanishes (to rounding) needs no more.
+        self._scale = np.array([1.0 / (b - a), 0.0])
+        done = self._sweep(a, b, max_evaluations)
         self._breaks = [piece[0] for piece in done[1:]]
         self._pieces = done
         self.pieces = [(lo, hi, None if coef is None else coef.shape[0] - 1) for lo, hi, coef in done]
         self._ks = {}
         self._values = None  # only needed while fitting
         self._last = (None, None, None)
+
+    def _sweep(self, a, b, budget):
+        """The pieces ``(lo, hi, coefficients or None)`` from `a` to `b`, sized from the decay seen so far."""
+        done, lo, length, decay = [], a, b - a, None
+        while lo < b:
+            if self.evaluations >= budget:  # not smooth enough (or noisy) to pay off: pointwise
+                done.append((lo, b, None))
+                break
+            rest = b - lo
+            count = max(1, math.ceil(rest / length * (1 - 1e-9)))
+            if count > 1 and rest / (count - 1) <= 1.2 * length:  # no sliver at the end
+                count -= 1
+            hi = b if count == 1 else lo + rest / count
+            first = _FIRST_DEGREE if decay is None else min(_MAX_DEGREE, max(8, math.ceil(
+                _MARGIN * decay.degree(hi - lo) + 2)))
+            coef, decay_here = self._fit(lo, hi, first, probing=decay is None)
+            if coef is not None:
+                done.append((lo, hi, coef))
+                decay = _slower(decay, decay_here)
+                length, lo = min(decay.length_for(_TARGET), 2 * (hi - lo)), hi
+            elif hi - lo <= _MIN_PIECE * (b - a):  # a jump or a kink: pointwise, then start afresh
+                done.append((lo, hi, None))
+                decay, lo, length = None, hi, b - hi  # the rest from a probe again
+            else:  # wasted: shorter, and from the degree this decay predicts
+                decay = _slower(decay, decay_here)
+                length = min(max(decay.length_for(_TARGET), (hi - lo) / 8), (hi - lo) / 2)
+        return done
 
     def _sample(self, t):
         v = self._values.get(t)
@@ -124,20 +225,37 @@ class ChebyshevCoefficients:
             self._scale = np.maximum(self._scale, [np.abs(v[:nn]).max(initial=0.0), np.abs(v[nn:]).max(initial=0.0)])
         return v
 
-    def _fit(self, lo, hi):
+    def _fit(self, lo, hi, m, probing):
+        """``(coefficients or None, _Decay)`` on ``[lo, hi]``, from degree m up to multiples of it predicted to do.
+
+        The scale is the largest value seen so far on the whole interval, which only grows: a piece
+        accepted early is judged against a scale no larger than the final one.
+        """
         nn = self._nn
-        for m in _DEGREES:
+        while True:
             ts = 0.5 * (hi + lo) + 0.5 * (hi - lo) * _extreme_points(m)
             ts[0], ts[-1] = hi, lo
             coef = _coefficients(np.array([self._sample(float(t)) for t in ts]))
-            tail = np.abs(coef[-3:])
-            # The scale is the largest value seen so far on the whole interval, which only grows:
-            # a piece accepted early is judged against a scale no larger than the final one.
-            G_ok = tail[:, :nn].max(initial=0.0) <= self.tol * self._scale[0]
-            g_ok = tail[:, nn:].max(initial=0.0) <= self.tol * self._scale[1]
-            if G_ok and g_ok:
-                return coef
-        return None
+            size = np.abs(coef[:, :nn]).max(axis=1, initial=0.0) / self._scale[0]
+            if self._scale[1] > 0:
+                size = np.maximum(size, np.abs(coef[:, nn:]).max(axis=1, initial=0.0) / self._scale[1])
+            passed = bool(size[-3:].max() <= self.tol)
+            decay = _Decay(size, self.tol, 0.5 * (hi - lo), passed)
+            if passed:
+                return coef, decay
+            if probing and m < _PROBE:  # 9 and 17 values predict little: 8, 16, 32 on the first piece
+                m *= 2
+                continue
+            # The values of degree m are among those of any multiple of m: the next degree is the least
+            # multiple that the decay predicts to be enough, if there is one. The first piece doubles
+            # when there is none: from 64 values on, the prediction is reliable (the decay of the first
+            # coefficients is rarely the asymptotic one), and this may be the only piece.
+            target = m * max(2, math.ceil((_MARGIN * decay.degree(hi - lo) + 1) / m))
+            if target > _MAX_DEGREE and probing and m < 2 * _PROBE:
+                target = 2 * m
+            if target > _MAX_DEGREE:
+                return None, decay
+            m = target
 
     def matrices(self, t):
         """``(G, g)`` at `t`, from the interpolant (pointwise outside it or on unresolved pieces)."""

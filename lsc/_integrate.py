@@ -182,7 +182,8 @@ def solve_completion(
         integrating, build piecewise Chebyshev interpolants of ``G(t)`` and
         ``g(t)`` on `t_span` from a few dozen evaluations of the completion,
         accurate to ``max(1e-3 * rtol, 1e-12)`` relative to the largest
-        entries of ``G`` and of ``g``, and let the solver evaluate those: one
+        entries of ``G`` (at least ``1 / |t1 - t0|``) and of ``g``, and let
+        the solver evaluate those: one
         factorization of the derivative array per Chebyshev point instead of
         one per solver stage (measured 4-20x fewer evaluations). A float sets
         that relative accuracy. False evaluates the completion at every
