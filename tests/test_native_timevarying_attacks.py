@@ -490,15 +490,37 @@ def test_invalid_start_value_blocks_initialization_until_a_valid_one(fmus):
                   "state_vr_set": ERROR, "residual_vr_set": ERROR, "step": OK}
 
 
-@pytest.mark.xfail(strict=True, reason="_native_tv.prepare always tabulates [start, stop + 0.1 (stop - start)]: a "
-                   "completion that is singular or not finite only in that margin (B22 = 1.05 - t with stop 1; f = "
-                   "sqrt(1.05 - t)) refuses the build ('not resolved ... on [0, 1.1]', 'cannot be evaluated at t = "
-                   "1.1') although the experiment's own [0, 1] is fine; a shorter margin (down to none) would do")
 @pytest.mark.parametrize("B22, f2, x20", [("1.05 - t", "sin(t)", 0.0), ("1 + t", "sqrt(1.05 - t)", 1.05 ** 0.5)])
-def test_completion_singular_only_in_the_margin_still_builds(tmp_path, B22, f2, x20):
+def test_completion_singular_only_in_the_margin_still_builds(tmp_path, capsys, B22, f2, x20):
     d = {"model": {"name": "Margin"}, "states": {"x1": {"start": 1.0}, "x2": {"start": x20}},
          "equations": {"A": [["1", "0"], ["0", "0"]], "B": [["1", "-1"], ["0", B22]], "f": ["0", f2]},
          "completion": {"method": "alternative", "lam": 2.0}, "experiment": {"start": 0.0, "stop": 1.0, "step": 0.01}}
+    # the 10 % margin past the stop time (for Model Exchange integrators) reaches the singularity at 1.05: it is
+    # halved until the completion is tabulated (1.025), and the build says so
     fmu = build_fmu(d, tmp_path, target="native")
+    assert "tabulated on [0, 1.025]" in capsys.readouterr().err
+    with zipfile.ZipFile(fmu) as zf:
+        description = re.search(r'description="([^"]*)"', zf.read("modelDescription.xml").decode()).group(1)
+        header = zf.read("sources/model.h").decode()
+    assert "tabulated on [0, 1.025]" in description and "margin past the stop time shortened to 2.5 %" in description
+    assert float(re.search(r"#define TV_T1 (\S+)", header).group(1)) == 1.025
     r = _fmpy(fmu, "CoSimulation", 0.0, 1.0)
     assert r.get("end") == 1.0 and max(abs(v) for v in r["residual"]) < 1e-6, r
+    # a run past the shortened tables is refused at set-up, naming their end
+    r = _fmpy(fmu, "CoSimulation", 0.0, 1.05)
+    assert "raised" in r and any("1.0249999999999999" in m or "1.025" in m for m in r["logs"]), r
+
+
+@pytest.mark.parametrize("B22, f2", [("0.95 - t", "sin(t)"), ("1 + t", "sqrt(0.95 - t)")])
+def test_completion_singular_inside_the_experiment_is_refused_naming_it(tmp_path, B22, f2):
+    # the margin is a convenience; a completion that fails inside [start, stop] refuses the build, naming the
+    # experiment's interval (not the horizon with its margin)
+    from fmu_build.targets.native import NativeTargetError
+
+    d = {"model": {"name": "Inside"}, "states": {"x1": {"start": 1.0}, "x2": {"start": 0.0}},
+         "equations": {"A": [["1", "0"], ["0", "0"]], "B": [["1", "-1"], ["0", B22]], "f": ["0", f2]},
+         "completion": {"method": "alternative", "lam": 2.0}, "experiment": {"start": 0.0, "stop": 1.0, "step": 0.01}}
+    with pytest.raises(NativeTargetError, match=r"\[0, 1\]") as info:
+        build_fmu(d, tmp_path, target="native")
+    assert "1.1" not in str(info.value), info.value
+    assert not list(tmp_path.glob("*.fmu"))
