@@ -20,6 +20,12 @@ u_i^(j)`` for ``j <= p`` (``p = k`` plus the completion's extra order), with
 of ``[f; f'; ...; f^(p)]`` (`_maps_at`); the residual's Gram form gets the terms
 of ``c_g = c_g0 + V u``: ``C^T V``, ``V^T c_g0`` and ``V^T V``.
 
+The horizon reaches `HORIZON_MARGIN` of the experiment's length past its
+stop time (Model Exchange integrators evaluate a little past it); where the
+completion cannot be tabulated that far (singular or not finite only past the
+stop time) the margin is halved, down to none (`_fit_horizon`), and the build's
+note says so; a failure inside ``[start, stop]`` refuses the build.
+
 Each is sampled at Chebyshev extreme points; a piece is accepted when the last
 three coefficients are below `TOL` relative to the largest value of the group
 on the horizon, else it is halved. The runtime's cost per step is mostly the
@@ -170,8 +176,10 @@ def _input_columns(X, b, p):
     return out
 
 
-def fit_tables(dae, method, lam, k, t_span, error, inputs=None):
-    """Piecewise Chebyshev coefficients of the sampler's vector on `t_span`; a dict for the header."""
+def fit_tables(dae, method, lam, k, t_span, error, inputs=None, counter=None):
+    """Piecewise Chebyshev coefficients of the sampler's vector on `t_span`; a dict for the header.
+
+    `counter` (a one-element list) counts the evaluations of the completion, also of a fit that fails."""
     a, b = map(float, t_span)
     sampler = _Sampler(dae, method, lam, k, error, inputs)
     sampler.where = f"[{a:g}, {b:g}]"
@@ -181,6 +189,8 @@ def fit_tables(dae, method, lam, k, t_span, error, inputs=None):
     def sample(t):
         v = values.get(t)
         if v is None:
+            if counter is not None:
+                counter[0] += 1
             v = values[t] = sampler(t)
             if not np.all(np.isfinite(v)):
                 raise error(f"the completion is not finite at t = {t!r} on [{a:g}, {b:g}]")
@@ -380,9 +390,10 @@ def prepare(dae, spec, k, error):
         order = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=k)._order
         inputs = _inputs(spec, order)
     # the tables reach past the stop time (Model Exchange integrators evaluate a little past it) where they can
-    tab, margin_note = _fit_horizon(lambda end: fit_tables(dae, spec.method, spec.lam, k, (a, end), error, inputs),
-                                    a, b, error)
-    tab["margin_note"] = margin_note
+    counter = [0]  # evaluations of every fit tried
+    tab, margin_note = _fit_horizon(
+        lambda end: fit_tables(dae, spec.method, spec.lam, k, (a, end), error, inputs, counter), a, b, error)
+    tab["margin_note"], tab["evaluations"] = margin_note, counter[0]
     n = dae.n
     # with inputs, the constant runtime's input jets (lengths from the order p, as for constant coefficients)
     comp = SimpleNamespace(_order=tab["p"] if spec.inputs else 0, _W_c=np.zeros((0, n)),
