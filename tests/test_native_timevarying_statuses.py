@@ -3,12 +3,16 @@ regimes (lambda H large: the rate; lambda H small: the error estimate and the to
 to the status the call returns, and Model Exchange asked to stop at the end of the tables.
 
 The FMU (x1' + x1 - x2 = 0, (1 + t) x2 = u: index 1, an input in f) runs in a fresh Python with fmpy's low-level
-FMI 2.0 calls and a logger that records each call's status and message.
+FMI 2.0 calls and a logger that records each call's status and message, or in a C master under valgrind.
 """
 import json
+import re
+import shutil
 import subprocess
 import sys
 import textwrap
+import zipfile
+from pathlib import Path
 
 import pytest
 
@@ -109,3 +113,31 @@ def test_model_exchange_is_asked_to_stop_at_the_end_of_the_tables(fmu):
     assert len(logs) == 1 and logs[0][0] == WARNING, r
     assert "fmi2CompletedIntegratorStep: reached 1.1000000000000001, the end of the horizon" in logs[0][1], r
     assert "terminateSimulation is true" in logs[0][1], r
+
+
+def test_failing_magnus_steps_read_no_uninitialized_value(fmu, tmp_path):
+    # valgrind --track-origins=yes on a plain (unsanitized) build: ASan and UBSan do not see reads of uninitialized
+    # values; the paths where a Magnus step fails early (an overflowing input, lambda = 1e300), the horizon's end
+    if shutil.which("valgrind") is None or shutil.which("cc") is None:
+        pytest.skip("valgrind or a C compiler not found")
+    with zipfile.ZipFile(fmu) as zf:
+        zf.extractall(tmp_path)
+        xml = zf.read("modelDescription.xml").decode()
+    guid = re.search(r'guid="([^"]+)"', xml).group(1)
+    vr = {name: re.search(rf'name="{name}" valueReference="(\d+)"', xml).group(1) for name in ("u", "lambda")}
+    src, here = tmp_path / "sources", Path(__file__).parent
+    for cmd in (["cc", "-g", "-O1", "-std=c99", "-shared", "-fPIC", "-I", str(src), "-o", str(tmp_path / "plain.so"),
+                 str(src / "fmi2Functions.c"), "-lm"],
+                ["cc", "-g", "-O1", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(src), "-o",
+                 str(tmp_path / "master"), str(here / "native_tv_valgrind_master.c"), "-ldl"]):
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+    proc = subprocess.run(["valgrind", "--track-origins=yes", "--error-exitcode=9", "-q", str(tmp_path / "master"),
+                           str(tmp_path / "plain.so"), guid, vr["u"], vr["lambda"]], capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr[-4000:]
+    st = dict(line.split(maxsplit=1) for line in proc.stdout.splitlines() if not line.startswith("LOG "))
+    assert st == {"step_overflow": "2", "step_lambda_1e300": "2", "step_ok": "0", "step_past": "2",
+                  "derivatives_inside": "0", "completed_at_end": "1 1"}, proc.stdout
+    logs = [line for line in proc.stdout.splitlines() if line.startswith("LOG ")]
+    assert all(line.startswith("LOG 2 ") for line in logs[:-1]) and logs[-1].startswith("LOG 1 "), logs
