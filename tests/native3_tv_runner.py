@@ -83,7 +83,7 @@ def steps(sc, logs):
         step = _do_step(fmu, t, sc["dt"])
         step["values"] = [v.hex() for v in fmu.getFloat64(vrs)]
         out.append(step)
-        if step["status"] == 0:  # on the grid i dt + dt, as the FMI 2.0 runner, unless it returned early
+        if step["status"] in (0, 1):  # on the grid i dt + dt, as the FMI 2.0 runner, unless it returned early
             t = step["lastSuccessfulTime"] if step["earlyReturn"] else i * sc["dt"] + sc["dt"]
         else:
             refused += 1

@@ -20,6 +20,12 @@ u_i^(j)`` for ``j <= p`` (``p = k`` plus the completion's extra order), with
 of ``[f; f'; ...; f^(p)]`` (`_maps_at`); the residual's Gram form gets the terms
 of ``c_g = c_g0 + V u``: ``C^T V``, ``V^T c_g0`` and ``V^T V``.
 
+The horizon reaches `HORIZON_MARGIN` of the experiment's length past its
+stop time (Model Exchange integrators evaluate a little past it); where the
+completion cannot be tabulated that far (singular or not finite only past the
+stop time) the margin is halved, down to none (`_fit_horizon`), and the build's
+note says so; a failure inside ``[start, stop]`` refuses the build.
+
 Each is sampled at Chebyshev extreme points; a piece is accepted when the last
 three coefficients are below `TOL` relative to the largest value of the group
 on the horizon, else it is halved. The runtime's cost per step is mostly the
@@ -46,6 +52,7 @@ FAST_COEFFICIENTS = 150_000  # pieces split to the lowest degree up to this size
 MAX_PIECES = 1024     # bound of the tables: 1024 pieces of degree 16 of a 10-state model are ~ 5.8 million doubles
 MIN_PIECE = 1e-6      # of the horizon
 HORIZON_MARGIN = 0.1  # the tables reach this fraction of the experiment's length past its stop time
+MARGIN_HALVINGS = 4   # where the completion cannot be tabulated that far: the margin halved up to this often, then none
 _CHECK_RATES = (0.3, 7.0)
 _AFFINE_RTOL = 1e-9
 
@@ -59,6 +66,7 @@ class _Sampler:
     def __init__(self, dae, method, lam, k, error, inputs=None):
         self.n = n = dae.n
         self.error = error
+        self.where = "the horizon"  # the interval being tabulated, for the messages
         self.affine = method == "alternative"
         self.inputs = inputs
         # the checks: the spec's DAE (with inputs: the inputs a known polynomial) at other rates, or at the fixed one
@@ -105,7 +113,7 @@ class _Sampler:
             else:
                 G0, g0, U0, G1, g1, U1 = G, g, U, np.zeros((n, n)), np.zeros(n), np.zeros_like(U)
         except ValueError as exc:
-            raise self.error(f"the completion cannot be evaluated at t = {t!r} on the horizon: {exc}") from exc
+            raise self.error(f"the completion cannot be evaluated at t = {float(t)!r} on {self.where}: {exc}") from exc
         return np.concatenate([G0.ravel(), G1.ravel(), g0, g1, U0.ravel(), U1.ravel(), (C.T @ C).ravel(), C.T @ cg,
                                [cg @ cg], (C.T @ V).ravel(), V.T @ cg, (V.T @ V).ravel()])
 
@@ -168,19 +176,24 @@ def _input_columns(X, b, p):
     return out
 
 
-def fit_tables(dae, method, lam, k, t_span, error, inputs=None):
-    """Piecewise Chebyshev coefficients of the sampler's vector on `t_span`; a dict for the header."""
+def fit_tables(dae, method, lam, k, t_span, error, inputs=None, counter=None):
+    """Piecewise Chebyshev coefficients of the sampler's vector on `t_span`; a dict for the header.
+
+    `counter` (a one-element list) counts the evaluations of the completion, also of a fit that fails."""
     a, b = map(float, t_span)
     sampler = _Sampler(dae, method, lam, k, error, inputs)
+    sampler.where = f"[{a:g}, {b:g}]"
     sampler.check_affine(np.linspace(a, b, 5))
     values, scale = {}, np.zeros(len(sampler.groups))
 
     def sample(t):
         v = values.get(t)
         if v is None:
+            if counter is not None:
+                counter[0] += 1
             v = values[t] = sampler(t)
             if not np.all(np.isfinite(v)):
-                raise error(f"the completion is not finite at t = {t!r} on the horizon")
+                raise error(f"the completion is not finite at t = {t!r} on [{a:g}, {b:g}]")
             for i, (lo, hi) in enumerate(sampler.groups):
                 scale[i] = max(scale[i], np.abs(v[lo:hi]).max(initial=0.0))
         return v
@@ -341,6 +354,30 @@ def _inputs(spec, p):
     return lsc.LinearDAE(A, B, f0), b, lsc.LinearDAE(A, B, sympy.Matrix(f.subs(poly))), ujet
 
 
+def _fit_horizon(fit, a, b, error):
+    """``(tables, note)``: the tables on ``[a, b + HORIZON_MARGIN (b - a)]`` and no note, or, where the completion
+    cannot be tabulated that far (singular or not finite only past the stop time), on ``[a, b + m (b - a)]`` with
+    the largest margin m of the halvings (down to `MARGIN_HALVINGS` of them, else none) that can, and a note
+    saying so. The margin only serves Model Exchange integrators that evaluate past the stop time; a failure on
+    the experiment's own ``[a, b]`` refuses the build (`fit` raises `error` naming the time or the interval)."""
+    try:
+        return fit(b + HORIZON_MARGIN * (b - a)), None
+    except error as exc:
+        reason = str(exc).split(": ")[0]  # what failed and where, without the advice
+    tab, margin = fit(b), HORIZON_MARGIN
+    for _ in range(MARGIN_HALVINGS):
+        margin /= 2
+        try:
+            tab = fit(b + margin * (b - a))
+            break
+        except error:
+            continue
+    else:
+        margin = 0.0
+    return tab, (f"The margin past the stop time shortened to {100 * margin:g} % of the experiment's length (from "
+                 f"{100 * HORIZON_MARGIN:g} %): {reason}.")
+
+
 def prepare(dae, spec, k, error):
     """The tables over the experiment's horizon and zero placeholders for the constant-coefficient arrays."""
     import time
@@ -348,12 +385,15 @@ def prepare(dae, spec, k, error):
 
     start = time.perf_counter()
     a, b = float(spec.experiment["start"]), float(spec.experiment["stop"])
-    span = (a, b + HORIZON_MARGIN * (b - a))  # Model Exchange integrators evaluate a little past the stop time
     inputs = None
     if spec.inputs:
         order = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=k)._order
         inputs = _inputs(spec, order)
-    tab = fit_tables(dae, spec.method, spec.lam, k, span, error, inputs)
+    # the tables reach past the stop time (Model Exchange integrators evaluate a little past it) where they can
+    counter = [0]  # evaluations of every fit tried
+    tab, margin_note = _fit_horizon(
+        lambda end: fit_tables(dae, spec.method, spec.lam, k, (a, end), error, inputs, counter), a, b, error)
+    tab["margin_note"], tab["evaluations"] = margin_note, counter[0]
     n = dae.n
     # with inputs, the constant runtime's input jets (lengths from the order p, as for constant coefficients)
     comp = SimpleNamespace(_order=tab["p"] if spec.inputs else 0, _W_c=np.zeros((0, n)),
@@ -381,7 +421,8 @@ def note(spec, tab, lam_note):
             f"sixth-order Magnus steps, fourth-order where a bound of their difference is below the tolerance, "
             f"sub-steps until the error estimate is); {spec.method} completion, {lam_note}; all parameters fixed at "
             "their spec values."
-            + (f" Inputs in f through their tabulated forcing maps on u, ..., u^({tab['p']})." if tab["nuj"] else ""))
+            + (f" Inputs in f through their tabulated forcing maps on u, ..., u^({tab['p']})." if tab["nuj"] else "")
+            + (" " + tab["margin_note"] if tab.get("margin_note") else ""))
 
 
 def report(tab, target, header):

@@ -60,7 +60,7 @@ static int step_matrices(Instance *c, double h, int level, const double **Phi, c
 static fmi2Status discard(Instance *c, double h, int for_good) {
     if (for_good || (c->s.discard_h > 0.0 && h >= c->s.discard_h)) {
         if (!c->s.terminal)
-            logmsg(c, fmi2Warning, "fmi2DoStep at t = %g: no step from here can succeed unless a value changes; "
+            logmsg(c, fmi2Discard, "fmi2DoStep at t = %g: no step from here can succeed unless a value changes; "
                    "fmi2Terminated is now true", c->s.t);
         c->s.terminal = 1;
     }
@@ -169,7 +169,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     }
     bad = first_invalid(c);
     if (bad >= 0) {
-        logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: value reference %d was set to an invalid value", t, bad);
+        logmsg(c, fmi2Discard, "fmi2DoStep at t = %g discarded: value reference %d was set to an invalid value", t, bad);
         return discard(c, h, 0);
     }
     if (h == 0.0) return fmi2OK;
@@ -194,7 +194,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     eval_f(c, t);
     for (j = 0; j < NX * NFE; j++) {
         if (!isfinite(c->fj[j])) {
-            logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the forcing (derivative %d of f_%d) is not finite "
+            logmsg(c, fmi2Discard, "fmi2DoStep at t = %g discarded: the forcing (derivative %d of f_%d) is not finite "
                    "at the step start", t, j / NX, j % NX + 1);
             return discard(c, h, 1);
         }
@@ -208,7 +208,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
         double est = 0.0, size = 0.0;
         if (idx == (1L << level)) break;
         if (step_matrices(c, H, level, &Phi, &F, &Fe) != 0) {
-            logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the step matrices for h = %g, lambda = %g are not "
+            logmsg(c, fmi2Discard, "fmi2DoStep at t = %g discarded: the step matrices for h = %g, lambda = %g are not "
                    "finite", t, H, c->s.lam);
             return discard(c, h, 0);
         }
@@ -223,7 +223,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
             int up = isfinite(est) ? (int)ceil(log2(est / (c->s.tol * (1.0 + size))) / 4.0) : 1;
             if (up < 1) up = 1;
             if (level + up > MAX_LEVEL) {
-                logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the forcing varies too fast for a step of %g "
+                logmsg(c, fmi2Discard, "fmi2DoStep at t = %g discarded: the forcing varies too fast for a step of %g "
                        "(estimated error %g with 2^%d sub-steps); take smaller communication steps", t, h, est, level);
                 return discard(c, h, 0);
             }
@@ -236,7 +236,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
             for (j = 0; j < NX; j++) v += Phi[i * NX + j] * c->tmp[j];
             for (j = 0; j < NX * NF; j++) v += F[i * NX * NF + j] * c->fj[j];
             if (!isfinite(v)) {
-                logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: the forcing or the state is not finite", t);
+                logmsg(c, fmi2Discard, "fmi2DoStep at t = %g discarded: the forcing or the state is not finite", t);
                 return discard(c, h, 0);
             }
             c->tmp2[i] = v;
@@ -264,7 +264,7 @@ fmi2Status fmi2GetStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Status 
     (void)s;
     if (!allowed(c, "fmi2GetStatus", StepComplete | Terminated | Error) || nullarg(c, "fmi2GetStatus", value, "value"))
         return fmi2Error;
-    logmsg(c, fmi2Error, "fmi2GetStatus: no asynchronous step to report on");
+    logmsg(c, fmi2Discard, "fmi2GetStatus: no asynchronous step to report on");
     return fmi2Discard;
 }
 

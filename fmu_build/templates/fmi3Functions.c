@@ -512,21 +512,11 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetF
         || nullargs((Instance *)instance, "fmi3CompletedIntegratorStep", enterEventMode, "enterEventMode",
                     terminateSimulation, "terminateSimulation")) return fmi3Error;
     s = fmi2CompletedIntegratorStep(instance, noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False, &event, &stop);
-    if (s != fmi2OK) return status3(s);
+    if (s != fmi2OK && s != fmi2Warning) return status3(s);
+    /* fmi2Warning: at the end of the horizon of time-varying tables, terminateSimulation true with the reason */
     *enterEventMode = event != fmi2False;
     *terminateSimulation = stop != fmi2False;
-#ifdef LSC_TIME_VARYING
-    {
-        const Instance *c = (const Instance *)instance;
-        if (!(c->s.t < TV_T1 - TV_TIME_SLACK(TV_T1))) { /* no derivative past the tables: stop here */
-            logmsg((Instance *)instance, fmi2Warning, "fmi3CompletedIntegratorStep: reached %.17g, the end of the "
-                   "horizon the time-varying coefficients were tabulated on at build time: terminateSimulation is "
-                   "true (build with a longer experiment stop)", c->s.t);
-            *terminateSimulation = fmi3True;
-        }
-    }
-#endif
-    return fmi3OK;
+    return status3(s);
 }
 
 fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) { return status3(fmi2SetTime(instance, time)); }
@@ -601,7 +591,8 @@ static int early_return_at_horizon(Instance *c, double t, double h, fmi2Boolean 
 #endif
 
 /* The step is the core's fmi2DoStep. It returns early only at the end of the horizon of time-varying tables (when
- * the importer allows it) and never needs event handling; after a discard lastSuccessfulTime is the FMU time before
+ * the importer allows it; fmi3Warning with the reason, as when a step lands on that end) and never needs event
+ * handling; after a discard lastSuccessfulTime is the FMU time before
  * the call (the FMU is unchanged), and terminateSimulation says that no retry can succeed as things are
  * (fmi2Terminated of the FMI 2.0 API: a step past the horizon, the same step discarded twice). */
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
@@ -627,7 +618,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
         *earlyReturn = s == fmi2OK;
         *terminateSimulation = s == fmi2OK || c->s.terminal != 0;
         *lastSuccessfulTime = c->s.t;
-        return status3(s);
+        return s == fmi2OK ? fmi3Warning : status3(s); /* the status of its logged reason */
     }
 #endif
     s = fmi2DoStep(c, currentCommunicationPoint, communicationStepSize, noSet);
@@ -640,6 +631,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
         logmsg(c, fmi2Warning, "fmi3DoStep: reached %.17g, the end of the horizon the time-varying coefficients were "
                "tabulated on at build time: terminateSimulation is true (build with a longer experiment stop)", c->s.t);
         *terminateSimulation = fmi3True;
+        return fmi3Warning; /* the status of the logged reason */
     }
 #endif
     return status3(s);

@@ -343,14 +343,32 @@ static int tv_magnus(Instance *c, double t, double h, const double *y, double bo
     return 0;
 }
 
+/* The reason a step is discarded at the sub-step cap: lambda H beyond about pi at the last level (the Magnus series
+ * cannot follow the rate), or, with lambda H small, the error estimate itself (a forcing or an input that varies
+ * too fast for the step or overflows, a tolerance below what double precision meets) */
+static void tv_log_cap(Instance *c, double t, double H, int level, double est, double size) {
+    const double lh = fabs(c->s.lam) * H;
+    if (lh > 1.0)
+        logmsg(c, fmi2Discard, "fmi2DoStep at t = %g discarded: estimated error %g with 2^%d sub-steps (lambda = %g, "
+               "lambda times the sub-step %g; the Magnus steps need lambda times the sub-step below about pi); take "
+               "smaller communication steps or a smaller lambda", t, est, level, c->s.lam, lh);
+    else
+        logmsg(c, fmi2Discard, "fmi2DoStep at t = %g discarded: the error estimate %g%s stays above the tolerance "
+               "%g (1 + |x|) = %g with 2^%d sub-steps, although lambda times the sub-step is %g (lambda = %g): the "
+               "forcing or an input varies too fast for the step, or a value overflows; take smaller communication "
+               "steps, or check the inputs and their derivatives", t, est, isfinite(est) ? "" : " (not finite)",
+               c->s.tol, c->s.tol * (1.0 + size), level, lh, c->s.lam);
+}
+
 /* Co-Simulation step from c->s.t = t to t + h: 0 done, 1 discard (the step may succeed shorter or with other
- * values), 2 discard for good (past the horizon). Deterministic in the state: a restored state steps the same. */
+ * values), 2 discard for good (past the horizon). Deterministic in the state: a restored state steps the same.
+ * Its messages carry fmi2Discard, the status fmi2DoStep returns for them. */
 static int tv_do_step(Instance *c, double t, double h) {
     double x[TV_M], xn[TV_M];
     int i, level = 0;
     long idx = 0;
     if (t + h > TV_T1 + TV_TIME_SLACK(TV_T1) + 1e-12 * h || t < TV_T0 - TV_TIME_SLACK(TV_T0)) {
-        logmsg(c, fmi2Error, "fmi2DoStep: the step from %.17g to %.17g leaves the horizon [%.17g, %.17g] the "
+        logmsg(c, fmi2Discard, "fmi2DoStep: the step from %.17g to %.17g leaves the horizon [%.17g, %.17g] the "
                "time-varying coefficients were tabulated on at build time (build with a longer experiment stop)",
                t, t + h, TV_T0, TV_T1);
         return 2;
@@ -359,7 +377,7 @@ static int tv_do_step(Instance *c, double t, double h) {
         input_jets(c, t);
         for (i = 0; i < NU * NFE; i++) {
             if (!isfinite(c->uj[i])) {
-                logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: derivative %d of input %d is not finite at "
+                logmsg(c, fmi2Discard, "fmi2DoStep at t = %g discarded: derivative %d of input %d is not finite at "
                        "the step start", t, i % NFE, i / NFE + 1);
                 return 2;
             }
@@ -376,9 +394,7 @@ static int tv_do_step(Instance *c, double t, double h) {
         if (tv_magnus(c, ts, H, x, c->s.tol * (1.0 + size), xn, &est) != 0) est = INFINITY;
         if (!(est <= c->s.tol * (1.0 + size))) {
             if (level + 1 > TV_MAX_LEVEL) {
-                logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: estimated error %g with 2^%d sub-steps (lambda "
-                       "= %g; the Magnus steps need lambda times the sub-step below about pi); take smaller "
-                       "communication steps or a smaller lambda", t, est, level, c->s.lam);
+                tv_log_cap(c, t, H, level, est, size);
                 return 1;
             }
             level++;
