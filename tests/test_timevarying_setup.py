@@ -1,6 +1,6 @@
 """The time-varying set-up's warm-started LU of J against the SVD at every time.
 
-`lsc._completion._Factors._warm` replaces the SVD of the standard derivative
+`lsc._dense_factors._Factors._warm` replaces the SVD of the standard derivative
 array by one LU warm-started from the null spaces at the last time; these
 tests pin that its completion equals the SVD path's (all three methods), that
 it is actually taken, that its rank checks fall back to the SVD (and so keep
