@@ -111,6 +111,8 @@ class Completion:
     # Time-varying: factor J by an LU warm-started from the last time's null spaces (see _Factors._warm);
     # False forces the SVD at every time.
     warm_start = True
+    # Time-varying: factor J by the block-column QR (lsc._structured_tv) before trying the warm start or the SVD.
+    block_qr = False
     _fastest_rate = None  # max |Re eig(G)| for constant coefficients, cached by lsc.stiffness_ratio
 
     def __init__(self, dae, *, lam=None, k=None, rcond=None, t_span=None, setup="auto"):
@@ -250,7 +252,7 @@ class Completion:
         # nested points); the first and any doubtful time take the SVD.
         ref = self._last_factors if check and self.warm_start else None
         fac = _Factors(self._eq, self.k, t, self.extra_order, self.rcond, fmap=fstack,
-                       expected_rank=self._rank if check else None, reference=ref)
+                       expected_rank=self._rank if check else None, reference=ref, block=self.block_qr)
         if check and fac.Z2.shape[0] >= WARM_MIN_ROWS:
             self._last_factors = fac
         return fac

@@ -18,7 +18,8 @@ import scipy.linalg
 from ._derivative_array import array_jets
 from ._exceptions import IndexDeterminationError
 from ._linalg import default_rcond, numerical_rank
-from ._structured import ConstraintBasis
+from ._structured import ConstraintBasis, StructuredFallback
+from ._structured_tv import BlockQR
 
 # A derivative array is 1-full when null(J) has no x' component; beyond this
 # sine of the angle between null(J) and {x' = 0} it is not.
@@ -48,14 +49,15 @@ class _Factors(ConstraintBasis):
     ``W``; a vector ``fstack(t)`` turns them into values at ``t``.
     """
 
-    def __init__(self, dae, k, t, q, rcond, fmap=None, expected_rank=None, reference=None):
+    def __init__(self, dae, k, t, q, rcond, fmap=None, expected_rank=None, reference=None, block=False):
         n = dae.n
-        self.warm = False
+        self.warm, self.block, self.block_note = False, None, None
         self.n, self.t = n, float(t)
         self.jets = jets = array_jets(dae, k, t, None, q)
         J = jets.J[0]
-        if reference is None or not self._warm(J, reference, rcond):
-            self._svd(J, k, t, rcond, expected_rank)
+        if not (block and self._block_qr(J, rcond, expected_rank)):
+            if reference is None or not self._warm(J, reference, rcond):
+                self._svd(J, k, t, rcond, expected_rank)
         self.Z2 = self._Z2
         self.C = self.Z2.T @ jets.F[0]
         if fmap is None:
@@ -94,6 +96,24 @@ class _Factors(ConstraintBasis):
         self._Z2 = self.U[:, self.rank :]
         self.N = self.Vt[self.rank :].T
         self.scale = self.s[0] if self.s.size else 0.0
+
+    def _block_qr(self, J, rcond, expected_rank):
+        """Null spaces and ``J^+`` from the block-column QR (`lsc._structured_tv.BlockQR`); False when it declines.
+
+        It declines (`block_note` says why) whenever a rank decision or 1-fullness is not proven clear-cut,
+        and when the rank differs from `expected_rank`: the caller's SVD then decides, warns or refuses.
+        """
+        try:
+            fac = BlockQR(J, self.n, rcond)
+        except StructuredFallback as exc:
+            self.block_note = str(exc)
+            return False
+        if expected_rank is not None and fac.rank != expected_rank:
+            self.block_note = f"rank {fac.rank} instead of {expected_rank}"
+            return False
+        self.block, self.rank, self._Z2, self.N, self.scale = fac, fac.rank, fac.Z2, fac.N, fac.scale
+        self.U = self.s = self.Vt = None
+        return True
 
     def _warm(self, J, ref, rcond):
         """Null spaces and ``J^+`` from one LU, warm-started from `ref` (factors at a nearby time).
@@ -155,6 +175,9 @@ class _Factors(ConstraintBasis):
         """The first n rows of ``J^+`` (thesis ``V^T J^+``); never the whole, formed once."""
         if self._first_rows is None:
             r, n = self.rank, self.n
+            if self.block is not None:
+                self._first_rows = self.block.first_rows
+                return self._first_rows
             if self.warm:
                 E = np.eye(self._lu[0].shape[0], n)
                 Y = scipy.linalg.lu_solve(self._lu, E, trans=1, check_finite=False).T
@@ -166,6 +189,8 @@ class _Factors(ConstraintBasis):
     def times_pinv(self, X):
         """``X @ J^+`` from the SVD factors."""
         r = self.rank
+        if self.block is not None:
+            return self.block.times_pinv(X)
         if self.warm:
             XM = scipy.linalg.lu_solve(self._lu, np.asarray(X).T, trans=1, check_finite=False).T
             return XM - ((X @ self.N) / self.scale) @ self._Z2.T
