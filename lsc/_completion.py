@@ -16,7 +16,7 @@ Three methods (thesis chapters 2-6):
 For constant coefficients every completion is computed once, at
 construction: ``rhs`` then costs one matrix-vector product plus the forcing
 ``W @ [f; f'; ...]``. For time-varying ones the completion is computed at
-each time it is asked for (one SVD of the derivative array), and the last few
+each time it is asked for (one factorization of the derivative array), and the last few
 times are cached so `matrices`, `rhs`, `constraint_residual` and `project`
 at one time share one factorization.
 """
@@ -108,11 +108,11 @@ class Completion:
     method = None
     uses_lam = False
     extra_order = 0
-    # Time-varying: factor J by an LU warm-started from the last time's null spaces (see _Factors._warm);
-    # False forces the SVD at every time.
+    # Time-varying, arrays of 100 rows and more: factor J by the block-column QR (lsc._structured_tv.BlockQR) or,
+    # where it declines, by an LU warm-started from the last time's null spaces (_Factors._warm); False forces
+    # the SVD at every time. `block_qr = False` keeps the warm start only.
     warm_start = True
-    # Time-varying: factor J by the block-column QR (lsc._structured_tv) before trying the warm start or the SVD.
-    block_qr = False
+    block_qr = True
     _fastest_rate = None  # max |Re eig(G)| for constant coefficients, cached by lsc.stiffness_ratio
 
     def __init__(self, dae, *, lam=None, k=None, rcond=None, t_span=None, setup="auto"):
@@ -252,7 +252,8 @@ class Completion:
         # nested points); the first and any doubtful time take the SVD.
         ref = self._last_factors if check and self.warm_start else None
         fac = _Factors(self._eq, self.k, t, self.extra_order, self.rcond, fmap=fstack,
-                       expected_rank=self._rank if check else None, reference=ref, block=self.block_qr)
+                       expected_rank=self._rank if check else None, reference=ref,
+                       block=self.block_qr and self.warm_start)
         if check and fac.Z2.shape[0] >= WARM_MIN_ROWS:
             self._last_factors = fac
         return fac

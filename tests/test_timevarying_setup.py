@@ -1,10 +1,11 @@
-"""The time-varying set-up's warm-started LU of J against the SVD at every time.
+"""The time-varying set-up's block-column QR and warm-started LU of J against the SVD at every time.
 
-`lsc._dense_factors._Factors._warm` replaces the SVD of the standard derivative
-array by one LU warm-started from the null spaces at the last time; these
-tests pin that its completion equals the SVD path's (all three methods), that
-it is actually taken, that its rank checks fall back to the SVD (and so keep
-the SVD path's refusals), and that a run against an exact solution is unchanged.
+`lsc._structured_tv.BlockQR` (the default) and `lsc._dense_factors._Factors._warm`
+(where the block QR declines) replace the SVD of the standard derivative array;
+these tests pin that their completions equal the SVD path's (all three
+methods), that they are actually taken, that their rank checks fall back to the
+SVD (and so keep the SVD path's refusals), and that a run against an exact
+solution is unchanged.
 """
 
 import numpy as np
@@ -24,6 +25,7 @@ def pencil():
 @pytest.mark.parametrize("method, lam", METHODS)
 def test_warm_equals_svd(pencil, method, lam):
     warm = lsc.complete(pencil.dae, method, lam=lam)
+    warm.block_qr = False  # the warm-started LU alone
     dense = lsc.complete(pencil.dae, method, lam=lam)
     dense.warm_start = False
     used = 0
@@ -50,6 +52,7 @@ def _against_svd(pencil, c, t):
 def test_any_regular_reference_gives_the_same_completion(pencil):
     # range(M^-1 Z2_ref) is the new null space exactly whenever M is regular, however far the reference
     c = lsc.complete(pencil.dae, "alternative", lam=1.0)
+    c.block_qr = False
     c.matrices(0.1)
     c._last_factors.N = np.roll(c._last_factors.N, 7, axis=0)
     _against_svd(pencil, c, 0.2)
@@ -60,6 +63,7 @@ def test_singular_warm_start_falls_back_to_svd(pencil):
     from lsc._derivative_array import array_jets
 
     c = lsc.complete(pencil.dae, "alternative", lam=1.0)
+    c.block_qr = False
     c.matrices(0.1)
     ref = c._last_factors
     J = array_jets(c._eq, c.k, 0.2, None, 1).J[0]
@@ -73,7 +77,7 @@ def test_small_arrays_keep_the_svd():
     p = gallery.rotating_canonical(3)
     c = lsc.complete(p.dae, "alternative", lam=1.0)
     c.matrices(0.1), c.matrices(0.2)
-    assert c._last_factors is None and not c._cache[0.2][0].warm
+    assert c._last_factors is None and not c._cache[0.2][0].warm and c._cache[0.2][0].block is None
 
 
 def test_run_against_exact_solution(pencil):
@@ -113,7 +117,8 @@ def _pair(p, method, lam, with_span):
 
 
 @pytest.mark.parametrize("name", sorted(BLOCK_PROBLEMS))
-def test_block_qr_equals_svd(name):
+def test_block_qr_equals_svd(name, monkeypatch):
+    monkeypatch.setattr("lsc._dense_factors.WARM_MIN_ROWS", 0)  # small arrays too (by default they keep the SVD)
     make, with_span = BLOCK_PROBLEMS[name]
     p = make()
     rng = np.random.default_rng(3)
@@ -192,7 +197,7 @@ def test_block_qr_declines_an_array_that_is_not_one_full():
 def test_block_qr_leaves_a_rank_change_to_the_svd():
     from lsc._dense_factors import _Factors
 
-    p = gallery.moving_pencil(n=30, blocks=(3, 2), seed=1)
+    p = gallery.moving_pencil(n=30, blocks=(3, 2), seed=1)  # J has 120 rows: the block QR applies
     fstack = p.dae.f_jet(0.3, 3).reshape(-1)
     ok = _Factors(p.dae, 3, 0.3, 0, None, fmap=fstack, block=True)
     assert ok.block is not None and ok.block_note is None
@@ -201,8 +206,7 @@ def test_block_qr_leaves_a_rank_change_to_the_svd():
 
 
 def test_block_qr_run_against_exact_solution(pencil):
-    c = lsc.complete(pencil.dae, "alternative", lam=1.0)
-    c.block_qr = True
+    c = lsc.complete(pencil.dae, "alternative", lam=1.0)  # block_qr is the default
     t_eval = np.linspace(*pencil.t_span, 11)
     res = lsc.solve_completion(c, pencil.t_span, pencil.x0, method="DOP853", t_eval=t_eval, rtol=1e-10, atol=1e-12)
     assert res.success
