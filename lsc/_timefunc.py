@@ -193,7 +193,9 @@ class CallableFunction(TimeFunction):
     def _checked(self, raw, shape, call, where):
         """`raw` as a finite float array of `shape`, or an error naming the call and where it was made."""
         call = f"`{self.name}{'.' if call.startswith('jet') else ''}{call}`"
-        if np.iscomplexobj(raw) or any(isinstance(v, complex) for v in np.ravel(np.asarray(raw, dtype=object))):
+        # a real ndarray holds no complex values: only lists and object arrays are scanned entry by entry
+        scan = not (isinstance(raw, np.ndarray) and raw.dtype != object)
+        if np.iscomplexobj(raw) or (scan and any(isinstance(v, complex) for v in np.ravel(np.asarray(raw, dtype=object)))):
             raise TypeError(f"{call} must return real numbers of shape {_shape_str(shape)}; got complex values "
                             f"{where} (their imaginary part would be lost).")
         try:
