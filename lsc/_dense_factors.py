@@ -1,4 +1,4 @@
-"""The standard derivative array at one time, factorized densely: an SVD, or an LU warm-started from a nearby time.
+"""The standard derivative array at one time, factorized: an SVD, a block-column QR, or an LU warm-started nearby.
 
 Every completion reads the same few quantities of the standard array
 ``J w = -F x + g``: ``Z2`` (orthonormal basis of its left null space), the
