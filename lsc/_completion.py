@@ -108,11 +108,12 @@ class Completion:
     method = None
     uses_lam = False
     extra_order = 0
-    # Time-varying, arrays of 100 rows and more: factor J by the block-column QR (lsc._structured_tv.BlockQR) or,
-    # where it declines, by an LU warm-started from the last time's null spaces (_Factors._warm); False forces
-    # the SVD at every time. `block_qr = False` keeps the warm start only.
+    # Time-varying, arrays of 100 rows and more: factor J by an LU warm-started from the last time's null spaces
+    # (_Factors._warm); False forces the SVD at every time. `block_qr = True` tries the block-column QR
+    # (lsc._structured_tv.BlockQR) first: 1.5x faster than the warm LU with one BLAS thread, not shown faster
+    # with two (examples/bench_tv_factor.py), so not the default.
     warm_start = True
-    block_qr = True
+    block_qr = False
     _fastest_rate = None  # max |Re eig(G)| for constant coefficients, cached by lsc.stiffness_ratio
 
     def __init__(self, dae, *, lam=None, k=None, rcond=None, t_span=None, setup="auto"):

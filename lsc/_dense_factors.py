@@ -5,10 +5,10 @@ Every completion reads the same few quantities of the standard array
 constraint matrix ``C = Z2^T F`` and its forcing ``cg``, the first ``n`` rows
 of ``J^+`` and products with ``F``, the forcing map and ``J^+``. `_Factors`
 provides them from one SVD of ``J`` (which also decides the rank and checks
-1-fullness) or, for time-varying arrays of 100 rows and more, from a
-pivoted QR found block column by block column (`lsc._structured_tv.BlockQR`,
-``O(k^2 n^3)``) or, where that declines, at a time near one already
-factorized, from one LU of ``J`` bordered by the old null spaces
+1-fullness) or, for time-varying arrays of 100 rows and more, when asked
+(``block``), from a pivoted QR found block column by block column
+(`lsc._structured_tv.BlockQR`, ``O(k^2 n^3)``) or, at a time near one
+already factorized, from one LU of ``J`` bordered by the old null spaces
 (`_Factors._warm`). Both prove their rank decisions and fall back to the SVD
 on any doubt, so the SVD's decisions, warnings and refusals stay.
 For constant coefficients `lsc._structured.StructuredFactors` offers the

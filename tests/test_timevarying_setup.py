@@ -1,7 +1,7 @@
 """The time-varying set-up's block-column QR and warm-started LU of J against the SVD at every time.
 
-`lsc._structured_tv.BlockQR` (the default) and `lsc._dense_factors._Factors._warm`
-(where the block QR declines) replace the SVD of the standard derivative array;
+`lsc._dense_factors._Factors._warm` (the default) and `lsc._structured_tv.BlockQR`
+(``Completion.block_qr = True``) replace the SVD of the standard derivative array;
 these tests pin that their completions equal the SVD path's (all three
 methods), that they are actually taken, that their rank checks fall back to the
 SVD (and so keep the SVD path's refusals), and that a run against an exact
@@ -197,7 +197,7 @@ def test_block_qr_declines_an_array_that_is_not_one_full():
 def test_block_qr_leaves_a_rank_change_to_the_svd():
     from lsc._dense_factors import _Factors
 
-    p = gallery.moving_pencil(n=30, blocks=(3, 2), seed=1)  # J has 120 rows: the block QR applies
+    p = gallery.moving_pencil(n=30, blocks=(3, 2), seed=1)  # J has 120 rows: the block QR applies when asked for
     fstack = p.dae.f_jet(0.3, 3).reshape(-1)
     ok = _Factors(p.dae, 3, 0.3, 0, None, fmap=fstack, block=True)
     assert ok.block is not None and ok.block_note is None
@@ -206,7 +206,8 @@ def test_block_qr_leaves_a_rank_change_to_the_svd():
 
 
 def test_block_qr_run_against_exact_solution(pencil):
-    c = lsc.complete(pencil.dae, "alternative", lam=1.0)  # block_qr is the default
+    c = lsc.complete(pencil.dae, "alternative", lam=1.0)
+    c.block_qr = True
     t_eval = np.linspace(*pencil.t_span, 11)
     res = lsc.solve_completion(c, pencil.t_span, pencil.x0, method="DOP853", t_eval=t_eval, rtol=1e-10, atol=1e-12)
     assert res.success
