@@ -7,13 +7,16 @@ min over interleaved repeats) on ``gallery.moving_pencil(n, blocks=(3, 2))``
 
 - ``svd``: one SVD of ``J`` per time (``warm_start = False``);
 - ``warm``: one LU bordered by the null spaces of the last time (the default);
-- ``block``: the block-column QR of `lsc._structured_tv` (``block_qr = True``).
+- ``block``: the block-column QR of `lsc._structured_tv` (``block_qr = True``), the warm LU where it declines.
 
 Per evaluation: one ``matrices(t)`` call at a new nearby time (the coefficient
 jets included, reported separately), and the factorization alone on a given
 ``J``. Set-up: the Chebyshev interpolants of ``G(t), g(t)`` to 1e-9
 (`lsc._chebyshev.ChebyshevCoefficients`), with the largest difference of the
 interpolants' values against the ``svd`` ones.
+
+BLAS threads are whatever the environment sets (``OPENBLAS_NUM_THREADS=1`` for one thread); CPU time
+counts every thread, spinning ones included.
 
 Run:  python examples/bench_tv_factor.py [sizes...]   (writes out/bench_tv_factor.md)
 """
