@@ -16,7 +16,7 @@ Three methods (thesis chapters 2-6):
 For constant coefficients every completion is computed once, at
 construction: ``rhs`` then costs one matrix-vector product plus the forcing
 ``W @ [f; f'; ...]``. For time-varying ones the completion is computed at
-each time it is asked for (one SVD of the derivative array), and the last few
+each time it is asked for (one factorization of the derivative array), and the last few
 times are cached so `matrices`, `rhs`, `constraint_residual` and `project`
 at one time share one factorization.
 """
@@ -26,14 +26,15 @@ from collections import OrderedDict
 import numpy as np
 import scipy.linalg
 
-from ._derivative_array import array_jets, stabilization_jets
+from ._dense_factors import WARM_MIN_ROWS, _Factors
+from ._derivative_array import stabilization_jets
 from ._exceptions import DimensionError, IndexDeterminationError
 from ._forcing import Forcing
 from ._index import check_solvability, determine_index, k_works
-from ._linalg import default_rcond, numerical_rank, validate_rcond
+from ._linalg import validate_rcond
 from ._problem import check_dae, column_equilibration, row_equilibration, row_scaled, unscale_columns, varying_view
 from ._rate import as_rate, lam_at
-from ._structured import ConstraintBasis, StructuredFactors, StructuredFallback
+from ._structured import StructuredFactors, StructuredFallback
 from ._timefunc import TimeFunction, _shape_str
 from ._validate import check_k, check_t_span
 
@@ -46,174 +47,10 @@ __all__ = [
     "complete",
 ]
 
-# A derivative array is 1-full when null(J) has no x' component; beyond this
-# sine of the angle between null(J) and {x' = 0} it is not.
-_ONE_FULL_TOL = np.sqrt(np.finfo(float).eps)
-_CACHE_SIZE = 4
-# Warm-started LU instead of the SVD of J (time-varying): only from this many rows of J on (below, the
-# SVD is as cheap as the checks), and with this safety factor on every rank test.
-_WARM_MIN_ROWS = 100
-_WARM_MARGIN = 10.0
 # The largest k - index accepted: measured on the gallery's constant problems (docs/reliability_library.md),
 # the error stays at the k = index level up to index + 12 at least and grows beyond index + 15.
 K_ABOVE_INDEX = 10
-
-
-def _norm2_if_above(X, tol):
-    """``||X||_2`` when it may exceed `tol`; the cheaper Frobenius norm (an upper bound) otherwise."""
-    frobenius = np.sqrt(np.einsum("ij,ij->", X, X))
-    return frobenius if frobenius <= tol else np.linalg.norm(X, 2)
-
-
-class _Factors(ConstraintBasis):
-    """The standard derivative array at one time, factorized once.
-
-    Shared by all three methods: the constraints ``c = Z2^T (F x - g)`` are
-    always those of the *standard* array, so residuals of different methods
-    compare.
-
-    ``fmap`` selects what the forcing quantities are: None (constant
-    coefficients) keeps them as matrices acting on
-    ``fstack = [f, f', ..., f^(k+q)]``, so a completion yields the map
-    ``W``; a vector ``fstack(t)`` turns them into values at ``t``.
-    """
-
-    def __init__(self, dae, k, t, q, rcond, fmap=None, expected_rank=None, reference=None):
-        n = dae.n
-        self.warm = False
-        self.n, self.t = n, float(t)
-        self.jets = jets = array_jets(dae, k, t, None, q)
-        J = jets.J[0]
-        if reference is None or not self._warm(J, reference, rcond):
-            self._svd(J, k, t, rcond, expected_rank)
-        self.Z2 = self._Z2
-        self.C = self.Z2.T @ jets.F[0]
-        if fmap is None:
-            self.Lg = jets.L
-            self.f0 = np.eye(n, jets.L.shape[2])
-        else:
-            self.Lg = jets.forcing(fmap)
-            self.f0 = fmap[:n]
-        # Constraint residual c = C x - cg.
-        self.cg = self.Z2.T @ self.Lg[0]
-        self._C_svd = None
-        self._first_rows = None
-        self.A0, self.B0 = J[:n, :n], jets.F[0][:n]
-        self.has_Jd = q >= 1 and bool(np.any(jets.J[1]))
-
-    def _svd(self, J, k, t, rcond, expected_rank):
-        n = self.n
-        # numpy's svd (LAPACK gesdd, like scipy's) has a fraction of scipy's call overhead, which
-        # dominates a time-varying rhs for arrays of a few dozen rows; the jets are finite (checked).
-        self.U, self.s, self.Vt = np.linalg.svd(J)
-        self.rank = numerical_rank(self.s, J.shape, rcond, what=f"derivative array J (k={k}, t={t:g})")
-        if expected_rank is not None and self.rank != expected_rank:
-            raise IndexDeterminationError(
-                f"the rank of the derivative array (k={k}) changes at t={t!r}: {self.rank} instead of "
-                f"{expected_rank}. The DAE is not solvable with constant rank here (thesis (A3)); "
-                "the completion would jump."
-            )
-        # 1-fullness: the null space of J must not move x' (x' unique).
-        null_x = _norm2_if_above(self.Vt[self.rank :, :n], _ONE_FULL_TOL) if self.rank < J.shape[1] else 0.0
-        if null_x > _ONE_FULL_TOL:
-            raise IndexDeterminationError(
-                f"the derivative array with k={k} differentiations does not determine x' at t={t!r} "
-                f"(not 1-full: its null space moves x' by {null_x:.1e}). Pass t_span to `complete` so k "
-                "is decided over the interval, or a larger k."
-            )
-        self._Z2 = self.U[:, self.rank :]
-        self.N = self.Vt[self.rank :].T
-        self.scale = self.s[0] if self.s.size else 0.0
-
-    def _warm(self, J, ref, rcond):
-        """Null spaces and ``J^+`` from one LU, warm-started from `ref` (factors at a nearby time).
-
-        For square ``J`` of rank r with orthonormal bases ``Z2`` (left) and
-        ``N`` (right) of its null spaces, ``M = J + s Z2 N^T`` is regular and
-        ``M^-1 = J^+ + N Z2^T / s``. With the bases of a nearby time, ``M``
-        is still regular, and ``range(M^-1 Z2_ref)``, ``range(M^-T N_ref)``
-        are exactly the new null spaces. The rank is verified, not assumed:
-        ``||J N||`` and ``||Z2^T J||`` below the threshold (rank <= r), an
-        estimate of ``||J^+||`` well above its inverse (rank >= r), and
-        1-fullness; any doubt returns False and the caller takes the SVD,
-        which decides (and refuses) exactly as without a reference.
-        """
-        if J.shape[0] != J.shape[1] or ref.N.shape[1] != ref._Z2.shape[1] or ref.rank == 0:
-            return False
-        s = ref.scale
-        try:
-            Z2, N = ref._Z2, ref.N
-            lu = scipy.linalg.lu_factor(J + s * (Z2 @ N.T), check_finite=False)
-            N = np.linalg.qr(scipy.linalg.lu_solve(lu, Z2, check_finite=False))[0]
-            Z2 = np.linalg.qr(scipy.linalg.lu_solve(lu, ref.N, trans=1, check_finite=False))[0]
-            M = J + s * (Z2 @ N.T)
-            lu = scipy.linalg.lu_factor(M, check_finite=False)
-        except (np.linalg.LinAlgError, ValueError):
-            return False
-        fro = np.sqrt(np.einsum("ij,ij->", J, J))  # ||J||_2 lies in [fro / sqrt(p), fro]
-        rc_J = default_rcond(J.shape) if rcond is None else rcond
-        anorm = np.abs(M).sum(axis=0).max()
-        rc, info = scipy.linalg.lapack.dgecon(lu[0], anorm, norm="1")
-        # ||J^+||_2 <= ||M^-1||_2 + 1/s <= sqrt(p) ||M^-1||_1 + 1/s; gecon's estimate of ||M^-1||_1 is a
-        # lower bound (rarely off by more than 3), hence the margin on it too.
-        pinv_bound = _WARM_MARGIN * np.sqrt(J.shape[0]) / (rc * anorm) + 1.0 / s if rc > 0 else np.inf
-        if (info != 0 or not pinv_bound * rc_J * fro * _WARM_MARGIN < 1.0
-                or np.linalg.norm(J @ N, 2) > rc_J * fro / np.sqrt(J.shape[0]) / _WARM_MARGIN
-                or np.linalg.norm(Z2.T @ J, 2) > rc_J * fro / np.sqrt(J.shape[0]) / _WARM_MARGIN
-                or _norm2_if_above(N[: self.n].T, _ONE_FULL_TOL) > _ONE_FULL_TOL):
-            return False
-        self._lu, self._Z2, self.N, self.scale = lu, Z2, N, s
-        self.rank, self.warm = ref.rank, True
-        self.U = self.s = self.Vt = None
-        return True
-
-    def times_F(self, X, d):
-        """``X @ F^(d)``."""
-        return X @ self.jets.F[d]
-
-    @property
-    def rounding_scale(self):
-        """``||F|| / sigma_min(J)``: entries of ``G = J^+ F`` that cancel are left at rounding relative to it."""
-        return np.linalg.norm(self.jets.F[0], 2) / self.s[self.rank - 1]
-
-    def times_L(self, X, d):
-        """``X @ Lg[d]``: the d-th derivative's forcing map (or value)."""
-        return X @ self.Lg[d]
-
-    @property
-    def first_rows(self):
-        """The first n rows of ``J^+`` (thesis ``V^T J^+``); never the whole, formed once."""
-        if self._first_rows is None:
-            r, n = self.rank, self.n
-            if self.warm:
-                E = np.eye(self._lu[0].shape[0], n)
-                Y = scipy.linalg.lu_solve(self._lu, E, trans=1, check_finite=False).T
-                self._first_rows = Y - (self.N[:n] / self.scale) @ self._Z2.T
-                return self._first_rows
-            self._first_rows = (self.Vt[:r, :n].T / self.s[:r]) @ self.U[:, :r].T
-        return self._first_rows
-
-    def times_pinv(self, X):
-        """``X @ J^+`` from the SVD factors."""
-        r = self.rank
-        if self.warm:
-            XM = scipy.linalg.lu_solve(self._lu, np.asarray(X).T, trans=1, check_finite=False).T
-            return XM - ((X @ self.N) / self.scale) @ self._Z2.T
-        return ((X @ self.Vt[:r].T) / self.s[:r]) @ self.U[:, :r].T
-
-    def index_one_solve(self, G_c, W_c, rcond, t):
-        """``(G, W)`` from ``[Z1^T A; C] x' = [-Z1^T B x + Z1^T f; G_c x + W_c]``, Z1 an orthonormal basis of range(A T2)."""
-        n, A = self.n, self.A0
-        AT2 = A @ self.T2
-        Z1, s1, _ = np.linalg.svd(AT2, full_matrices=False)
-        if numerical_rank(s1, AT2.shape, rcond, what="A T2") < AT2.shape[1]:
-            raise IndexDeterminationError(f"A T2 is rank deficient at t={t!r}: the DAE is not solvable.")
-        M = np.vstack([Z1.T @ A, self.C])
-        G_num = np.vstack([-Z1.T @ self.B0, G_c])
-        W_num = np.concatenate([Z1.T @ self.f0, W_c], axis=0)
-        # one LU for both right-hand sides (W_num is a matrix or, time-varying, a vector)
-        sol = np.linalg.solve(M, np.column_stack([G_num, W_num]))
-        return sol[:, :n], sol[:, n:].reshape(W_num.shape)
+_CACHE_SIZE = 4
 
 
 class Completion:
@@ -271,9 +108,12 @@ class Completion:
     method = None
     uses_lam = False
     extra_order = 0
-    # Time-varying: factor J by an LU warm-started from the last time's null spaces (see _Factors._warm);
-    # False forces the SVD at every time.
+    # Time-varying, arrays of 100 rows and more: factor J by an LU warm-started from the last time's null spaces
+    # (_Factors._warm); False forces the SVD at every time. `block_qr = True` tries the block-column QR
+    # (lsc._structured_tv.BlockQR) first: 1.5x faster than the warm LU with one BLAS thread, not shown faster
+    # with two (examples/bench_tv_factor.py), so not the default.
     warm_start = True
+    block_qr = False
     _fastest_rate = None  # max |Re eig(G)| for constant coefficients, cached by lsc.stiffness_ratio
 
     def __init__(self, dae, *, lam=None, k=None, rcond=None, t_span=None, setup="auto"):
@@ -413,8 +253,9 @@ class Completion:
         # nested points); the first and any doubtful time take the SVD.
         ref = self._last_factors if check and self.warm_start else None
         fac = _Factors(self._eq, self.k, t, self.extra_order, self.rcond, fmap=fstack,
-                       expected_rank=self._rank if check else None, reference=ref)
-        if check and fac.Z2.shape[0] >= _WARM_MIN_ROWS:
+                       expected_rank=self._rank if check else None, reference=ref,
+                       block=self.block_qr and self.warm_start)
+        if check and fac.Z2.shape[0] >= WARM_MIN_ROWS:
             self._last_factors = fac
         return fac
 
