@@ -121,3 +121,13 @@ def test_stabilized_at_lam_1e6_keeps_its_spectrum(setup):
     ev = np.linalg.eigvals(complete(p.dae, "stabilized", lam=lam, setup=setup)._G)
     added = ev[np.abs(ev + lam) < 1e-2 * lam]
     assert added.size == 5 and np.all(ev.real < 0)
+
+
+def test_overflowing_scales_refused_as_dense():
+    """A = 1e200 N, B = 1e-200 I: B_mu^-1 A overflows; the dense path's refusal (IndexDeterminationError), not a
+    LinAlgError from a staircase of infs."""
+    dae = LinearDAE(1e200 * np.eye(3, k=1), 1e-200 * np.eye(3))
+    with pytest.raises(IndexDeterminationError):
+        quiet_complete(dae, "standard", None, setup="dense")
+    with pytest.raises(IndexDeterminationError):
+        quiet_complete(dae, "standard", None)
