@@ -252,6 +252,8 @@ def _pencil_reduction(A, B, rcond, kmax):
         )
     mu, lu = _shift(A, B)
     Mt = scipy.linalg.lu_solve(lu, A.T, trans=1)
+    if not np.all(np.isfinite(Mt)):
+        raise StructuredFallback("B_mu^-1 A overflows: A and B are too far apart in scale for n-sized blocks")
     norms = _norm2(A), _norm2(B)
     U_S, sizes, N1, Nr, Wl, lu_Mt = _generalized_null_space(A, B + mu * A, Mt, rcond, kmax, norms[1])
     _check_balance(*norms, len(sizes), n, rcond)
