@@ -131,3 +131,20 @@ def test_overflowing_scales_refused_as_dense():
         quiet_complete(dae, "standard", None, setup="dense")
     with pytest.raises(IndexDeterminationError):
         quiet_complete(dae, "standard", None)
+
+
+def test_finite_eigenvalue_at_the_first_trial_shift():
+    """A finite eigenvalue placed exactly at the first trial shift (B + mu A singular there): the next shift
+    is taken and the completion equals the dense one."""
+    from lsc._structured import _SHIFTS
+
+    lam0 = 1.0
+    for _ in range(40):  # fixed point: the shift scales with ||B||_1 / ||A||_1, which moves with the eigenvalue
+        p = gallery.random_pencil(n=10, blocks=(3, 2), spectrum=[-0.5, -1.0, -1.5, -2.0, lam0], seed=0)
+        A, B = p.dae.A(0.0), p.dae.B(0.0)
+        lam0 = _SHIFTS[0] * np.linalg.norm(B, 1) / np.linalg.norm(A, 1)
+    assert np.min(np.abs(np.linalg.eigvals(B + lam0 * A))) < 1e-12 * np.linalg.norm(B, 1)
+    for method, lam in METHOD_LAMS:
+        dense, fast = assert_as_dense(p.dae, method, lam, tol=1e-10)
+        assert fast.setup == "structured" and abs(fast._structured.shift - lam0) > 0.1 * abs(lam0)
+        assert exact_error(fast, p.exact) < 1e-11
