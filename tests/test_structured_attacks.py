@@ -148,3 +148,12 @@ def test_finite_eigenvalue_at_the_first_trial_shift():
         dense, fast = assert_as_dense(p.dae, method, lam, tol=1e-10)
         assert fast.setup == "structured" and abs(fast._structured.shift - lam0) > 0.1 * abs(lam0)
         assert exact_error(fast, p.exact) < 1e-11
+
+
+@pytest.mark.parametrize("scale, k", [(0.3, 13), (0.1, 9)])
+def test_k_far_above_the_index_on_a_mildly_unbalanced_pencil(scale, k):
+    """k = 9 or 13 on an index-3 pencil with ||A|| / ||B|| = 0.07 or 0.2: the dense array with k differentiations
+    is scaled by that ratio to the power 2k; the default set-up gives the dense G or refuses with it."""
+    A, B = weierstrass(10, (3, 2), seed=1)
+    dae, _ = manufactured(scale * A, B)
+    assert_as_dense(dae, "alternative", 2.0, k=k)
