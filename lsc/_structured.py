@@ -222,28 +222,31 @@ def _norm2(M, steps=12):
     return norm
 
 
-def _check_balance(norm_A, norm_B, index, n, rcond):
+def _check_balance(norm_A, norm_B, k, n, rcond):
     """Decline when ``||A||`` and ``||B||`` are so far apart that the dense arrays' decisions depend on the ratio.
 
-    The array of ``(s A, B)`` is ``diag(s^-i) J(A, B) diag(s^(j+1))``: its singular values move by up to
-    ``s^(2k)`` while the staircase (cosines of bases, invariant under ``s``) does not, so the dense path
-    decides a different index (small ``A``) or refuses (large ``A``) where the structured one would not.
-    Measured on random pencils of index 1..6 (cond 10, ``s`` from 1e-4 to 1e4): the dense decisions
-    changed only where ``m^(2 index)``, ``m = max(||A||/||B||, ||B||/||A||)``, exceeded ``1 / (rcond
-    _MARGIN)``; declining from ``1 / (rcond _MARGIN^2)`` on leaves a further margin of 100.
+    The array of ``(s A, B)`` with k differentiations is ``diag(s^-i) J(A, B) diag(s^(j+1))``: its singular
+    values move by up to ``s^(2k)`` while the staircase (cosines of bases, invariant under ``s``) does not,
+    so the dense path decides a different index (small ``A``), refuses (large ``A``) or, for k above the
+    index, computes a different G where the structured one would not. Measured on random pencils of index
+    1..6 (cond 10, ``s`` from 1e-4 to 1e4, n = 12): the dense decisions changed only where
+    ``m^(k + 2)``, ``m = max(||A||/||B||, ||B||/||A||)``, exceeded about ``1 / rcond``; this declines from
+    ``m^max(2k, k + 2) = 1 / (rcond _MARGIN^2)`` on.
     """
-    tol = rcond if rcond is not None else _default_rcond(n, index)
+    tol = rcond if rcond is not None else _default_rcond(n, k)
     rho = norm_A / norm_B if norm_B else np.inf
     spread = max(rho, 1.0 / rho) if rho else np.inf
-    if index and spread ** (2 * index) * tol * _MARGIN**2 > 1.0:
+    power = max(2 * k, k + 2)
+    if k and spread**power * tol * _MARGIN**2 > 1.0:
         raise StructuredFallback(
-            f"||A|| / ||B|| = {rho:.1e}: at index {index} the dense arrays' rank decisions depend on that ratio "
-            f"(its power {2 * index} or that of its inverse reaches 1 / (rcond {_MARGIN:g}^2), rcond = {tol:.1e})"
+            f"||A|| / ||B|| = {rho:.1e}: with k = {k} the dense arrays' rank decisions depend on that ratio "
+            f"(its power {power} or that of its inverse reaches 1 / (rcond {_MARGIN:g}^2), rcond = {tol:.1e})"
         )
 
 
-def _pencil_reduction(A, B, rcond, kmax):
-    """Shift, ``Mt = B_mu^-T A^T``, its generalized null space and ``(||A||, ||B||)``."""
+def _pencil_reduction(A, B, rcond, kmax, k=None):
+    """Shift, ``Mt = B_mu^-T A^T``, its generalized null space and ``(||A||, ||B||)`` (k: the differentiations
+    that will be used, None for the index)."""
     n = A.shape[0]
     if rcond is not None and rcond < _MARGIN * n * _EPS:
         raise StructuredFallback(
@@ -256,7 +259,7 @@ def _pencil_reduction(A, B, rcond, kmax):
         raise StructuredFallback("B_mu^-1 A overflows: A and B are too far apart in scale for n-sized blocks")
     norms = _norm2(A), _norm2(B)
     U_S, sizes, N1, Nr, Wl, lu_Mt = _generalized_null_space(A, B + mu * A, Mt, rcond, kmax, norms[1])
-    _check_balance(*norms, len(sizes), n, rcond)
+    _check_balance(*norms, len(sizes) if k is None else max(k, len(sizes)), n, rcond)
     return mu, lu, Mt, U_S, sizes, N1, Nr, Wl, lu_Mt, norms
 
 
@@ -304,7 +307,7 @@ def structured_array(A, B, k=None, rcond=None, kmax=10):
     """
     A, B = np.asarray(A, float), np.asarray(B, float)
     n = A.shape[0]
-    mu, lu, Mt, U_S, sizes, N1, Nr, Wl, lu_Mt, norms = _pencil_reduction(A, B, rcond, kmax)
+    mu, lu, Mt, U_S, sizes, N1, Nr, Wl, lu_Mt, norms = _pencil_reduction(A, B, rcond, kmax, k)
     index = len(sizes)
     k = index if k is None else k
     if k < index:
