@@ -39,7 +39,11 @@ of ``A`` or, on the small level matrices, to 1 (they hold cosines between
 orthonormal bases). A decision within a factor ``_MARGIN`` (100, the margin
 of `RankDecisionWarning`) of the threshold, no shift that makes ``B + mu A``
 well conditioned (singular or nearly singular pencils), k below the index
-or an index-one system that is not clearly invertible is not decided here:
+or an index-one system that is not clearly invertible is not decided here;
+nor is what the dense arrays decide differently from the staircase: an
+``rcond`` at rounding level, a rank of A that holds against ``||A||`` but
+not against ``||B||``, ``||A||`` and ``||B||`` far apart (`_check_balance`)
+and bases that miss the dense threshold (`_check_residuals`).
 `StructuredFallback` says why and the caller uses the dense path, which
 decides, warns or refuses as it always does.
 """
