@@ -1,0 +1,320 @@
+"""Hostile specs and hosts against time-varying native FMUs with inputs in f.
+
+One small index-2 problem with a time-varying constraint and an input with a time-varying coefficient:
+``x1' - x2 = (1 + t/10) u``, ``(2 + cos t) x1 = (2 + cos t) cos t``; for any input ``u(t)`` the exact
+solution is ``x1 = cos t``, ``x2 = -sin t - (1 + t/10) u(t)`` (``x2(0) = 0`` for ``u(0) = 0``). Built FMUs
+run in subprocesses (fmpy's FMU2Slave / FMU3Slave); every bad call asserts that the host exits cleanly.
+"""
+import copy
+import json
+import math
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from fmu_build import build_fmu
+from fmu_build.spec import SpecError
+from fmu_build.targets.native import NativeTargetError
+
+BASE = {"model": {"name": "TvIn"}, "states": {"x1": {"start": 1.0}, "x2": {"start": 0.0}},
+        "inputs": {"u": {"start": 0.0}},
+        "equations": {"A": [["1", "0"], ["0", "0"]], "B": [["0", "-1"], ["2 + cos(t)", "0"]],
+                      "f": ["u*(1 + t/10)", "(2 + cos(t))*cos(t)"]},
+        "completion": {"method": "alternative", "lam": 2.0},
+        "experiment": {"start": 0.0, "stop": 2.0, "step": 0.01}}
+
+
+def _spec(name="TvIn", **changes):
+    d = copy.deepcopy(BASE)
+    d["model"]["name"] = name
+    for key, value in changes.items():
+        if key in ("A", "B", "f"):
+            d["equations"][key] = value
+        else:
+            d[key] = value
+    return d
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("tvin_attacks")
+    return {2: build_fmu(_spec(), folder / "2", target="native"),
+            3: build_fmu(_spec("TvIn3"), folder / "3", target="native", fmi_version=3)}
+
+
+# the host side: a script of fmpy calls in a fresh process, its findings as JSON on the last line
+_PRELUDE = """
+import json, math
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave, FMU2Model
+FMU = {fmu!r}
+md = read_model_description(FMU)
+un = extract(FMU)
+var = {{v.name: v.valueReference for v in md.modelVariables}}
+U, X, R = var[{uname!r}], [var["x1"], var["x2"]], var["constraint_residual"]
+u = lambda t: math.sin(2 * t)
+du = [lambda t, k=k: 2 ** k * math.sin(2 * t + k * math.pi / 2) for k in range(1, 7)]  # every order the FMU takes
+exact = lambda t: [math.cos(t), -math.sin(t) - (1 + t / 10) * u(t)]
+res = {{}}
+
+def new(name="a"):
+    f = FMU2Slave(guid=md.guid, unzipDirectory=un, modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+    f.instantiate()
+    f.setupExperiment(startTime=0.0)
+    f.enterInitializationMode()
+    f.exitInitializationMode()
+    return f
+
+def send(f, t, value=None, jets=True):
+    f.setReal([U], [u(t) if value is None else value])
+    if jets:
+        for k, d in enumerate(du):
+            f.setRealInputDerivatives([U], [k + 1], [d(t)])
+
+def attempt(call):
+    try:
+        return ["ok", call()]
+    except Exception as exc:
+        return ["err", str(exc)]
+
+def err(f, t):
+    return max(abs(a - b) for a, b in zip(f.getReal(X), exact(t)))
+"""
+
+
+def _host(fmu, body, timeout=240, uname="u"):
+    """Run the prelude and `body` in a fresh Python; the host must exit 0; return (findings, stderr)."""
+    script = textwrap.dedent(_PRELUDE).format(fmu=str(fmu), uname=uname) + textwrap.dedent(body) + \
+        "\nprint(json.dumps(res, default=str))\n"
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=timeout)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1]), proc.stdout + proc.stderr  # fmpy logs to stdout
+
+
+# -- the spec side ----------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("f0, match", [
+    ("Piecewise((u, t < 1), (0, True))", "Piecewise"),
+    ("abs(u)", "abs"),
+    ("sqrt(u**2)", "abs"),  # sympy makes it Abs(u): refused as abs
+    ("sign(u)", "sign"),
+    ("Heaviside(u)", "Heaviside"),
+    ("floor(u)", "floor"),
+    ("Max(t - 1, 0)*u", "Max"),
+])
+def test_nonsmooth_disguises_of_the_input_are_refused_by_the_spec(tmp_path, f0, match):
+    with pytest.raises(SpecError, match=match):
+        build_fmu(_spec(f=[f0, "(2 + cos(t))*cos(t)"]), tmp_path, target="native")
+    assert not list(tmp_path.glob("*.fmu*"))
+
+
+@pytest.mark.parametrize("inputs, match", [
+    ({"u": {"start": 0.0, "type": "Integer"}}, "unknown key 'type'"),
+    ({"u": {"start": False}}, "expected a number"),
+    ({"u": {"start": 0.0, "min": -1.0}}, "unknown key 'min'"),
+    ({"u": {"start": float("nan")}}, "finite"),
+    ({"x1": {"start": 0.0}}, "clashes with a state"),
+    ({"t": {"start": 0.0}}, "reserved"),
+])
+def test_inputs_the_spec_cannot_interpret_are_refused(tmp_path, inputs, match):
+    with pytest.raises(SpecError, match=match):
+        build_fmu(_spec(inputs=inputs), tmp_path, target="native")
+
+
+def test_an_input_named_like_a_c_keyword_in_disguise_builds_and_runs(tmp_path):
+    # 'double' is a C type name and 'u*u/u' is u (sympy cancels it): the forcing maps are those of u
+    d = _spec("TvKw", inputs={"double": {"start": 0.0}}, f=["double*double/double*(1 + t/10)", "(2 + cos(t))*cos(t)"])
+    fmu = build_fmu(d, tmp_path, target="native")
+    body = """
+    f = new()
+    t = 0.0
+    for i in range(100):
+        send(f, t)
+        f.doStep(t, 0.01)
+        t = (i + 1) * 0.01
+    res["err"] = err(f, t)
+    """
+    found, _ = _host(fmu, body, uname="double")
+    assert found["err"] < 1e-8, found
+
+
+# -- the host side --------------------------------------------------------------------------------------
+
+
+def test_exact_input_jets_and_changing_step_sizes_match_the_exact_solution(fmus):
+    body = """
+    f = new()
+    t = 0.0
+    for i in range(200):
+        send(f, t)
+        f.doStep(t, 0.01)
+        t = (i + 1) * 0.01
+    res["fixed"] = err(f, t)
+    g = new("b")
+    t = 0.0
+    for h in [0.01, 0.02, 0.005, 0.03] * 10:
+        send(g, t)
+        g.doStep(t, h)
+        t += h
+    res["varying"] = err(g, t)
+    res["t"] = t
+    """
+    found, _ = _host(fmus[2], body)
+    assert found["fixed"] < 1e-9 and found["varying"] < 1e-9, found
+
+
+def test_bad_input_values_and_derivatives_are_refused_and_the_host_goes_on(fmus):
+    body = """
+    for v in (float("nan"), float("inf")):
+        g = new("b")
+        res[f"set {v}"] = attempt(lambda: g.setReal([U], [v]))[0]
+        res[f"step {v}"] = attempt(lambda: g.doStep(0.0, 0.01))
+        res[f"x {v}"] = g.getReal(X)
+        g.terminate()
+        g.freeInstance()
+    g = new("c")
+    for o in (0, -1, 7, 2 ** 31 - 1):
+        res[f"order {o}"] = attempt(lambda: g.setRealInputDerivatives([U], [o], [1.0]))[0]
+    res["output vr"] = attempt(lambda: g.setRealInputDerivatives([X[0]], [1], [1.0]))[0]
+    res["nan derivative"] = attempt(lambda: g.setRealInputDerivatives([U], [1], [float("nan")]))[0]
+    res["good step after"] = attempt(lambda: g.doStep(0.0, 0.01))[0]
+    res["x after"] = g.getReal(X)
+    """
+    found, stderr = _host(fmus[2], body)
+    for v in ("nan", "inf"):
+        assert found[f"set {v}"] == "err" and found[f"step {v}"][0] == "err" and found[f"x {v}"] == [1.0, 0.0]
+    assert all(found[f"order {o}"] == "err" for o in (0, -1, 7, 2 ** 31 - 1))
+    assert found["output vr"] == "err" and found["nan derivative"] == "err"
+    assert found["good step after"] == "ok" and abs(found["x after"][0] - math.cos(0.01)) < 1e-9
+    assert "order 0 must be 1.." in stderr and "is not an input" in stderr
+
+
+@pytest.mark.xfail(strict=True, reason="u = 1e308 is finite but its forcing (1 + t/10) u overflows the Magnus "
+                   "exponent: tv_do_step climbs to 2^14 sub-steps and discards blaming lambda ('the Magnus steps "
+                   "need lambda times the sub-step below about pi'), not the input (timevarying.c, tv_do_step)")
+def test_an_input_whose_forcing_overflows_is_discarded_naming_the_input(fmus):
+    body = """
+    g = new("b")
+    g.setReal([U], [1e308])
+    res["step"] = attempt(lambda: g.doStep(0.0, 0.01))[0]
+    """
+    found, stderr = _host(fmus[2], body)
+    assert found["step"] == "err"
+    assert "lambda" not in stderr and "input" in stderr, stderr
+
+
+def test_rollback_restores_the_input_jets_and_history_bit_for_bit(fmus):
+    body = """
+    f = new("r")
+    t, h = 0.0, 0.01
+    for i in range(20):
+        send(f, t)
+        f.doStep(t, h)
+        t = (i + 1) * h
+    send(f, t)
+    s = f.getFMUstate()
+    f.doStep(t, h)
+    a = f.getReal(X)
+    f.setFMUstate(s)   # the jets sent before the state was taken are part of it
+    f.doStep(t, h)
+    res["same"] = f.getReal(X) == a
+    f.setFMUstate(s)
+    f.setReal([U], [5.0])
+    f.setRealInputDerivatives([U], [1], [100.0])
+    f.setFMUstate(s)   # a value and a derivative set after the state was taken are undone
+    f.doStep(t, h)
+    res["undone"] = f.getReal(X) == a
+    f.setFMUstate(f.deSerializeFMUstate(f.serializeFMUstate(s)))
+    f.doStep(t, h)
+    res["serialized"] = f.getReal(X) == a
+    # values only: the history polynomial is part of the state
+    g1, g2 = new("v1"), new("v2")
+    t = 0.0
+    for i in range(20):
+        for g in (g1, g2):
+            g.setReal([U], [u(t)])
+            g.doStep(t, h)
+        t = (i + 1) * h
+    st = g1.getFMUstate()
+    for i in range(5):
+        g1.setReal([U], [7.0 * i])
+        g1.doStep(t + i * h, h)
+    g1.setFMUstate(st)
+    for i in range(10):
+        for g in (g1, g2):
+            g.setReal([U], [u(t + i * h)])
+            g.doStep(t + i * h, h)
+    res["history"] = g1.getReal(X) == g2.getReal(X)
+    """
+    found, _ = _host(fmus[2], body)
+    assert found == {"same": True, "undone": True, "serialized": True, "history": True}, found
+
+
+def test_two_instances_with_different_inputs_do_not_share_state(fmus):
+    body = """
+    p, q, solo = new("p"), new("q"), new("s")
+    t, h = 0.0, 0.01
+    for i in range(50):
+        send(p, t)
+        for g in (q, solo):
+            g.setReal([U], [3 * u(t) + 1])
+            for k, d in enumerate(du):
+                g.setRealInputDerivatives([U], [k + 1], [3 * d(t)])
+        for g in (p, q, solo):
+            g.doStep(t, h)
+        t = (i + 1) * h
+    res["q is solo"] = q.getReal(X) == solo.getReal(X)
+    res["p err"] = err(p, t)
+    """
+    found, _ = _host(fmus[2], body)
+    assert found["q is solo"] and found["p err"] < 1e-9, found
+
+
+def test_output_derivatives_above_the_declared_order_are_refused_naming_the_order(fmus):
+    # with inputs the model description declares maxOutputDerivativeOrder 1: order 1 is G x + g(t, u) (the exact
+    # x'), order 2 is refused as an order out of range, not as a "derivative that is not finite"
+    body = """
+    f = new()
+    t = 0.0
+    for i in range(50):
+        send(f, t)
+        f.doStep(t, 0.01)
+        t = (i + 1) * 0.01
+    res["declared"] = md.coSimulation.maxOutputDerivativeOrder
+    res["order 1"] = attempt(lambda: list(f.getRealOutputDerivatives(X, [1, 1])))
+    res["exact 1"] = [-math.sin(t), -math.cos(t) - u(t) / 10 - (1 + t / 10) * du[0](t)]
+    res["order 2"] = attempt(lambda: f.getRealOutputDerivatives(X, [2, 2]))[0]
+    """
+    found, stderr = _host(fmus[2], body)
+    assert found["declared"] == 1
+    assert found["order 1"][0] == "ok"
+    assert max(abs(a - b) for a, b in zip(found["order 1"][1], found["exact 1"])) < 1e-8
+    assert found["order 2"] == "err"
+    assert "order 2 must be 1..1" in stderr and "not finite" not in stderr, stderr
+
+
+def test_fmi3_output_derivatives_above_the_declared_order_are_refused_naming_the_order(fmus):
+    body = """
+    from fmpy.fmi3 import FMU3Slave
+    f = FMU3Slave(guid=md.guid, unzipDirectory=un, modelIdentifier=md.coSimulation.modelIdentifier, instanceName="a")
+    f.instantiate()
+    f.enterInitializationMode(startTime=0.0)
+    f.exitInitializationMode()
+    t = 0.0
+    for i in range(20):
+        f.setFloat64([U], [u(t)])
+        f.doStep(t, 0.01)
+        t = (i + 1) * 0.01
+    res["order 1"] = attempt(lambda: list(f.getOutputDerivatives(X, [1, 1])))[0]
+    res["order 2"] = attempt(lambda: f.getOutputDerivatives(X, [2, 2]))[0]
+    res["nan input"] = attempt(lambda: f.setFloat64([U], [float("nan")]))[0]
+    res["step after nan"] = attempt(lambda: f.doStep(t, 0.01))[0]
+    f.terminate()
+    f.freeInstance()
+    """
+    found, stderr = _host(fmus[3], body)
+    assert found == {"order 1": "ok", "order 2": "err", "nan input": "err", "step after nan": "err"}, found
+    assert "order 2 must be 1..1" in stderr and "not finite at t" not in stderr, stderr
