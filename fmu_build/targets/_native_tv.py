@@ -372,7 +372,8 @@ def finish_header(header, tab):
     header = header.replace("; A, B constant", "; A(t), B(t) time-varying: G, g and the residual from the tables at the "
                             "end (G0, G1, W0, W1 below are unused zeros)", 1)
     if tab["nuj"]:  # with inputs x' only, as the model description declares: a higher order is refused as such
-        header = re.sub(r"#define MAX_OUTPUT_DERIVATIVE_ORDER \d+", "#define MAX_OUTPUT_DERIVATIVE_ORDER 1", header, count=1)
+        header = re.sub(r"#define MAX_OUTPUT_DERIVATIVE_ORDER \d+", "#define MAX_OUTPUT_DERIVATIVE_ORDER 1", header,
+                        count=1)
     body, end = header.rsplit("#endif", 1)
     return body + header_section(tab) + "\n#endif" + end
 
