@@ -318,3 +318,36 @@ def test_fmi3_output_derivatives_above_the_declared_order_are_refused_naming_the
     found, stderr = _host(fmus[3], body)
     assert found == {"order 1": "ok", "order 2": "err", "nan input": "err", "step after nan": "err"}, found
     assert "order 2 must be 1..1" in stderr and "not finite at t" not in stderr, stderr
+
+
+# -- the size of the tables ------------------------------------------------------------------------------
+
+
+def _many_inputs(count, stop):
+    return _spec(f"TvMany{count}", inputs={f"u{i}": {"start": 0.0} for i in range(count)},
+                 f=[" + ".join(f"u{i}*cos({i}*t/5)" for i in range(count)), "(2 + cos(t))*cos(t)"],
+                 experiment={"start": 0.0, "stop": stop, "step": 0.01})
+
+
+def test_the_tables_size_is_bounded_with_the_inputs_columns(tmp_path, monkeypatch):
+    # the input maps add 3 n m + m + m^2 entries per coefficient (m = nu (p + 1)): 12 inputs of a 2-state model
+    # make 2659 entries, eight times those of a 10-state model without inputs; the piece limit alone does not
+    # bound the tables (12 inputs on [0, 20]: 39 pieces, an 18.5 MB model.h). A bound on the doubles, checked
+    # while fitting, refuses with the size it would reach
+    from fmu_build.targets import _native_tv
+
+    monkeypatch.setattr(_native_tv, "MAX_TABLE_DOUBLES", 100_000)
+    with pytest.raises(NativeTargetError, match=r"tables would hold more than 100000 doubles.*12 input"):
+        build_fmu(_many_inputs(12, 2.0), tmp_path, target="native")
+    assert not list(tmp_path.glob("*.fmu*"))
+
+
+def test_forty_inputs_on_a_long_horizon_are_refused_early(tmp_path):
+    # at the real bound: refused after a few pieces (a lower bound of the size), not after the whole fit
+    import time
+
+    start = time.perf_counter()
+    with pytest.raises(NativeTargetError, match=r"tables would hold more than \d+ doubles"):
+        build_fmu(_many_inputs(40, 20.0), tmp_path, target="native")
+    assert time.perf_counter() - start < 60
+    assert not list(tmp_path.glob("*.fmu*"))
