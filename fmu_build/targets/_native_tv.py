@@ -46,6 +46,7 @@ DEGREES = (10, 16)    # low degrees, more pieces: the Clenshaw sweep is most of 
 FAST_COEFFICIENTS = 150_000  # pieces split to the lowest degree up to this size (~ 25 bytes of C each)
 MAX_PIECES = 1024     # bound of the tables: 1024 pieces of degree 16 of a 10-state model are ~ 5.8 million doubles
 MIN_PIECE = 1e-6      # of the horizon
+MAX_TABLE_DOUBLES = 6_000_000  # all coefficients (~ 25 bytes of C each): the inputs' columns grow as m^2, not n^2
 HORIZON_MARGIN = 0.1  # the tables reach this fraction of the experiment's length past its stop time
 _CHECK_RATES = (0.3, 7.0)
 _AFFINE_RTOL = 1e-9
@@ -212,13 +213,28 @@ def fit_tables(dae, method, lam, k, t_span, error, inputs=None):
                         f"<= {DEGREES[-1]} within the limit of {MAX_PIECES} pieces (minimum piece {MIN_PIECE:g} of "
                         f"the horizon) on [{a:g}, {b:g}]: shorten the horizon (experiment stop) or build with "
                         "target='pythonfmu'")
+        _check_size(len(done) + len(todo) + 2, sampler)  # every piece has at least the lowest degree
         mid = 0.5 * (lo + hi)
         todo += [(mid, hi), (lo, mid)]
     done.sort(key=lambda p: p[0])
     fast = min(FAST_COEFFICIENTS // ((DEGREES[0] + 1) * (sampler.ndyn + sampler.nres)), MAX_PIECES)
     done = _lowest_degree(done, fast, tail_ok, lambda lo, hi: fit(lo, hi, DEGREES[:1]))
+    _check_size(sum(c.shape[0] for _, _, c in done) / (DEGREES[0] + 1), sampler)
     return dict(pieces=done, n=sampler.n, nv=sampler.ndyn + sampler.nres, ndyn=sampler.ndyn,
                 evaluations=len(values), t0=a, t1=b, p=sampler.p, nuj=sampler.m)
+
+
+def _check_size(pieces, sampler):
+    """Refuse tables of more than `MAX_TABLE_DOUBLES` (`pieces` of the lowest degree, or their equivalent)."""
+    nv = sampler.ndyn + sampler.nres
+    if pieces * (DEGREES[0] + 1) * nv > MAX_TABLE_DOUBLES:
+        nu = sampler.m // (sampler.p + 1)
+        raise sampler.error(
+            f"the tables would hold more than {MAX_TABLE_DOUBLES} doubles ({math.ceil(pieces)} pieces of degree >= "
+            f"{DEGREES[0]}, {nv} entries per coefficient for {sampler.n} states"
+            + (f" and {nu} input(s) with derivatives up to {sampler.p}" if nu else "")
+            + "): shorten the horizon (experiment stop)" + (", use fewer inputs" if nu else "")
+            + " or build with target='pythonfmu'")
 
 
 def _lowest_degree(pieces, limit, tail_ok, refit):
