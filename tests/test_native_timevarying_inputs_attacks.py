@@ -353,3 +353,99 @@ def test_forty_inputs_on_a_long_horizon_are_refused_early(tmp_path):
         build_fmu(_many_inputs(40, 20.0, varying=False), tmp_path, target="native")
     assert time.perf_counter() - start < 60
     assert not list(tmp_path.glob("*.fmu*"))
+
+
+# -- other places for the input ---------------------------------------------------------------------------
+
+_PLACES = {
+    # a parameter times the input, fixed with fix_parameters: set at run time it is refused, the tables use 2
+    "param": (dict(parameters={"k": {"value": 2.0, "tunable": True}}, f=["k*u*(1 + t/10)", "(2 + cos(t))*cos(t)"]),
+              "sin(2*t)", ["cos(t)", "-sin(t) - 2*(1 + t/10)*sin(2*t)"], {}),
+    # the input in the constraint only: x1 = cos t + u / (2 + cos t), x2 = x1' reads u'
+    "constraint": (dict(f=["0", "(2 + cos(t))*cos(t) + u"]), "sin(2*t)",
+                   ["cos(t) + sin(2*t)/(2 + cos(t))", "diff(cos(t) + sin(2*t)/(2 + cos(t)), t)"], {"x2_0": 2 / 3}),
+    # index 1: x1' = -x1 + x2, (2 + cos t) x2 = (2 + cos t)(1 + t) u
+    "index1": (dict(B=[["1", "-1"], ["0", "2 + cos(t)"]], f=["0", "(2 + cos(t))*(1 + t)*u"]),
+               "(cos(t) - sin(t))/(1 + t)", ["cos(t)", "cos(t) - sin(t)"], {"u": 1.0, "x2_0": 1.0}),
+}
+
+
+@pytest.mark.parametrize("place", list(_PLACES))
+def test_the_input_in_other_places_matches_the_exact_solution(tmp_path, place):
+    changes, u_expr, x_exact, starts = _PLACES[place]
+    fmu = build_fmu(_spec(f"TvPlace{place}", **changes), tmp_path, target="native",
+                    fix_parameters=place == "param")
+    body = f"""
+    import sympy as sp
+    T = sp.Symbol("t")
+    ue = sp.sympify({u_expr!r})
+    nud = int((un / "sources" / "model.h").read_text().split("#define NF ")[1].split()[0])
+    fn = [sp.lambdify(T, sp.diff(ue, T, k)) for k in range(nud)]
+    xe = [sp.lambdify(T, sp.sympify(e)) for e in {x_exact!r}]
+    f = FMU2Slave(guid=md.guid, unzipDirectory=un, modelIdentifier=md.coSimulation.modelIdentifier, instanceName="a")
+    f.instantiate()
+    f.setupExperiment(startTime=0.0)
+    for name, v in {starts!r}.items():
+        f.setReal([var[name]], [v])
+    res["set k"] = attempt(lambda: f.setReal([var["k"]], [5.0]))[0] if "k" in var else None
+    f.enterInitializationMode()
+    f.exitInitializationMode()
+    t = 0.0
+    for i in range(150):
+        f.setReal([U], [float(fn[0](t))])
+        for k in range(1, nud):
+            f.setRealInputDerivatives([U], [k], [float(fn[k](t))])
+        f.doStep(t, 0.01)
+        t = (i + 1) * 0.01
+    res["err"] = max(abs(a - float(b(t))) for a, b in zip(f.getReal(X), xe))
+    res["residual"] = f.getReal([R])[0]
+    """
+    found, _ = _host(fmu, body)
+    assert found["err"] < 1e-9 and found["residual"] < 1e-6, found
+    assert found["set k"] == ("err" if place == "param" else None)
+
+
+def test_an_unused_input_changes_nothing(tmp_path):
+    fmu = build_fmu(_spec("TvUnused", f=["-sin(t)", "(2 + cos(t))*cos(t)"]), tmp_path, target="native")
+    body = """
+    runs = []
+    for value in (0.0, 1e6):
+        f = new()
+        t = 0.0
+        for i in range(50):
+            f.setReal([U], [value * (i % 2)])
+            f.doStep(t, 0.01)
+            t = (i + 1) * 0.01
+        runs.append(f.getReal(X))
+    res["same"] = runs[0] == runs[1]
+    res["err"] = max(abs(a - b) for a, b in zip(runs[0], [math.cos(t), -math.sin(t) + math.sin(t)]))
+    """
+    found, _ = _host(fmu, body)
+    assert found["same"] and found["err"] < 1e-9, found
+
+
+def test_fmi3_cosimulation_with_inputs_equals_the_fmi2_build(fmus):
+    # values only (FMI 3.0 has no input-derivative setter): both estimate the derivatives from the same history
+    body = """
+    from fmpy.fmi3 import FMU3Slave
+    md3 = read_model_description({fmu3!r})
+    v3 = {{v.name: v.valueReference for v in md3.modelVariables}}
+    f3 = FMU3Slave(guid=md3.guid, unzipDirectory=extract({fmu3!r}), modelIdentifier=md3.coSimulation.modelIdentifier,
+                   instanceName="b")
+    f3.instantiate()
+    f3.enterInitializationMode(startTime=0.0)
+    f3.exitInitializationMode()
+    f2 = new()
+    t = 0.0
+    for i in range(150):
+        f2.setReal([U], [u(t)])
+        f3.setFloat64([v3["u"]], [u(t)])
+        f2.doStep(t, 0.01)
+        f3.doStep(t, 0.01)
+        t = (i + 1) * 0.01
+    a, b = f2.getReal(X), f3.getFloat64([v3["x1"], v3["x2"]])
+    res["diff"] = max(abs(p - q) for p, q in zip(a, b))
+    res["err"] = err(f2, t)
+    """.format(fmu3=str(fmus[3]))
+    found, _ = _host(fmus[2], body)
+    assert found["diff"] <= 1e-12 and found["err"] < 2e-3, found
