@@ -192,18 +192,21 @@ def test_bad_input_values_and_derivatives_are_refused_and_the_host_goes_on(fmus)
     assert "order 0 must be 1.." in stderr and "is not an input" in stderr
 
 
-@pytest.mark.xfail(strict=True, reason="u = 1e308 is finite but its forcing (1 + t/10) u overflows the Magnus "
-                   "exponent: tv_do_step climbs to 2^14 sub-steps and discards blaming lambda ('the Magnus steps "
-                   "need lambda times the sub-step below about pi'), not the input (timevarying.c, tv_do_step)")
 def test_an_input_whose_forcing_overflows_is_discarded_naming_the_input(fmus):
     body = """
     g = new("b")
     g.setReal([U], [1e308])
     res["step"] = attempt(lambda: g.doStep(0.0, 0.01))[0]
+    g.setReal([U], [0.0])
+    res["step after"] = attempt(lambda: g.doStep(0.0, 0.01))[0]
+    res["x"] = g.getReal(X)
     """
     found, stderr = _host(fmus[2], body)
-    assert found["step"] == "err"
-    assert "lambda" not in stderr and "input" in stderr, stderr
+    # u = 1e308 is finite, its forcing (1 + t/10) u in the Magnus exponent is not: discarded at once with that
+    # reason, not after 2^14 sub-steps blaming lambda; with a sane value again the step is taken
+    assert found["step"] == "err" and found["step after"] == "ok", found
+    assert abs(found["x"][0] - math.cos(0.01)) < 1e-9
+    assert "lambda" not in stderr and "inputs' values" in stderr, stderr
 
 
 def test_rollback_restores_the_input_jets_and_history_bit_for_bit(fmus):
