@@ -452,3 +452,71 @@ def test_fmi3_cosimulation_with_inputs_equals_the_fmi2_build(fmus):
     """.format(fmu3=str(fmus[3]))
     found, _ = _host(fmus[2], body)
     assert found["diff"] <= 1e-12 and found["err"] < 2e-3, found
+
+
+def test_a_jump_in_a_values_only_input_is_visible_on_the_residual_as_for_constant_coefficients(fmus, tmp_path):
+    # u = 0 before t = 1, 1 after, values only: the history polynomial through the jump makes derivatives of
+    # order 1/h^j for UDEG steps, and x2 = -sin t - (1 + t/10) u is off by up to ten times the jump there. The
+    # FMU cannot know the input jumped; what it owes the host: the same answer as the constant-coefficient FMU
+    # of the same model, the bad steps flagged by constraint_residual, and the exact solution again after them
+    const = build_fmu(_spec("CIn", B=[["0", "-1"], ["3", "0"]], f=["u*(1 + t/10)", "3*cos(t)"]), tmp_path,
+                      target="native")
+    body = """
+    md2 = read_model_description({const!r})
+    c = FMU2Slave(guid=md2.guid, unzipDirectory=extract({const!r}), modelIdentifier=md2.coSimulation.modelIdentifier,
+                  instanceName="c")
+    c.instantiate()
+    c.setupExperiment(startTime=0.0)
+    c.enterInitializationMode()
+    c.exitInitializationMode()
+    f = new()
+    t, h = 0.0, 0.01
+    rows = []
+    for i in range(120):
+        us = 0.0 if i < 100 else 1.0
+        for g in (f, c):
+            g.setReal([U], [us])
+            g.doStep(t, h)
+        t = (i + 1) * h
+        x = f.getReal(X + [R])
+        ux = 0.0 if i < 99 else 1.0  # the exact input at the step end (u jumps at t = 1)
+        rows.append([max(abs(a - b) for a, b in zip(x, [math.cos(t), -math.sin(t) - (1 + t / 10) * ux])), x[2],
+                     max(abs(a - b) for a, b in zip(x, c.getReal(X)))])
+    res["rows"] = rows
+    """.format(const=str(const))
+    found, _ = _host(fmus[2], body)
+    rows = found["rows"]
+    # (row 99 ends at t = 1, where the exact input is already 1 and the FMU holds 0: not counted)
+    assert max(r[0] for r in rows[:99]) < 1e-8 and max(r[0] for r in rows[100:]) > 1.0  # the jump's garbage
+    assert all(r[1] > 0.1 for r in rows[100:] if r[0] > 1e-3)  # ... every bad step flagged by the residual
+    assert max(r[0] for r in rows[110:]) < 1e-8  # ... and gone after the history's UDEG + 1 points
+    # the constant-coefficient FMU answers the same (within the garbage, to 1e-3 of its size: the 1/h^j
+    # derivatives amplify the two runtimes' different rounding)
+    assert all(r[2] < (1e-8 if r[0] < 1e-3 else 1e-3 * r[0]) for r in rows)
+
+
+def test_fmi3_early_return_at_the_horizon_with_an_input(fmus):
+    body = """
+    from fmpy.fmi3 import FMU3Slave
+    f = FMU3Slave(guid=md.guid, unzipDirectory=un, modelIdentifier=md.coSimulation.modelIdentifier, instanceName="a")
+    f.instantiate(earlyReturnAllowed=True)
+    f.enterInitializationMode(startTime=0.0)
+    f.exitInitializationMode()
+    t, flags = 0.0, []
+    while len(flags) < 30:
+        f.setFloat64([U], [u(t)])
+        r = attempt(lambda: f.doStep(t, 0.25))
+        flags.append(r[1] if r[0] == "err" else list(r[1]))
+        if r[0] == "err" or r[1][2]:
+            t = r[1][3] if r[0] == "ok" else t
+            break
+        t = r[1][3]
+    res["last"] = flags[-1]
+    res["t"] = t
+    res["err"] = max(abs(a - b) for a, b in zip(f.getFloat64(X), exact(t)))
+    res["next"] = attempt(lambda: f.doStep(t, 0.1))[0]
+    """
+    found, _ = _host(fmus[3], body)
+    # the tables reach 10 % past the stop time 2: the step from 2 to 2.25 returns early at 2.2, terminateSimulation
+    assert found["last"][1:3] == [True, True] and abs(found["t"] - 2.2) < 1e-12, found
+    assert found["err"] < 3e-2 and found["next"] == "err", found  # values only at h = 0.25: the estimate's error
