@@ -370,7 +370,20 @@ _PLACES = {
     # index 1: x1' = -x1 + x2, (2 + cos t) x2 = (2 + cos t)(1 + t) u
     "index1": (dict(B=[["1", "-1"], ["0", "2 + cos(t)"]], f=["0", "(2 + cos(t))*(1 + t)*u"]),
                "(cos(t) - sin(t))/(1 + t)", ["cos(t)", "cos(t) - sin(t)"], {"u": 1.0, "x2_0": 1.0}),
+    # a coefficient that vanishes on the first half of the horizon (smoothly: tables of a steep tanh)
+    "vanishing": (dict(f=["u*(1 + tanh(20*(t - 1)))/2", "(2 + cos(t))*cos(t)"]), "sin(2*t)",
+                  ["cos(t)", "-sin(t) - sin(2*t)*(1 + tanh(20*(t - 1)))/2"], {}),
+    # affine in disguise: (u + 1)^2 - u^2 = 2 u + 1
+    "disguised": (dict(f=["(u + 1)**2 - u**2", "(2 + cos(t))*cos(t)"]), "sin(2*t)",
+                  ["cos(t)", "-sin(t) - 2*sin(2*t) - 1"], {"x2_0": -1.0}),
 }
+
+
+@pytest.mark.parametrize("f0", ["sqrt(u + 4)", "u*u/(u + 1)", "exp(u) - u"])
+def test_f_not_affine_in_the_input_in_disguise_is_refused(tmp_path, f0):
+    with pytest.raises(NativeTargetError, match="not affine in the input"):
+        build_fmu(_spec(f=[f0, "(2 + cos(t))*cos(t)"]), tmp_path, target="native")
+    assert not list(tmp_path.glob("*.fmu*"))
 
 
 @pytest.mark.parametrize("place", list(_PLACES))
