@@ -620,3 +620,39 @@ def test_model_exchange_in_a_c_master_under_sanitizers(fmus, tmp_path):
     assert abs(t - 2.0) < 1e-12 and abs(x1 - math.cos(t)) < 1e-8, lines
     assert abs(x2 - (-math.sin(t) - (1 + t / 10) * math.sin(2 * t))) < 2e-3, lines  # measured 4.1e-4
     assert lines[1] == "overflow 3" and "is not finite" in proc.stderr, (lines, proc.stderr)  # fmi2Error, logged
+
+
+def test_lambda_changed_mid_run_with_inputs_equals_a_run_started_there(fmus):
+    # off the manifold (x1 started 1e-3 off), exact input jets: lambda 2 on [0, 0.5] then 5 on [0.5, 1] equals an
+    # instance set up at 0.5 with the first run's state and lambda 5 (the input maps' U1 part follows lambda)
+    body = """
+    def start(t0, x0, lam):
+        f = FMU2Slave(guid=md.guid, unzipDirectory=un, modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName="l")
+        f.instantiate()
+        f.setupExperiment(startTime=t0)
+        f.setReal([var["x1_0"], var["x2_0"], var["lambda"]], [*x0, lam])
+        f.enterInitializationMode()
+        f.exitInitializationMode()
+        return f
+
+    def go(f, i0, i1):
+        for i in range(i0, i1):
+            send(f, i * 0.01)
+            f.doStep(i * 0.01, 0.01)
+
+    a = start(0.0, [1.001, 0.0], 2.0)
+    go(a, 0, 50)
+    mid = a.getReal(X)
+    a.setReal([var["lambda"]], [5.0])
+    go(a, 50, 100)
+    b = start(0.5, mid, 5.0)
+    go(b, 50, 100)
+    c = start(0.5, mid, 2.0)
+    go(c, 50, 100)
+    res["a-b"] = max(abs(p - q) for p, q in zip(a.getReal(X), b.getReal(X)))
+    res["a-c"] = max(abs(p - q) for p, q in zip(a.getReal(X), c.getReal(X)))
+    res["off at 0.5"] = max(abs(p - q) for p, q in zip(mid, exact(0.5)))
+    """
+    found, _ = _host(fmus[2], body)
+    assert found["a-b"] < 1e-13 and found["a-c"] > 1e-5 and found["off at 0.5"] > 1e-4, found
