@@ -656,3 +656,11 @@ def test_lambda_changed_mid_run_with_inputs_equals_a_run_started_there(fmus):
     """
     found, _ = _host(fmus[2], body)
     assert found["a-b"] < 1e-13 and found["a-c"] > 1e-5 and found["off at 0.5"] > 1e-4, found
+
+
+def test_an_input_start_value_whose_forcing_overflows_is_refused_for_that_reason(tmp_path):
+    # u(0) = 1.7e308 is a finite start value; the build's check of the input maps (at the start values) overflows:
+    # refused naming the start value, not as "not affine in lambda" with a misfit of nan
+    with pytest.raises(NativeTargetError, match="not finite.*start value"):
+        build_fmu(_spec(inputs={"u": {"start": 1.7e308}}), tmp_path, target="native")
+    assert not list(tmp_path.glob("*.fmu*"))
