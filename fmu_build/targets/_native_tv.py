@@ -128,7 +128,13 @@ class _Sampler:
             G0, G1, g0, g1, U0, U1 = self._parts(self(t))
             ujet = self.inputs[3](t) if self.inputs is not None else np.zeros(0)
             for rate, comp in self.checks:
-                G, g = comp.matrices(t)
+                with np.errstate(over="ignore", invalid="ignore"):
+                    G, g = comp.matrices(t)
+                    g_tab = g0 + U0 @ ujet
+                if self.inputs is not None and not (np.all(np.isfinite(g)) and np.all(np.isfinite(g_tab))):
+                    raise self.error(f"g(t) with the inputs at their start values is not finite at t = {t:g} (the "
+                                     "build checks the input maps there): give the inputs a start value of a "
+                                     "magnitude their forcing can hold")
                 for name, M0, M1, M in (("G", G0, G1, G), ("g", g0 + U0 @ ujet, g1 + U1 @ ujet, g)):
                     scale = max(np.abs(M).max(), np.abs(M0).max() + rate * np.abs(M1).max(), 1.0)
                     err = np.abs(M0 + rate * M1 - M).max() / scale
