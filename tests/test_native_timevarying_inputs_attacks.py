@@ -664,3 +664,13 @@ def test_an_input_start_value_whose_forcing_overflows_is_refused_for_that_reason
     with pytest.raises(NativeTargetError, match="not finite.*start value"):
         build_fmu(_spec(inputs={"u": {"start": 1.7e308}}), tmp_path, target="native")
     assert not list(tmp_path.glob("*.fmu*"))
+
+
+def test_an_input_in_b_in_disguise(tmp_path):
+    # u - u cancels when parsed (B does not depend on u: built); sin(u)^2 + cos(u)^2 - 1 is zero but not to
+    # sympy's automatic simplification: refused as an input in B (conservative, with the reason)
+    build_fmu(_spec("TvBCancel", B=[["0", "-1"], ["2 + cos(t) + u - u", "0"]]), tmp_path / "a", target="native")
+    with pytest.raises(NativeTargetError, match="B depends on the input"):
+        build_fmu(_spec("TvBTrig", B=[["0", "-1"], ["2 + cos(t) + sin(u)**2 + cos(u)**2 - 1", "0"]]), tmp_path / "b",
+                  target="native")
+    assert not list((tmp_path / "b").glob("*.fmu*"))
