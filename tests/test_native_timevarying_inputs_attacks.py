@@ -674,3 +674,18 @@ def test_an_input_in_b_in_disguise(tmp_path):
         build_fmu(_spec("TvBTrig", B=[["0", "-1"], ["2 + cos(t) + sin(u)**2 + cos(u)**2 - 1", "0"]]), tmp_path / "b",
                   target="native")
     assert not list((tmp_path / "b").glob("*.fmu*"))
+
+
+def test_a_refused_input_derivative_call_applies_none_of_its_entries(fmus):
+    # [u' = 50, order 0]: the call is refused for its second entry; the first must not have been taken either
+    body = """
+    a, b = new("a"), new("b")
+    for g in (a, b):
+        g.setReal([U], [0.0])
+    res["call"] = attempt(lambda: a.setRealInputDerivatives([U, U], [1, 0], [50.0, 1.0]))[0]
+    for g in (a, b):
+        g.doStep(0.0, 0.01)
+    res["same"] = a.getReal(X) == b.getReal(X)
+    """
+    found, _ = _host(fmus[2], body)
+    assert found == {"call": "err", "same": True}, found
