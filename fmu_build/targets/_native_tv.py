@@ -38,6 +38,7 @@ refused with a `NativeTargetError` naming the limit.
 """
 
 import math
+import re
 
 import numpy as np
 
@@ -51,6 +52,7 @@ DEGREES = (10, 16)    # low degrees, more pieces: the Clenshaw sweep is most of 
 FAST_COEFFICIENTS = 150_000  # pieces split to the lowest degree up to this size (~ 25 bytes of C each)
 MAX_PIECES = 1024     # bound of the tables: 1024 pieces of degree 16 of a 10-state model are ~ 5.8 million doubles
 MIN_PIECE = 1e-6      # of the horizon
+MAX_TABLE_DOUBLES = 6_000_000  # all coefficients (~ 25 bytes of C each): the inputs' columns grow as m^2, not n^2
 HORIZON_MARGIN = 0.1  # the tables reach this fraction of the experiment's length past its stop time
 MARGIN_HALVINGS = 4   # where the completion cannot be tabulated that far: the margin halved up to this often, then none
 _CHECK_RATES = (0.3, 7.0)
@@ -134,7 +136,13 @@ class _Sampler:
             G0, G1, g0, g1, U0, U1 = self._parts(self(t))
             ujet = self.inputs[3](t) if self.inputs is not None else np.zeros(0)
             for rate, comp in self.checks:
-                G, g = comp.matrices(t)
+                with np.errstate(over="ignore", invalid="ignore"):
+                    G, g = comp.matrices(t)
+                    g_tab = g0 + U0 @ ujet
+                if self.inputs is not None and not (np.all(np.isfinite(g)) and np.all(np.isfinite(g_tab))):
+                    raise self.error(f"g(t) with the inputs at their start values is not finite at t = {t:g} (the "
+                                     "build checks the input maps there): give the inputs a start value of a "
+                                     "magnitude their forcing can hold")
                 for name, M0, M1, M in (("G", G0, G1, G), ("g", g0 + U0 @ ujet, g1 + U1 @ ujet, g)):
                     scale = max(np.abs(M).max(), np.abs(M0).max() + rate * np.abs(M1).max(), 1.0)
                     err = np.abs(M0 + rate * M1 - M).max() / scale
@@ -224,13 +232,28 @@ def fit_tables(dae, method, lam, k, t_span, error, inputs=None, counter=None):
                         f"<= {DEGREES[-1]} within the limit of {MAX_PIECES} pieces (minimum piece {MIN_PIECE:g} of "
                         f"the horizon) on [{a:g}, {b:g}]: shorten the horizon (experiment stop) or build with "
                         "target='pythonfmu'")
+        _check_size(len(done) + len(todo) + 2, sampler)  # every piece has at least the lowest degree
         mid = 0.5 * (lo + hi)
         todo += [(mid, hi), (lo, mid)]
     done.sort(key=lambda p: p[0])
     fast = min(FAST_COEFFICIENTS // ((DEGREES[0] + 1) * (sampler.ndyn + sampler.nres)), MAX_PIECES)
     done = _lowest_degree(done, fast, tail_ok, lambda lo, hi: fit(lo, hi, DEGREES[:1]))
+    _check_size(sum(c.shape[0] for _, _, c in done) / (DEGREES[0] + 1), sampler)
     return dict(pieces=done, n=sampler.n, nv=sampler.ndyn + sampler.nres, ndyn=sampler.ndyn,
                 evaluations=len(values), t0=a, t1=b, p=sampler.p, nuj=sampler.m)
+
+
+def _check_size(pieces, sampler):
+    """Refuse tables of more than `MAX_TABLE_DOUBLES` (`pieces` of the lowest degree, or their equivalent)."""
+    nv = sampler.ndyn + sampler.nres
+    if pieces * (DEGREES[0] + 1) * nv > MAX_TABLE_DOUBLES:
+        nu = sampler.m // (sampler.p + 1)
+        raise sampler.error(
+            f"the tables would hold more than {MAX_TABLE_DOUBLES} doubles ({math.ceil(pieces)} pieces of degree >= "
+            f"{DEGREES[0]}, {nv} entries per coefficient for {sampler.n} states"
+            + (f" and {nu} input(s) with derivatives up to {sampler.p}" if nu else "")
+            + "): shorten the horizon (experiment stop)" + (", use fewer inputs" if nu else "")
+            + " or build with target='pythonfmu'")
 
 
 def _lowest_degree(pieces, limit, tail_ok, refit):
@@ -410,6 +433,9 @@ def finish_header(header, tab):
     # the first lines describe the model: its A, B are the tables at the end, not the zero G0, W0 placeholders
     header = header.replace("; A, B constant", "; A(t), B(t) time-varying: G, g and the residual from the tables at the "
                             "end (G0, G1, W0, W1 below are unused zeros)", 1)
+    if tab["nuj"]:  # with inputs x' only, as the model description declares: a higher order is refused as such
+        header = re.sub(r"#define MAX_OUTPUT_DERIVATIVE_ORDER \d+", "#define MAX_OUTPUT_DERIVATIVE_ORDER 1", header,
+                        count=1)
     body, end = header.rsplit("#endif", 1)
     return body + header_section(tab) + "\n#endif" + end
 

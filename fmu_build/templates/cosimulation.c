@@ -89,6 +89,8 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component comp, const fmi2ValueRefere
             logmsg(c, fmi2Error, "fmi2SetRealInputDerivatives: value %g is not finite", value[i]);
             return fmi2Error;
         }
+    }
+    for (i = 0; i < nvr; i++) { /* all checked first: a refused call takes none of its entries */
         if (c->s.ud_t != c->s.t) { /* derivatives for a new time: those sent for an earlier step no longer hold */
             memset(c->s.ud_set, 0, sizeof c->s.ud_set);
             c->s.ud_t = c->s.t;

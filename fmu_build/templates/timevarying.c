@@ -382,6 +382,14 @@ static int tv_do_step(Instance *c, double t, double h) {
                 return 2;
             }
         }
+        /* finite values whose forcing overflows (u = 1e308): no sub-step can help, say so before trying */
+        if (tv_rhs(c, t, c->s.x, xn) == 0)
+            for (i = 0; i < NX; i++)
+                if (!isfinite(xn[i])) {
+                    logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: x' = G x + g(t, u) of state %d is not "
+                           "finite at the step start with the inputs' values and derivatives set", t, i + 1);
+                    return 2;
+                }
     }
     memcpy(x, c->s.x, sizeof(double) * NX);
     x[NX] = 1.0;
