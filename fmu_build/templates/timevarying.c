@@ -386,7 +386,7 @@ static int tv_do_step(Instance *c, double t, double h) {
         if (tv_rhs(c, t, c->s.x, xn) == 0)
             for (i = 0; i < NX; i++)
                 if (!isfinite(xn[i])) {
-                    logmsg(c, fmi2Warning, "fmi2DoStep at t = %g discarded: x' = G x + g(t, u) of state %d is not "
+                    logmsg(c, fmi2Discard, "fmi2DoStep at t = %g discarded: x' = G x + g(t, u) of state %d is not "
                            "finite at the step start with the inputs' values and derivatives set", t, i + 1);
                     return 2;
                 }
