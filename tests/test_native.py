@@ -344,6 +344,17 @@ def test_output_derivatives_are_exact(built):
 # -- hosts -----------------------------------------------------------------------------
 
 
+def _sanitized_library(folder, main="fmi2Functions.c", pedantic=False):
+    """The FMU's sources in `folder`/sources compiled with ASan and UBSan into `folder`/san.so (warnings are errors)."""
+    lib, src = folder / "san.so", folder / "sources"
+    proc = subprocess.run(["cc", "-std=c99", *(["-pedantic"] if pedantic else []), "-Wall", "-Wextra", "-Werror",
+                           "-fsanitize=address,undefined", "-fno-sanitize-recover=undefined", "-fno-omit-frame-pointer",
+                           "-g", "-shared", "-fPIC", "-I", str(src), "-o", str(lib), str(src / main), "-lm"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return lib
+
+
 def _master(tmp_path, sanitize=False):
     exe = tmp_path / ("master_san" if sanitize else "master")
     flags = ["-fsanitize=address,undefined", "-fno-omit-frame-pointer", "-g"] if sanitize else ["-O2"]
@@ -366,12 +377,7 @@ def _unpacked(fmu, folder):
 def test_c_master_under_address_and_ub_sanitizers(built, tmp_path):
     spec = _spec("chain5")
     guid, vrs = _unpacked(built["chain5"], tmp_path)
-    lib = tmp_path / "san.so"
-    proc = subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-fsanitize=address,undefined", "-g",
-                           "-fno-sanitize-recover=undefined", "-shared", "-fPIC", "-I", str(tmp_path / "sources"),
-                           "-o", str(lib), str(tmp_path / "sources" / "fmi2Functions.c"), "-lm"],
-                          capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr
+    lib = _sanitized_library(tmp_path)
     exe = _master(tmp_path, sanitize=True)
     names = states(spec)
     proc = subprocess.run([str(exe), str(lib), guid, "200", "0.01", str(len(names)), *[str(vrs[n]) for n in names],

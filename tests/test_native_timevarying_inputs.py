@@ -301,16 +301,11 @@ def test_c_master_under_address_and_ub_sanitizers(built, tmp_path):
     import os
     import subprocess
 
-    from test_native import _master, _unpacked
+    from test_native import _master, _sanitized_library, _unpacked
 
     name = "RotForce3"
     guid, vrs = _unpacked(built[name], tmp_path)
-    lib = tmp_path / "san.so"
-    proc = subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-fsanitize=address,undefined", "-g",
-                           "-fno-sanitize-recover=undefined", "-shared", "-fPIC", "-I", str(tmp_path / "sources"),
-                           "-o", str(lib), str(tmp_path / "sources" / "fmi2Functions.c"), "-lm"],
-                          capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr
+    lib = _sanitized_library(tmp_path)
     exe = _master(tmp_path, sanitize=True)
     names = _names(name)
     proc = subprocess.run([str(exe), str(lib), guid, "100", "0.01", str(len(names)), *[str(vrs[n]) for n in names]],
