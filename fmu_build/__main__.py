@@ -301,7 +301,8 @@ def _run_ecos(args):
 def _add_native_flags(build):
     """``--native`` (generated C, FMI 2.0 CS + ME, no Python in the host) and ``--fix-parameters``."""
     build.add_argument("--native", action="store_true",
-                       help="build a native C FMU (Co-Simulation and Model Exchange; constant A and B only)")
+                       help="build a native C FMU (Co-Simulation and Model Exchange; constant A and B, or "
+                            "time-varying ones tabulated over the experiment)")
     build.add_argument("--fix-parameters", action="store_true",
                        help="with --native: fix tunable parameters that enter A or B at their spec values")
     build.add_argument("--fmi-version", type=int, choices=[2, 3], default=2,
