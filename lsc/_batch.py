@@ -18,13 +18,11 @@ equilibration and arrays of `WARM_MIN_ROWS` rows or more (factored by a
 warm-started LU) take the per-time path entirely.
 """
 
-import warnings
-
 import numpy as np
 
 from ._dense_factors import _ONE_FULL_TOL, WARM_MIN_ROWS, _norm2_if_above
-from ._derivative_array import array_jets
-from ._linalg import numerical_rank
+from ._derivative_array import stabilization_jets, stacked_arrays
+from ._linalg import _MARGIN, default_rcond
 
 __all__ = []
 
@@ -33,12 +31,19 @@ def _t(X):
     return np.swapaxes(X, -1, -2)
 
 
-def _quiet_rank(s, shape, rcond, what):
-    """`numerical_rank`, or None when it would warn (a close call: the per-time path decides and warns)."""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        rank = numerical_rank(s, shape, rcond, what=what)
-    return None if caught else rank
+def _ranks(s, shape, rcond):
+    """`numerical_rank` of each row of singular values `s` (m, p); -1 where it would warn (a close call).
+
+    The same threshold ``rcond * s[0]`` and close-call test, for all times at once: a time marked -1 is
+    left to the per-time path, which decides and warns.
+    """
+    if s.shape[1] == 0:
+        return np.zeros(s.shape[0], dtype=int)
+    rcond = default_rcond(shape) if rcond is None else rcond
+    tol = rcond * s[:, :1]
+    ranks = np.count_nonzero(s > tol, axis=1)
+    close = np.any((s > tol / _MARGIN) & (s < tol * _MARGIN), axis=1) | (s[:, 0] == 0.0)
+    return np.where(close, -1, ranks)
 
 
 def batchable(completion):
@@ -56,35 +61,32 @@ def matrices_many(completion, ts):
         return out
     eq, k, q, n, rcond = completion._eq, completion.k, completion.extra_order, completion.n, completion.rcond
     N, r = (k + 1) * n, completion._rank
-    kept, jets_list, fstacks = [], [], []
+    order = k + q
+    kept, fstacks, A, B = [], [], [], []
     for i, t in enumerate(ts):
         try:  # in the per-time path's order: the forcing's jet, then the coefficients'
-            fstack = eq.f_jet(t, completion._order).reshape(-1)
-            jets = array_jets(eq, k, t, None, q)
+            fstack = eq.f_jet(t, completion._order).reshape(-1, n)
+            Aj, Bj = eq.A.jet(t, order), eq.B.jet(t, order)
         except Exception:  # noqa: BLE001 - the per-time path raises it, with its message
             continue
         kept.append(i)
-        jets_list.append(jets)
         fstacks.append(fstack)
+        A.append(Aj)
+        B.append(Bj)
     if len(kept) < 2:
         return out
-    J = np.stack([j.J for j in jets_list])  # (m, q + 1, N, N)
+    J, F = stacked_arrays(np.array(A), np.array(B), k, q)
     U, s, Vt = np.linalg.svd(J[:, 0])
-    good = []
-    for j, i in enumerate(kept):
-        t = ts[i]
-        if _quiet_rank(s[j], (N, N), rcond, f"derivative array J (k={k}, t={t:g})") != r:
-            continue
-        if r < N and _norm2_if_above(Vt[j, r:, :n], _ONE_FULL_TOL) > _ONE_FULL_TOL:
-            continue
-        good.append(j)
+    ok = _ranks(s, (N, N), rcond) == r
+    if r < N:  # 1-fullness: the null space of J must not move x' (as `_Factors._svd`)
+        ok &= [_norm2_if_above(Vt[j, r:, :n], _ONE_FULL_TOL) <= _ONE_FULL_TOL for j in range(len(kept))]
+    good = np.nonzero(ok)[0]
     if len(good) < 2:
         return out
-    sel = np.array(good)
-    st = _Stack(n, r, U[sel], s[sel], Vt[sel], J[sel],
-                np.stack([jets_list[j].F for j in good]),
-                np.stack([jets_list[j].forcing(fstacks[j]) for j in good]),
-                np.stack([fstacks[j][:n] for j in good]))
+    fs = np.array(fstacks)[good]  # (m, k + q + 1, n)
+    Lam = stabilization_jets(k, q, None)
+    Lg = np.einsum("dij,mjn->mdin", Lam, fs).reshape(len(good), q + 1, N)
+    st = _Stack(n, r, U[good], s[good], Vt[good], J[good], F[good], Lg, fs[:, 0])
     times = [ts[kept[j]] for j in good]
     try:
         res = completion._stacked_maps(st, times)
@@ -140,8 +142,7 @@ def alternative_maps(st, lam, rcond, times):
     T2 = _t(Vct[:, a:])
     AT2 = st.A0 @ T2
     Z1, s1, _ = np.linalg.svd(AT2, full_matrices=False)
-    ok = [_quiet_rank(sc[j], st.C.shape[1:], None, "constraint matrix Z2^T F") == a
-          and _quiet_rank(s1[j], AT2.shape[1:], rcond, "A T2") == AT2.shape[2] for j in range(len(times))]
+    ok = (_ranks(sc, st.C.shape[1:], None) == a) & (_ranks(s1, AT2.shape[1:], rcond) == AT2.shape[2])
     Z1t = _t(Z1)
     M = np.concatenate([Z1t @ st.A0, st.C], axis=1)
     G_num = np.concatenate([-(Z1t @ st.B0), G_c], axis=1)
