@@ -30,6 +30,11 @@ multiple of ``m``: 32 may go to 96 where doubling would take 128), up to
 right as a step-size controller would, for about `_TARGET` degrees by the
 slowest decay seen so far, each started at its predicted degree.
 
+The times of a degree are known before any of them is evaluated: they are
+evaluated together (`lsc._batch`, the linear algebra of all of them stacked,
+each rank decided as at one time), and a time that needs a decision of its
+own is evaluated alone.
+
 A piece that is still unresolved at 1e-6 of the interval's length (a jump in
 the forcing, say), or left when the budget of evaluations is spent, is
 evaluated pointwise, so the interpolant is never silently wrong by more than

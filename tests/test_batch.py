@@ -88,3 +88,25 @@ def test_failing_coefficient_left_to_per_time_path():
         assert np.allclose(many[1][0], c.matrices(1.0)[0], rtol=1e-12, atol=0)
     with pytest.raises(ValueError, match="non-finite"):
         c.matrices(2.7)
+
+
+def test_vectorized_ranks_equal_numerical_rank():
+    # the stacked rank decisions are numerical_rank's, and every close call (a warning) is left out (-1)
+    from lsc._batch import _ranks
+    from lsc._linalg import numerical_rank
+
+    rng = np.random.default_rng(3)
+    tol = 1e-10  # rcond; relative singular values at, around and far from it
+    rows = [np.sort(np.concatenate([[1.0], 10.0 ** rng.uniform(-16, 0, 5), [tol * f]]))[::-1]
+            for f in (1e-3, 0.02, 0.5, 2.0, 50.0, 1e3, 1.0)] + [np.zeros(7)]
+    s = np.array(rows)
+    got = _ranks(s, (7, 7), tol)
+    for row, rank in zip(s, got):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            expected = numerical_rank(row, (7, 7), tol)
+        if caught or row[0] == 0.0:
+            assert rank == -1
+        else:
+            assert rank == expected
+    assert set(got[:6]) > {-1}  # some decisions are clear-cut, some are close calls
