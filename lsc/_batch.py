@@ -12,13 +12,13 @@ Every rank decision is the per-time one: `numerical_rank` on each time's
 singular values. A time whose rank is not the completion's, whose decision
 is a close call (a warning), which is not 1-full, or whose coefficients
 raise, is left out (None): the caller evaluates it by the per-time path,
-which decides, warns or refuses exactly as it always does. The standard
-and the alternative completion are stacked; other completions, column
+which decides, warns or refuses exactly as it always does. Column
 equilibration and arrays of `WARM_MIN_ROWS` rows or more (factored by a
 warm-started LU) take the per-time path entirely.
 """
 
 import numpy as np
+import scipy.linalg
 
 from ._dense_factors import _ONE_FULL_TOL, WARM_MIN_ROWS, _norm2_if_above
 from ._derivative_array import stabilization_jets, stacked_arrays
@@ -122,6 +122,22 @@ def standard_maps(st):
     """The standard completion's ``(G, g)`` at every time of `st`."""
     P = st.first_rows
     return -(P @ st.F[:, 0]), (P @ st.Lg[:, 0, :, None])[..., 0]
+
+
+def stabilized_maps(st, Lams):
+    """The stabilized completion's ``(G, g)``: the standard one plus ``K c`` (`StabilizedCompletion._maps`).
+
+    `Lams`: ``stabilization_jets(k, 0, lam jet)[0]`` at each time (unit lower triangular).
+    """
+    G, g = standard_maps(st)
+    m, (N, a), n = len(Lams), st.Z2.shape[1:], st.n
+    k1 = N // n
+    Lam_inv = np.stack([scipy.linalg.solve_triangular(L, np.eye(k1), lower=True, unit_diagonal=True) for L in Lams])
+    M = np.einsum("mji,mjba->miba", Lam_inv, st.Z2.reshape(m, k1, n, a)).reshape(m, N, a)
+    Y0_Dinv = np.einsum("maib,mij->majb", st.first_rows.reshape(m, n, k1, n), Lam_inv).reshape(m, n, N)
+    Qm, Rm = np.linalg.qr(M)
+    K = _t(np.linalg.solve(Rm, _t(Y0_Dinv @ Qm)))
+    return G + K @ st.C, g - (K @ st.cg[:, :, None])[..., 0]
 
 
 def alternative_maps(st, lam, rcond, times):

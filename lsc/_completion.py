@@ -26,7 +26,7 @@ from collections import OrderedDict
 import numpy as np
 import scipy.linalg
 
-from ._batch import alternative_maps, standard_maps
+from ._batch import alternative_maps, stabilized_maps, standard_maps
 from ._dense_factors import WARM_MIN_ROWS, _Factors
 from ._derivative_array import stabilization_jets
 from ._exceptions import DimensionError, IndexDeterminationError
@@ -440,7 +440,6 @@ class StabilizedCompletion(StandardCompletion):
 
     method = "stabilized"
     uses_lam = True
-    _stacked_maps = None  # K = Y0 D^-1 (M^+)^T is formed per time
 
     def _maps(self, fac, t):
         G, W = super()._maps(fac, t)
@@ -454,6 +453,9 @@ class StabilizedCompletion(StandardCompletion):
         Qm, Rm = scipy.linalg.qr(M, mode="economic")
         K = scipy.linalg.solve_triangular(Rm, (Y0_Dinv @ Qm).T, lower=False).T
         return G + K @ fac.C, W - K @ fac.cg
+
+    def _stacked_maps(self, st, times):
+        return stabilized_maps(st, [stabilization_jets(self.k, 0, self._lam_jet(t, self.k))[0] for t in times])
 
 
 class AlternativeCompletion(Completion):

@@ -36,11 +36,13 @@ def test_stacked_equals_per_time(method, index):
 
 
 def test_stacked_path_taken_on_rotating_canonical():
-    # n = 6, k = 3: 24 rows, under WARM_MIN_ROWS: the alternative and the standard completion are stacked
+    # n = 6, k = 3: 24 rows, under WARM_MIN_ROWS: all three completions are stacked; 120 rows are not
     p = gallery.rotating_canonical(3)
     assert batchable(lsc.complete(p.dae, "alternative", lam=1.0))
     assert batchable(lsc.complete(p.dae, "standard"))
-    assert not batchable(lsc.complete(p.dae, "stabilized", lam=1.0))
+    assert batchable(lsc.complete(p.dae, "stabilized", lam=1.0))
+    q = gallery.moving_pencil(n=30, blocks=(3, 2), seed=1)
+    assert not batchable(lsc.complete(q.dae, "alternative", lam=1.0, k=3))
 
 
 def test_interpolant_unchanged_by_stacking(monkeypatch):
