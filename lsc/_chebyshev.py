@@ -30,6 +30,11 @@ multiple of ``m``: 32 may go to 96 where doubling would take 128), up to
 right as a step-size controller would, for about `_TARGET` degrees by the
 slowest decay seen so far, each started at its predicted degree.
 
+The times of a degree are known before any of them is evaluated: they are
+evaluated together (`lsc._batch`, the linear algebra of all of them stacked,
+each rank decided as at one time), and a time that needs a decision of its
+own is evaluated alone.
+
 A piece that is still unresolved at 1e-6 of the interval's length (a jump in
 the forcing, say), or left when the budget of evaluations is spent, is
 evaluated pointwise, so the interpolant is never silently wrong by more than
@@ -41,6 +46,8 @@ import math
 
 import numpy as np
 import scipy.fft
+
+from ._batch import matrices_many
 
 __all__ = []
 
@@ -219,11 +226,23 @@ class ChebyshevCoefficients:
                 G, g = self.completion.matrices(t)
             except ValueError as exc:  # a forcing that is not finite, a rank that changes: reported by the caller
                 raise EvaluationFailed(t, exc) from exc
-            v = self._values[t] = np.concatenate([G.ravel(), g])
-            self.evaluations += 1
-            nn = self._nn
-            self._scale = np.maximum(self._scale, [np.abs(v[:nn]).max(initial=0.0), np.abs(v[nn:]).max(initial=0.0)])
+            v = self._store(t, G, g)
         return v
+
+    def _store(self, t, G, g):
+        v = self._values[t] = np.concatenate([G.ravel(), g])
+        self.evaluations += 1
+        nn = self._nn
+        self._scale = np.maximum(self._scale, [np.abs(v[:nn]).max(initial=0.0), np.abs(v[nn:]).max(initial=0.0)])
+        return v
+
+    def _sample_many(self, ts):
+        """The values at `ts`; the new times evaluated together (`lsc._batch`), any it leaves one by one."""
+        new = [t for t in dict.fromkeys(ts) if t not in self._values]
+        for t, res in zip(new, matrices_many(self.completion, new)):
+            if res is not None:
+                self._store(t, *res)
+        return np.array([self._sample(t) for t in ts])
 
     def _fit(self, lo, hi, m, probing):
         """``(coefficients or None, _Decay)`` on ``[lo, hi]``, from degree m up to multiples of it predicted to do.
@@ -235,7 +254,7 @@ class ChebyshevCoefficients:
         while True:
             ts = 0.5 * (hi + lo) + 0.5 * (hi - lo) * _extreme_points(m)
             ts[0], ts[-1] = hi, lo
-            coef = _coefficients(np.array([self._sample(float(t)) for t in ts]))
+            coef = _coefficients(self._sample_many([float(t) for t in ts]))
             size = np.abs(coef[:, :nn]).max(axis=1, initial=0.0) / self._scale[0]
             if self._scale[1] > 0:
                 size = np.maximum(size, np.abs(coef[:, nn:]).max(axis=1, initial=0.0) / self._scale[1])

@@ -26,6 +26,7 @@ from collections import OrderedDict
 import numpy as np
 import scipy.linalg
 
+from ._batch import alternative_maps, stabilized_maps, standard_maps
 from ._dense_factors import WARM_MIN_ROWS, _Factors
 from ._derivative_array import stabilization_jets
 from ._exceptions import DimensionError, IndexDeterminationError
@@ -115,6 +116,7 @@ class Completion:
     warm_start = True
     block_qr = False
     _fastest_rate = None  # max |Re eig(G)| for constant coefficients, cached by lsc.stiffness_ratio
+    _stacked_maps = None  # ``(st, times) -> (Gs, gs)`` on many times at once (lsc._batch), where defined
 
     def __init__(self, dae, *, lam=None, k=None, rcond=None, t_span=None, setup="auto"):
         check_dae(dae)
@@ -407,6 +409,9 @@ class StandardCompletion(Completion):
         P = fac.first_rows
         return -fac.times_F(P, 0), fac.times_L(P, 0)
 
+    def _stacked_maps(self, st, times):
+        return standard_maps(st)
+
 
 class StabilizedCompletion(StandardCompletion):
     """Least squares completion of the stabilized array ``D = d/dt + lam`` (ch. 3, 5).
@@ -449,6 +454,9 @@ class StabilizedCompletion(StandardCompletion):
         K = scipy.linalg.solve_triangular(Rm, (Y0_Dinv @ Qm).T, lower=False).T
         return G + K @ fac.C, W - K @ fac.cg
 
+    def _stacked_maps(self, st, times):
+        return stabilized_maps(st, [stabilization_jets(self.k, 0, self._lam_jet(t, self.k))[0] for t in times])
+
 
 class AlternativeCompletion(Completion):
     """Index-one form with stabilized constraints (thesis ch. 4, 6; ERRATA 2, 4).
@@ -478,6 +486,9 @@ class AlternativeCompletion(Completion):
             Y = fac.times_pinv(Z2.T @ fac.jets.J[1])
             G_c, W_c = G_c + fac.times_F(Y, 0), W_c - fac.times_L(Y, 0)
         return fac.index_one_solve(G_c, W_c, self.rcond, t)
+
+    def _stacked_maps(self, st, times):
+        return alternative_maps(st, [self._lam_jet(t)[0] for t in times], self.rcond, times)
 
 
 COMPLETIONS = {

@@ -123,6 +123,27 @@ def array_jets(dae, k, t, lam=None, q=0):
     return _ArrayJets(J, F, Lam, k, q, n)
 
 
+def stacked_arrays(A, B, k, q):
+    """`array_jets`'s ``J`` and ``F`` (standard differentiation) at m times at once, same arithmetic.
+
+    `A`, `B`: the coefficients' jets to order ``k + q`` at each time, shape (m, k + q + 1, n, n).
+    Returns ``J`` (m, q + 1, N, N) and ``F`` (m, q + 1, N, n), ``N = (k + 1) n``.
+    """
+    m, n = A.shape[0], A.shape[-1]
+    N = (k + 1) * n
+    J = np.zeros((m, q + 1, N, N))
+    F = np.zeros((m, q + 1, N, n))
+    for i in range(k + 1):  # D^i u is u's jet from order i on
+        rows = slice(i * n, (i + 1) * n)
+        F[:, :, rows] = B[:, i : i + q + 1]
+        for mm in range(1, i + 2):
+            block = comb(i, mm - 1) * A[:, i - mm + 1 : i - mm + q + 2]
+            if mm <= i:
+                block = block + comb(i, mm) * B[:, i - mm : i - mm + q + 1]
+            J[:, :, rows, (mm - 1) * n : mm * n] = block
+    return J, F
+
+
 class DerivativeArray:
     """The derivative array ``J w = -F x + g`` at one time.
 
