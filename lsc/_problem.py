@@ -155,18 +155,26 @@ def _power_of_two_scales(norms):
 
 
 def _spread(values):
-    """Largest over smallest nonzero magnitude (1 when there is none)."""
+    """Largest over smallest nonzero magnitude (1 when there is none; inf beyond the largest double)."""
     nonzero = np.abs(values[values != 0.0])
-    return nonzero.max() / nonzero.min() if nonzero.size else 1.0
+    with np.errstate(over="ignore"):  # a spread beyond 1.8e308 is inf, which compares as it should
+        return nonzero.max() / nonzero.min() if nonzero.size else 1.0
+
+
+def _norms(M, axis):
+    """2-norms of the rows (axis=1) or columns (axis=0) of `M`, without overflow for entries near 1e308."""
+    big = np.abs(M).max(axis=axis, initial=0.0)
+    unit = np.where(big > 0.0, big, 1.0)
+    return np.linalg.norm(M / np.expand_dims(unit, axis), axis=axis) * big
 
 
 def _row_scales(A, B):
-    norms = np.linalg.norm(np.hstack([A, B]), axis=1)
+    norms = _norms(np.hstack([A, B]), axis=1)
     return _power_of_two_scales(norms) if _spread(norms) > ROW_SPREAD else np.ones(A.shape[0])
 
 
 def _column_scales(A, B):
-    norms = np.linalg.norm(np.vstack([A, B]), axis=0)
+    norms = _norms(np.vstack([A, B]), axis=0)
     return _power_of_two_scales(norms) if _spread(norms) > ROW_SPREAD else np.ones(A.shape[1])
 
 
@@ -189,7 +197,7 @@ def equilibration(dae, t=0.0):
     A, B = dae.A(t), dae.B(t)
     r = _row_scales(A, B)
     Ar, Br = r[:, None] * A, r[:, None] * B
-    if _spread(np.linalg.norm(np.vstack([Ar, Br]), axis=0)) <= ROW_SPREAD:
+    if _spread(_norms(np.vstack([Ar, Br]), axis=0)) <= ROW_SPREAD:
         return (None if np.all(r == 1.0) else r), None
     candidates = [(r, _column_scales(Ar, Br))]
     c = _column_scales(A, B)

@@ -36,3 +36,18 @@ def test_attributes_and_residual():
     np.testing.assert_allclose(dae.residual(1.0, x, xdot), 0, atol=1e-15)
     np.testing.assert_allclose(dae.residual(1.0, x, xdot + 1), [1.0, 0.0], atol=1e-15)
     assert "n=2" in repr(dae)
+
+
+def test_equilibration_of_rows_whose_squared_entries_overflow():
+    # norms by squares overflowed to inf for entries near 1e200: the row's power-of-two scale came out 0, a zero
+    # equation (and spreads of inf / inf were NaN, which compares False and skipped the scaling)
+    import warnings
+
+    from lsc._problem import equilibration
+
+    A, B = np.diag([1e200, 1.0]), np.diag([1e200, 1.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        r, c = equilibration(LinearDAE(A, B))
+    assert r is not None and np.all(r > 0)
+    assert abs(np.log2(r[0] * np.hypot(1e200, 1e200))) <= 1.0 and abs(np.log2(r[1] * np.hypot(1.0, 1.0))) <= 1.0
