@@ -107,6 +107,22 @@ static void tv_input_vector(Instance *c, double t, double *uv) {
         for (j = 0; j <= TV_P; j++) uv[i * (TV_P + 1) + j] = c->uj[i * NFE + j];
 }
 
+/* The input-jet entries at t0 + dt from those at t0 in c->uj (input_jets at the step start): the jet is the
+ * polynomial of degree NFE - 1 the step uses, so its Taylor shift is exact, and the nodes of every sub-step read
+ * it without redoing the history's divided differences */
+static void tv_shifted_inputs(const Instance *c, double dt, double *uv) {
+    int i, j, k;
+    for (i = 0; i < NU && TV_NUJ > 0; i++)
+        for (j = 0; j <= TV_P; j++) {
+            double v = 0.0, term = 1.0;
+            for (k = j; k < NFE; k++) {
+                v += c->uj[i * NFE + k] * term;
+                term *= dt / (double)(k - j + 1);
+            }
+            uv[i * (TV_P + 1) + j] = v;
+        }
+}
+
 /* The table values (TV_NG each, at the current lambda) at nt <= TV_NODES ascending times t[q] into
  * out[q * TV_NG]: where the steps and Model Exchange read G and g (the output derivatives read the tables'
  * derivatives by tv_values_jet); 0, or -1 outside the horizon */
@@ -267,7 +283,7 @@ static void tv_commutator(const double *restrict a, const double *restrict b, do
     }
 }
 
-/* One step over [t, t + h] from y = [x; 1] into ynew, the sixth- or the fourth-order Magnus step, and `est`, an
+/* One step over [t, t + h] (inside the communication step from t0, whose input jets c->uj holds) from y = [x; 1] into ynew, the sixth- or the fourth-order Magnus step, and `est`, an
  * estimate of the error of y4 (Blanes, Casas, Oteo and Ros, Phys. Rep. 470 (2009); three Gauss points,
  * alpha_1 = h A_2, alpha_2 = sqrt(15) h / 3 (A_3 - A_1), alpha_3 = 10 h / 3 (A_3 - 2 A_2 + A_1)):
  *   Omega4 = alpha_1 + alpha_3 / 12 - C1 / 12,  C1 = [alpha_1, alpha_2],
@@ -282,14 +298,15 @@ static void tv_commutator(const double *restrict a, const double *restrict b, do
  * the other two commutators give y6, taken with est = |D y| + |D| |y| (e^(2 m) - 1) (again a bound of
  * |y6 - y4|; m = |Omega6| + |D|) where that is below `bound`, else with est = |y6 - y4| from the second
  * exponential: never more sub-steps than |y6 - y4| asks for. */
-static int tv_magnus(Instance *c, double t, double h, const double *y, double bound, double *ynew, double *est) {
+static int tv_magnus(Instance *c, double t0, double t, double h, const double *y, double bound, double *ynew,
+                     double *est) {
     const double r = sqrt(15.0) / 10.0;
     double v[TV_NODES * TV_NG], a1[TV_R], a2[TV_R], a3[TV_R], c1[TV_R], om4[TV_R], w[TV_R], p[TV_R];
     const double ts[TV_NODES] = {t + (0.5 - r) * h, t + 0.5 * h, t + (0.5 + r) * h};
     double n1, n3, n4, nc1, nc2, nd, nv, yn = 0.0, e = 0.0, uv[TV_NODES * A1(TV_NUJ)];
     int i, j;
     if (tv_values(c, ts, TV_NODES, v) != 0) return -1;
-    for (i = 0; i < TV_NODES; i++) tv_input_vector(c, ts[i], uv + i * A1(TV_NUJ)); /* the step's input jet at the node */
+    for (i = 0; i < TV_NODES; i++) tv_shifted_inputs(c, ts[i] - t0, uv + i * A1(TV_NUJ)); /* the step's jet at the node */
     tv_augment(v, uv, a1);
     tv_augment(v + TV_NG, uv + A1(TV_NUJ), a2);
     tv_augment(v + 2 * TV_NG, uv + 2 * A1(TV_NUJ), a3);
@@ -399,7 +416,7 @@ static int tv_do_step(Instance *c, double t, double h) {
         for (i = 0; i < NX; i++) size = fabs(x[i]) > size ? fabs(x[i]) : size;
         /* beyond |Omega| ~ pi (lambda H large) the Magnus series need not converge and the exponentials may
          * overflow: a failed step counts as an infinite estimate, so the level goes up */
-        if (tv_magnus(c, ts, H, x, c->s.tol * (1.0 + size), xn, &est) != 0) est = INFINITY;
+        if (tv_magnus(c, t, ts, H, x, c->s.tol * (1.0 + size), xn, &est) != 0) est = INFINITY;
         if (!(est <= c->s.tol * (1.0 + size))) {
             if (level + 1 > TV_MAX_LEVEL) {
                 tv_log_cap(c, t, H, level, est, size);
