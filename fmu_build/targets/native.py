@@ -36,7 +36,7 @@ import lsc
 from .._description import model_description
 from .._description3 import build_description3, model_description3
 from ._runtime import start_name
-from .._model import _mangled
+from .._model import _input_derivatives, _mangled
 from . import _native_tv
 
 __all__ = ["build_native", "NativeTargetError", "C_FLAGS"]
@@ -179,21 +179,6 @@ def _ccode_block(exprs, targets, symbol_names):
     return lines
 
 
-def _derivatives_with_inputs(f, t, input_symbols, orders):
-    """f^(d) for d < orders, inputs u as functions of t whose j-th derivative is the symbol ``_mangled("u", u, j)``."""
-    import sympy
-
-    from .._model import _input_derivatives
-
-    if input_symbols:
-        return _input_derivatives(f, t, input_symbols, orders - 1)
-    out, D = [], sympy.Matrix(f)
-    for d in range(orders):
-        out.append(D)
-        D = D.diff(t)
-    return out
-
-
 def _is_linear_in_states(expr, state_symbols, spec):
     import sympy
 
@@ -264,7 +249,7 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars
     for i, (uname, usym) in enumerate(spec.input_symbols.items()):
         for j in range(nfe):
             names[sympy.Symbol(_mangled("u", uname, j), real=True)] = f"u[{i * nfe + j}]"
-    derivs = _derivatives_with_inputs(f, spec.t, spec.input_symbols, nfe) if f_jet else []
+    derivs = _input_derivatives(f, spec.t, spec.input_symbols, nfe - 1) if f_jet else []
     exprs, targets = [], []
     for d, D in enumerate(derivs):
         for i in range(n):

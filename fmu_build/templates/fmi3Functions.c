@@ -579,7 +579,7 @@ static int early_return_at_horizon(Instance *c, double t, double h, fmi2Boolean 
     const Host3 *host = (const Host3 *)c->cb.componentEnvironment;
     const double end = TV_T1;
     if (!host->early_return || !(c->s.phase & StepComplete) || !isfinite(t) || !isfinite(h)
-        || !(t + h > end + TV_TIME_SLACK(end) + 1e-12 * h) || !(t < end - TV_TIME_SLACK(end))
+        || !TV_LEAVES_HORIZON(t, h) || TV_AT_END(t)
         || (c->s.stop_defined && t + h > c->s.t_stop)) return 0;
     *s = fmi2DoStep(c, t, end - t, noSet);
     if (*s == fmi2OK)
@@ -626,7 +626,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     *terminateSimulation = c->s.terminal != 0;
     *lastSuccessfulTime = c->s.t;
 #ifdef LSC_TIME_VARYING
-    if (s == fmi2OK && communicationStepSize > 0.0 && !(c->s.t < TV_T1 - TV_TIME_SLACK(TV_T1))) {
+    if (s == fmi2OK && communicationStepSize > 0.0 && TV_AT_END(c->s.t)) {
         /* at the end of the tables no step can follow: the importer is asked to stop here, not at the next step */
         logmsg(c, fmi2Warning, "fmi3DoStep: reached %.17g, the end of the horizon the time-varying coefficients were "
                "tabulated on at build time: terminateSimulation is true (build with a longer experiment stop)", c->s.t);

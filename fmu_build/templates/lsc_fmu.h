@@ -37,7 +37,6 @@ typedef enum {
 } ModelPhase;
 
 #define ANY_ALIVE (Instantiated | InitializationMode | EventMode | ContinuousTimeMode | StepComplete | Terminated | Error)
-#define INITIALIZED (EventMode | ContinuousTimeMode | StepComplete)
 
 /* Everything the next step depends on: a snapshot is a copy of this struct. */
 typedef struct {

@@ -48,7 +48,7 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetFMUS
     }
     *terminateSimulation = fmi2False;
 #ifdef LSC_TIME_VARYING
-    if (!(c->s.t < TV_T1 - TV_TIME_SLACK(TV_T1))) { /* no derivative past the tables: the integrator stops here */
+    if (TV_AT_END(c->s.t)) { /* no derivative past the tables: the integrator stops here */
         logmsg(c, fmi2Warning, "fmi2CompletedIntegratorStep: reached %.17g, the end of the horizon the time-varying "
                "coefficients were tabulated on at build time: terminateSimulation is true (build with a longer "
                "experiment stop)", c->s.t);

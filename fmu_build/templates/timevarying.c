@@ -12,6 +12,10 @@
  * about pi, so a rate far beyond 1 / h is refused (discarded with a logged reason) instead of crawling */
 #define TV_MAX_LEVEL 14
 #define TV_TIME_SLACK(t) (TIME_ULPS * DBL_EPSILON * fmax(fabs(t), 1.0))
+/* a step from t of h ends past the tables (the FMI 2.0 and 3.0 layers ask the same question) */
+#define TV_LEAVES_HORIZON(t, h) ((t) + (h) > TV_T1 + TV_TIME_SLACK(TV_T1) + 1e-12 * (h))
+/* t is at (or past) the end of the tables: no step or derivative goes further */
+#define TV_AT_END(t) (!((t) < TV_T1 - TV_TIME_SLACK(TV_T1)))
 
 static void input_jets(Instance *c, double t); /* lsc_model.c: the inputs' jets at t into c->uj */
 
@@ -384,7 +388,7 @@ static int tv_do_step(Instance *c, double t, double h) {
     double x[TV_M], xn[TV_M];
     int i, level = 0;
     long idx = 0;
-    if (t + h > TV_T1 + TV_TIME_SLACK(TV_T1) + 1e-12 * h || t < TV_T0 - TV_TIME_SLACK(TV_T0)) {
+    if (TV_LEAVES_HORIZON(t, h) || t < TV_T0 - TV_TIME_SLACK(TV_T0)) {
         logmsg(c, fmi2Discard, "fmi2DoStep: the step from %.17g to %.17g leaves the horizon [%.17g, %.17g] the "
                "time-varying coefficients were tabulated on at build time (build with a longer experiment stop)",
                t, t + h, TV_T0, TV_T1);
