@@ -49,7 +49,9 @@ def _ranks(s, shape, rcond):
 def batchable(completion):
     """Whether `matrices_many` may stack `completion`'s evaluations."""
     n = completion.n
-    return (getattr(completion, "_stacked_maps", None) is not None and not completion.dae.is_constant
+    # a subclass's own `_maps` is evaluated as it is written, never replaced by the built-in stacked formulas
+    return (getattr(completion, "_stacked_maps", None) is not None and completion._builtin_maps()
+            and not completion.dae.is_constant
             and completion._col_scales is None and completion._rank is not None
             and 0 < completion._rank < (completion.k + 1) * n < WARM_MIN_ROWS)
 

@@ -161,8 +161,11 @@ class Completion:
         if setup not in ("auto", "dense"):
             raise ValueError(f"`setup` must be 'auto' or 'dense'; found {setup!r}.")
         # a user's subclass may read the dense factors (`fac.jets`) in its `_maps`: it keeps them
-        builtin = type(self)._maps in (StandardCompletion._maps, StabilizedCompletion._maps, AlternativeCompletion._maps)
-        return "structured" if setup == "auto" and self.dae.is_constant and builtin else "dense"
+        return "structured" if setup == "auto" and self.dae.is_constant and self._builtin_maps() else "dense"
+
+    def _builtin_maps(self):
+        """Whether `_maps` is the library's own: only then may the structured or stacked set-ups stand in for it."""
+        return type(self)._maps in (StandardCompletion._maps, StabilizedCompletion._maps, AlternativeCompletion._maps)
 
     def _structured_k(self, k):
         """k from the structured set-up (lsc._structured); on a declined problem the dense path decides."""
