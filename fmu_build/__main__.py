@@ -17,13 +17,13 @@ commands:
               lsc-fmu build examples/specs/prescribed_path.toml -o out
               lsc-fmu build examples/specs/prescribed_path.toml -o out --native --fix-parameters
   simulate  run an FMU in fmpy, write its outputs as CSV (and a PNG plot)
-              lsc-fmu simulate out/PathInput.fmu --input path.csv --plot -o out/run.csv
+              lsc-fmu simulate out/PathInput.fmu --input examples/inputs/path.csv --plot -o out/run.csv
   env       print the shell exports a native (non-Python) FMI host needs, ecos on PATH
-              eval "$(lsc-fmu env)" && ecos simulate --path out/PrescribedPath.fmu
+              eval "$(lsc-fmu env)" && ecos simulate --path out/PrescribedPath.fmu --stopTime 10 --stepSize 0.01
   ecos      run the ecos host shipped with ecospy, with that environment
-              lsc-fmu ecos simulate --path out/PrescribedPath.fmu --stopTime 10
+              lsc-fmu ecos simulate --path out/PrescribedPath.fmu --stopTime 10 --stepSize 0.01
   cosim     co-simulate FMUs connected in an SSP file (or .ssd) with a fixed macro step
-              lsc-fmu cosim out/loop.ssp --stop-time 10 --step-size 0.01 -o out/result.csv --plot
+              lsc-fmu cosim out/path_control.ssp --stop-time 10 --step-size 0.01 -o out/result.csv --plot
   sweep     run a parameter study (lambda, steps, tolerances, parameters) on Dask
               lsc-fmu sweep out/PrescribedPath.fmu --grid lam=1,2,5,10 -o out/study.csv --plot out/study.png
 
@@ -100,7 +100,7 @@ def _add_simulate(sub):
                     "time; fmpy interpolates it linearly. It is checked before the run: times finite and "
                     "strictly increasing, every value a finite number, every column an input of the FMU, "
                     "every input a column or given a start value.",
-        epilog="example: lsc-fmu simulate out/PathInput.fmu --input path.csv --step 0.01 --plot -o out/run.csv",
+        epilog="example: lsc-fmu simulate out/PathInput.fmu --input examples/inputs/path.csv --step 0.01 --plot -o out/run.csv",
     )
     p.add_argument("fmu", help="path of the .fmu file")
     p.add_argument("--input", metavar="CSV", help="input signals: columns 'time' and one per FMU input")
@@ -252,7 +252,7 @@ def _add_env(sub):
         "env", help="print the shell exports a native (non-Python) FMI host needs",
         description="Print LD_PRELOAD, PYTHONHOME and PYTHONPATH for a native FMI host that loads these "
                     "pythonfmu FMUs, and put the ecos binary of ecospy (made executable) on PATH.",
-        epilog='example: eval "$(lsc-fmu env)" && ecos simulate --path out/PrescribedPath.fmu --stopTime 10',
+        epilog='example: eval "$(lsc-fmu env)" && ecos simulate --path out/PrescribedPath.fmu --stopTime 10 --stepSize 0.01',
     )
 
 
@@ -389,7 +389,7 @@ def _add_cosim(sub):
         description="Co-simulate the FMUs of an SSP system (an .ssp archive or a SystemStructure.ssd) with a "
                     "fixed macro step in fmpy, and write the recorded variables as CSV (columns 'time' and "
                     "'component.variable'). A run that stops early writes what it computed and exits 1.",
-        epilog="example: lsc-fmu cosim out/loop.ssp --stop-time 10 --step-size 0.01 -o out/result.csv --plot")
+        epilog="example: lsc-fmu cosim out/path_control.ssp --stop-time 10 --step-size 0.01 -o out/result.csv --plot")
     cosim.add_argument("system", help="the .ssp or .ssd file")
     cosim.add_argument("--stop-time", type=float, required=True, help="end time")
     cosim.add_argument("--step-size", type=float, required=True, help="macro step")

@@ -56,7 +56,8 @@ class DivergenceCheck:
         if loop is not None:
             advice = (f"{name} is in the algebraic loop through {', '.join(loop)}, whose gain is above 1 in "
                       "magnitude: no step size or extrapolation helps; a loop gain below 1, or `iterations` > 0 "
-                      "(which iterates the loop and fails if it does not contract)")
+                      "(which iterates the loop at each exchange; if it does not contract, the growth check "
+                      "still stops the run)")
         else:
             advice = RECOMMENDED
         raise _Stop(f"the coupling diverged: {what.format(name)} at t = {t!r}; this configuration is "
