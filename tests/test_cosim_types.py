@@ -144,22 +144,18 @@ def default_loops(tmp_path_factory):
 
 @pytest.mark.parametrize("g", [0.2, 1.1])
 @pytest.mark.parametrize("H", [0.02, 0.01])
-def test_default_run_of_the_loop_converges_or_says_it_diverged(default_loops, g, H):
-    """The docs' loop (pythonfmu plant and DAE FMU), default configuration: success with the exact
-    solution (error < 1e-2), or success=False naming the variable, the time and the recommendation."""
-    import scenarios
-
+def test_default_run_of_the_loop_says_it_diverged(default_loops, g, H):
+    """The docs' loop (pythonfmu plant and DAE FMU), default configuration: it diverges at every H of
+    the docs' table (docs/cosimulation.md), so the run must stop with success=False naming the
+    variable, the time and the recommendation, before an overflow."""
     out, _ = run(f"""
 r = cosimulate({str(default_loops[g])!r}, 1.0, {H!r}, output=["plant.w", "dae.x2"])
 print(json.dumps({{"success": bool(r.success), "message": r.message, "t": r["time"].tolist(),
                   "w": r["plant.w"].tolist()}}))
 """)
-    if out["success"]:
-        w_exact = scenarios.loop_reference(np.array(out["t"]), g)[0]
-        assert np.abs(np.array(out["w"]) - w_exact).max() < 1e-2
-    else:
-        message = out["message"]
-        assert "the coupling diverged" in message and "t = " in message, message
-        assert "plant.w" in message or "dae.x2" in message
-        assert "docs/cosimulation.md recommends" in message
-        assert max(abs(w) for w in out["w"]) < 1e7  # stopped early, not at an overflow
+    assert not out["success"], out["message"]
+    message = out["message"]
+    assert "the coupling diverged" in message and "t = " in message, message
+    assert "plant.w" in message or "dae.x2" in message
+    assert "docs/cosimulation.md recommends" in message
+    assert max(abs(w) for w in out["w"]) < 1e7  # stopped early, not at an overflow
