@@ -81,17 +81,6 @@ def _run_build(args):
     return 0
 
 
-def _assignments(items, option, form, text=False):
-    """``{name: float}`` from repeated ``NAME=VALUE`` options, or a ValueError naming the option;
-    ``text``: a value that is no plain decimal number is kept as a string (converted by the variable's type later)."""
-    from ._cli_checks import assignments, decimal, number_assignments
-
-    if not text:
-        return number_assignments(items, option, form)
-    values = assignments(items, option, form)
-    return {name: value if decimal(value) is None else decimal(value) for name, value in values.items()}
-
-
 def _add_simulate(sub):
     p = sub.add_parser(
         "simulate", help="run an FMU in fmpy and write its outputs as CSV (and a PNG)",
@@ -432,7 +421,7 @@ def _run_cosim(args):
     import warnings
     from pathlib import Path
 
-    from ._cli_checks import check_output, check_span, check_step, check_system_file, check_time
+    from ._cli_checks import assignments, check_output, check_span, check_step, check_system_file, check_time
     from .cosim import cosimulate
 
     try:
@@ -447,7 +436,8 @@ def _run_cosim(args):
         check_system_file(args.system)
         if not Path(args.result).resolve().parent.is_dir():
             raise ValueError(f"`-o` {args.result}: the folder {str(Path(args.result).parent)!r} does not exist.")
-        start = _assignments(args.start, "--start", "COMP.VAR=VALUE", text=True)
+        # texts: cosimulate reads each by its variable's type (a String "42" stays a string)
+        start = assignments(args.start, "--start", "COMP.VAR=VALUE")
     except ValueError as exc:
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2

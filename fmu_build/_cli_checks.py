@@ -39,17 +39,6 @@ def assignments(items, option, form):
     return values
 
 
-def number_assignments(items, option, form):
-    """``{name: float}`` from repeated ``NAME=VALUE`` options, each value a plain decimal number."""
-    values = assignments(items, option, form)
-    for name, text in values.items():
-        value = decimal(text)
-        if value is None:
-            raise ValueError(f"`{option}` expects {form} with a plain decimal number; found {name}={text!r}.")
-        values[name] = value
-    return values
-
-
 def typed_start_values(items, variables, option="--set"):
     """``{name: value}`` from ``NAME=VALUE`` texts, each read by its FMU variable's type.
 
