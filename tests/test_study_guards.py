@@ -324,3 +324,26 @@ def test_fmu_message_after_a_serial_study_does_not_crash_the_process(tmp_path):
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, (proc.returncode, proc.stderr[-2000:])
     assert "alive" in proc.stdout and "424242" in proc.stdout + proc.stderr
+
+
+def test_grid_lam_sets_only_the_lambda_of_fmus_lsc_built(tmp_path):
+    # `lam` in an SSP study set `<c>.lambda` on every component with such a variable, a third-party FMU's own
+    # parameter `lambda` included, and the row reported success
+    import zipfile
+
+    from fmu_build import build_fmu
+
+    ours = build_fmu(os.path.join(SPECS, "prescribed_path.toml"), str(tmp_path / "a"), target="native",
+                     fix_parameters=True)
+    theirs = tmp_path / "Other.fmu"
+    with zipfile.ZipFile(ours) as src, zipfile.ZipFile(theirs, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item)
+            if item.filename == "modelDescription.xml":
+                data = data.replace(b'generationTool="lsc fmu_build', b'generationTool="another tool')
+                assert b"lsc fmu_build" not in data
+            dst.writestr(item, data)
+    _runs._SSP_LAYOUT.clear()
+    outputs, residuals, with_lambda = _runs.ssp_layout({"components": {"dae": str(ours), "other": str(theirs)},
+                                                        "connections": []})
+    assert with_lambda == ["dae"]

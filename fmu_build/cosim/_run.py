@@ -20,6 +20,11 @@ from ._system import _split
 logger = logging.getLogger("fmu_build.cosim")
 
 LSC_TOOL = "lsc fmu_build"  # generationTool (native) or author (pythonfmu) of the DAE FMUs lsc builds
+
+
+def built_by_lsc(md):
+    """Whether a model description is that of a DAE FMU lsc built: only its `lambda` is the completion's rate."""
+    return LSC_TOOL in (md.generationTool or "") or LSC_TOOL in (getattr(md, "author", None) or "")
 MAX_INPUT_ORDER = 8  # highest input-derivative order ever probed or sent
 DTYPES = {"Real": np.float64, "Integer": np.int64, "Boolean": np.bool_, "String": object}
 
@@ -129,8 +134,7 @@ class Run(DivergenceCheck):
         for n, c in self.comps.items():
             v = c.variables.get("lambda")
             # only our DAE FMUs: another FMU's `lambda` is its own parameter, with its own meaning
-            ours = LSC_TOOL in (c.md.generationTool or "") or LSC_TOOL in (getattr(c.md, "author", None) or "")
-            if ours and v is not None and v.causality == "parameter" and v.type == "Real":
+            if built_by_lsc(c.md) and v is not None and v.causality == "parameter" and v.type == "Real":
                 if self.control.enabled and v.variability != "tunable":
                     raise ValueError(f"`lambda_per_step` with `step_control` needs a tunable {n}.lambda; "
                                      f"it is {v.variability}.")

@@ -333,19 +333,22 @@ def ssp_layout(scenario):
     from fmpy import read_model_description
 
     from ..cosim import read_system
+    from ..cosim._run import built_by_lsc
 
     key = (os.fspath(scenario), os.path.getmtime(scenario)) if not isinstance(scenario, dict) else None
     if key is not None and key in _SSP_LAYOUT:
         return _SSP_LAYOUT[key]
     components, connections, workdir = read_system(scenario)
     try:
-        names = {c: {v.name for v in read_model_description(path).modelVariables} for c, path in components.items()}
+        mds = {c: read_model_description(path) for c, path in components.items()}
     finally:
         if workdir:
             shutil.rmtree(workdir, ignore_errors=True)
     outputs = sorted({f"{a}.{y}" for a, y, _, _ in connections})
+    names = {c: {v.name for v in md.modelVariables} for c, md in mds.items()}
     residuals = [f"{c}.constraint_residual" for c in sorted(names) if "constraint_residual" in names[c]]
-    with_lambda = [c for c in sorted(names) if "lambda" in names[c]]
+    # `lam` is the completion's rate: only the DAE FMUs lsc built have it (another FMU's `lambda` is its own)
+    with_lambda = [c for c in sorted(names) if "lambda" in names[c] and built_by_lsc(mds[c])]
     layout = (outputs, residuals, with_lambda)
     if key is not None:
         _SSP_LAYOUT[key] = layout
@@ -370,7 +373,7 @@ def _run_ssp(cosimulate, scenario, point, settings, start):
             continue
         if name == "lam":
             if not with_lambda:
-                raise ValueError("`lam`: no component of the scenario has a variable `lambda`")
+                raise ValueError("`lam`: no DAE FMU built by lsc in the scenario has a variable `lambda`")
             start_values.update({f"{c}.lambda": float(value) for c in with_lambda})
         elif name in SSP_OPTIONS:
             options[name] = int(value) if name in ("extrapolation", "iterations") else value
