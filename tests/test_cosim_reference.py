@@ -92,4 +92,4 @@ print(json.dumps({{"success": bool(r.success), "message": r.message, "steps": r.
     assert out["success"], out["message"]
     assert out["steps"] > 10
     late = np.array(out["t"]) > 1.0
-    assert np.abs(np.array(out["x0"]) - np.array(out["x1"]))[late].max() < 1e-2
+    assert np.abs(np.array(out["x0"]) - np.array(out["x1"]))[late].max() < 1e-3  # exp(-10) of the start gap plus the coupling error at rtol 1e-4
