@@ -44,10 +44,12 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # a threaded BLAS on a share
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
+import contextlib  # noqa: E402
 import csv  # noqa: E402
 import inspect  # noqa: E402
 import math  # noqa: E402
 import platform  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -61,8 +63,6 @@ from lsc import gallery  # noqa: E402
 try:  # examples/ is on sys.path when run as a script; the tests import this file by path
     from _docs_output import HELP, output_path
 except ImportError:  # pragma: no cover
-    import sys
-
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from _docs_output import HELP, output_path
 
@@ -128,6 +128,20 @@ class Drift:
 
 
 DRIFT = Drift()
+
+
+@contextlib.contextmanager
+def _quiet_stderr():
+    """File descriptor 2 to /dev/null (C libraries write there directly)."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with open(os.devnull, "w") as null:
+        os.dup2(null.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
 
 
 class Outcome:
@@ -374,7 +388,8 @@ class CasadiPeer:
         F = self.integrator(t_eval, rtol, atol)
         xs0, zs0 = self.start(t_eval[0], x0)
         try:
-            out = F(x0=ca.DM(xs0), z0=ca.DM(zs0))
+            with _quiet_stderr():  # SUNDIALS prints its failures; the exception says the same, and the report lists it
+                out = F(x0=ca.DM(xs0), z0=ca.DM(zs0))
         except RuntimeError as exc:
             return Outcome(None, False, str(exc).strip().splitlines()[-1][:200])
         xf, zf = out["xf"], out["zf"]
@@ -663,10 +678,31 @@ def _ratio(a, b):
     return f"{a / b:.2g}" if a is not None and b is not None and b > 0 and np.isfinite(a) and np.isfinite(b) else "n/a"
 
 
+def _loads(*rows):
+    """The load averages at which `rows` were measured, as "lsc/peer"."""
+    return "/".join(f"{r['load']:.1f}" for r in rows if r)
+
+
+def every_method_table(rows, level):
+    """The fastest run of every peer configuration reaching `level`, one column each."""
+    wp = [r for r in rows if r["experiment"] == "work-precision"]
+    configs = list(dict.fromkeys((r["family"], r["peer"], r["method"]) for r in wp))
+    head = [f"{f} {m}" if f == "lsc" else f"{f} {p} {m}" for f, p, m in configs]
+    lines = ["| problem | " + " | ".join(head) + " |", "|---|" + "---:|" * len(configs)]
+    for name in dict.fromkeys(r["problem"] for r in wp):
+        cells = []
+        for f, p, m in configs:
+            best = fastest(rows, level, problem=name, family=f, peer=p, method=m)
+            ran = any(r["problem"] == name and (r["family"], r["peer"], r["method"]) == (f, p, m) for r in wp)
+            cells.append(_ms(best["time"]) if best else ("not reached" if ran else "-"))
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def equal_error_table(rows, peer_family, levels):
     """At each error level: the fastest lsc run and the fastest peer run, their times, drifts and ratios."""
     lines = ["| problem | index | error <= | lsc (fastest) | time | drift | " + peer_family + " (fastest) | time | drift |"
-             " time lsc/peer | drift lsc/peer |", "|---|---:|---:|---|---:|---:|---|---:|---:|---:|---:|"]
+             " time lsc/peer | drift lsc/peer | load |", "|---|---:|---:|---|---:|---:|---|---:|---:|---:|---:|---|"]
     for name in dict.fromkeys(r["problem"] for r in rows if r["experiment"] == "work-precision"):
         index = next(r["index"] for r in rows if r["problem"] == name)
         for level in levels:
@@ -679,7 +715,8 @@ def equal_error_table(rows, peer_family, levels):
             lines.append(f"| {name} | {index} | {level:.0e} | {la} | {_ms(a and a['time'])} | {_e(a and a['drift_max'])} | "
                          f"{lb} | {_ms(b and b['time'])} | {_e(b and b['drift_max'])} | "
                          f"{_ratio(a and a['time'], b and b['time'])} | "
-                         f"{_ratio(a and a['drift_max'], b and b['drift_max'])} |")
+                         f"{_ratio(a and a['drift_max'], b and b['drift_max'])} | "
+                         f"{_loads(a, b)} |")
     return lines
 
 
@@ -745,6 +782,9 @@ def report_casadi(rows, curves, args):
     lines += ["**Work-precision at equal error** (fastest run of each reaching the error; drift = max constraint "
               "residual over the run; ratios below 1 favour lsc):", ""]
     lines += equal_error_table(rows, "CasADi", LEVELS)
+    lines += ["", "**Every configuration at error <= 1e-6** (fastest run reaching it; `not reached`: no tolerance "
+              "tried got there or the runs failed):", ""]
+    lines += every_method_table(rows, 1e-6)
     lines += ["", "**Set-up** (`lsc.complete` against `dae_reduce_index` + `dae_map_semi_expl` + one IDAS "
               "integrator construction):", ""]
     lines += setup_table(rows, "CasADi")
@@ -778,6 +818,8 @@ def report_ida(rows, curves, args):
              "`C x - c(t) = 0` (N spans the null space of C), i.e. lsc's set-up with IDA's integration.", ""]
     lines += ["**Work-precision at equal error** (fastest run of each reaching the error; ratios below 1 favour lsc):", ""]
     lines += equal_error_table(rows, "IDA", LEVELS)
+    lines += ["", "**Every configuration at error <= 1e-6** (fastest run reaching it; `-`: not run on that problem):", ""]
+    lines += every_method_table(rows, 1e-6)
     fail = failures(rows, "IDA") + failures([r for r in rows if r["experiment"] == "work-precision"], "lsc")
     if fail:
         lines += ["", "**Runs that failed:**", ""] + fail
@@ -792,6 +834,14 @@ SECTIONS = {
 }
 
 
+def _style(label, colours):
+    """One colour per configuration across all panels; line style by family."""
+    if label not in colours:
+        colours[label] = f"C{len(colours) % 10}"
+    style = "-" if label.startswith("lsc") else ("--" if label.startswith("CasADi") else ":")
+    return {"color": colours[label], "linestyle": style}
+
+
 def plot(rows, curves, path_wp, path_drift):
     try:
         import matplotlib
@@ -800,6 +850,7 @@ def plot(rows, curves, path_wp, path_drift):
         import matplotlib.pyplot as plt
     except ImportError:
         return False
+    colours = {}
     wp = [r for r in rows if r["experiment"] == "work-precision" and r["success"]]
     keys = list(dict.fromkeys((r["section"], r["problem"]) for r in wp))
     cols = 4
@@ -812,8 +863,8 @@ def plot(rows, curves, path_wp, path_drift):
                 series.setdefault(f"{r['family']} {r['peer']} {r['method']}", []).append((max(r["err"], 1e-16), r["time"]))
         for label, pts in sorted(series.items()):
             pts.sort()
-            style = "-" if label.startswith("lsc") else ("--" if label.startswith("CasADi") else ":")
-            ax.loglog([q[0] for q in pts], [q[1] for q in pts], style, marker=".", label=label, linewidth=1)
+            ax.loglog([q[0] for q in pts], [q[1] for q in pts], marker=".", label=label, linewidth=1,
+                      **_style(label, colours))
         ax.set_title(f"{name} ({section})", fontsize=8)
         ax.set_xlabel("max error / (1 + |x*|)", fontsize=7)
         ax.set_ylabel("time [s]", fontsize=7)
@@ -830,8 +881,7 @@ def plot(rows, curves, path_wp, path_drift):
         for ax, name in zip(axes.flat, names):
             for (pname, label), (t, d) in curves.items():
                 if pname == name:
-                    style = "-" if label.startswith("lsc") else ("--" if label.startswith("CasADi") else ":")
-                    ax.semilogy(t, np.maximum(d, 1e-17), style, label=label, linewidth=1)
+                    ax.semilogy(t, np.maximum(d, 1e-17), label=label, linewidth=1, **_style(label, colours))
             ax.set_title(name, fontsize=8)
             ax.set_xlabel("t", fontsize=7)
             ax.set_ylabel("constraint residual", fontsize=7)

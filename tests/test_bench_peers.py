@@ -117,7 +117,7 @@ def test_ida_forms_reach_the_exact_solution(bench):
 def test_equal_error_table_picks_the_fastest_run_reaching_each_level(bench):
     rows = [
         {"experiment": "work-precision", "problem": "P", "index": 3, "family": f, "peer": "x", "method": m, "rtol": tol,
-         "time": time_, "err": err, "drift_max": 1e-9, "success": True}
+         "time": time_, "err": err, "drift_max": 1e-9, "success": True, "load": 1.0}
         for f, m, tol, time_, err in [("lsc", "expm", 1e-6, 1.0, 1e-7), ("lsc", "CVODE", 1e-6, 0.5, 1e-5),
                                       ("CasADi", "IDAS", 1e-6, 2.0, 1e-7), ("CasADi", "IDAS", 1e-4, 0.1, 1e-4)]
     ]
