@@ -121,7 +121,8 @@ class Drift:
     def __call__(self, p, t, X):
         c = self._cache.get(id(p))
         if c is None:
-            c = self._cache[id(p)] = (p, lsc.complete(p.dae, "standard", t_span=None if p.dae.is_constant else p.t_span))
+            t_span = None if p.dae.is_constant else p.t_span
+            c = self._cache[id(p)] = (p, lsc.complete(p.dae, "standard", t_span=t_span))  # p kept: ids stay unique
         if X is None or not np.all(np.isfinite(X)):
             return np.full(len(t), math.inf)
         return np.linalg.norm(c[1].constraint_residual(t, X), axis=0)
@@ -147,8 +148,8 @@ def _quiet_stderr():
 class Outcome:
     """One peer run: original unknowns ``x`` at ``t`` (or None), success and why not."""
 
-    def __init__(self, x, success=True, message=""):
-        self.x, self.success, self.message = x, bool(success), message
+    def __init__(self, x, success=True, message="", stats=None):
+        self.x, self.success, self.message, self.stats = x, bool(success), message, stats or {}
 
 
 # -- lsc -----------------------------------------------------------------------------------------------------------
@@ -266,7 +267,8 @@ def with_array_forcing(p):
     names = inspect.getclosurevars(jet).nonlocals if callable(jet) else {}
     if not p.dae.is_constant or not {"y_star", "PE", "PAb"} <= set(names):
         return p
-    p.dae_array = lsc.LinearDAE(p.dae.A(0.0), p.dae.B(0.0), CanonicalForcing(names["y_star"], names["PE"], names["PAb"]))
+    forcing = CanonicalForcing(names["y_star"], names["PE"], names["PAb"])
+    p.dae_array = lsc.LinearDAE(p.dae.A(0.0), p.dae.B(0.0), forcing)
     for s in np.linspace(*p.t_span, 3):  # the same function (to rounding in sin of t up to 200), on arrays of times
         ref = p.dae.f_jet(s, 4)
         tol = 1e-13 * (1 + abs(s)) * np.abs(ref).max()
@@ -315,7 +317,8 @@ def casadi_dae(p):
         r = np.array(check(s, xs, xd[diff])).ravel()
         scale = 1 + np.abs(xs).max() + np.abs(xd).max()
         if not np.all(np.abs(r) <= 1e-9 * scale):
-            raise AssertionError(f"the CasADi form of {p.name} is not the same DAE: residual {np.abs(r).max():.2e} at t={s}")
+            raise AssertionError(f"the CasADi form of {p.name} is not the same DAE: residual "
+                                 f"{np.abs(r).max():.2e} at t={s}")
     algebraic = [j for j in range(n) if j not in dx]
     return {"x_impl": ca.vertcat(*[x[j] for j in diff]), "dx_impl": ca.vertcat(*dx.values()),
             "z": ca.vertcat(*[x[j] for j in algebraic]), "alg": alg, "t": t}, (diff, algebraic)
@@ -371,8 +374,8 @@ class CasadiPeer:
             opts = dict(IDAS_OPTIONS, reltol=rtol, abstol=atol)
             if self.suppress_algebraic:
                 opts["suppress_algebraic"] = True
-            self._integrators[key] = ca.integrator("F", "idas", self.se, float(t_eval[0]), [float(s) for s in t_eval[1:]],
-                                                   opts)
+            grid = [float(s) for s in t_eval[1:]]
+            self._integrators[key] = ca.integrator("F", "idas", self.se, float(t_eval[0]), grid, opts)
         return self._integrators[key]
 
     def start(self, t0, x0):
@@ -392,6 +395,8 @@ class CasadiPeer:
                 out = F(x0=ca.DM(xs0), z0=ca.DM(zs0))
         except RuntimeError as exc:
             return Outcome(None, False, str(exc).strip().splitlines()[-1][:200])
+        stats = F.stats()
+        stats = {"steps": stats.get("nsteps", ""), "error_test_failures": stats.get("netfails", "")}
         xf, zf = out["xf"], out["zf"]
         orig = self.to_orig(xf=xf, zf=zf)
         # the first output point is the start as IDAS made it consistent: the state at t0 from the states after it
@@ -402,7 +407,7 @@ class CasadiPeer:
         X[self.algebraic, 1:] = np.array(orig["z"])
         X[self.diff, 0] = np.array(first["x_impl"]).ravel()
         X[self.algebraic, 0] = np.array(first["z"]).ravel()
-        return Outcome(X)
+        return Outcome(X, stats=stats)
 
     SETTINGS = ("`casadi.dae_reduce_index(dae, {'baumgarte_pole': pole})` (algorithm 'pantelides', max_iter 500: "
                 "the defaults), `casadi.dae_map_semi_expl`, `casadi.integrator(..., 'idas', ...)` with reltol = tol, "
@@ -499,6 +504,7 @@ def _row(section, experiment, p, peer, method, rtol, atol, seconds, outcome, Xs,
         "success": ok, "message": outcome.message.replace("\n", " ")[:160], "load": round(load(), 2),
         "reduced_index": getattr(peer, "index", ""), "t_span": f"{t_eval[0]:g}-{t_eval[-1]:g}",
         "err_end": float(np.max(np.abs(outcome.x[:, -1] - Xs[:, -1]) / (1 + np.abs(Xs[:, -1])))) if ok else math.inf,
+        "steps": outcome.stats.get("steps", ""), "error_test_failures": outcome.stats.get("error_test_failures", ""),
         **extra,
     }
 
@@ -623,11 +629,13 @@ def _unsupported(section, p, label, reason):
 # -- section: IDA ---------------------------------------------------------------------------------------------------
 def ida_problems(quick):
     """Index-1 problems (IDA on the DAE itself) and higher-index ones (IDA on index-1 reformulations)."""
-    index1 = [named(gallery.nilpotent_chain(1, seed=0), "nilpotent_chain(index=1, seed=0)"), gallery.stiff_index1(1000.0)]
+    index1 = [named(gallery.nilpotent_chain(1, seed=0), "nilpotent_chain(index=1, seed=0)"),
+              gallery.stiff_index1(1000.0)]
     higher = [gallery.mechanical()]
     if not quick:
         index1 += [gallery.random_pencil(n=12, blocks=(1, 1, 1)), gallery.thesis_example3()]
-        higher += [gallery.prescribed_path(), named(gallery.nilpotent_chain(3, seed=0), "nilpotent_chain(index=3, seed=0)"),
+        higher += [gallery.prescribed_path(),
+                   named(gallery.nilpotent_chain(3, seed=0), "nilpotent_chain(index=3, seed=0)"),
                    gallery.random_pencil(n=12, blocks=(3, 2))]
     return index1, higher
 
@@ -720,6 +728,14 @@ def equal_error_table(rows, peer_family, levels):
     return lines
 
 
+def idas_steps_table(rows, tol):
+    lines = ["| problem | configuration | steps | error-test failures | error |", "|---|---|---:|---:|---:|"]
+    for r in rows:
+        if r["experiment"] == "work-precision" and r["family"] == "CasADi" and r["rtol"] == tol and r["success"]:
+            lines.append(f"| {r['problem']} | {r['peer']} | {r['steps']} | {r['error_test_failures']} | {_e(r['err'])} |")
+    return lines
+
+
 def setup_table(rows, peer_family):
     lines = [f"| problem | n | lsc.complete | {peer_family} set-up | ratio lsc/peer |", "|---|---:|---:|---:|---:|"]
     for name in dict.fromkeys(r["problem"] for r in rows if r["experiment"] == "work-precision"):
@@ -766,6 +782,13 @@ def drift_long_table(rows, section):
     return lines
 
 
+FORCING_NOTE = ("- **Forcing**: the gallery's sympy expressions as they are (lsc compiles them; CasADi gets the same "
+                "expressions); the canonical problems' sinusoidal forcing (`nilpotent_chain`, `random_pencil`) to "
+                "lsc's expm as a numpy callable over arrays of times, to CVODE and Radau as the gallery's jet callable "
+                "(each method's fast path), to CasADi and IDA as the same function (CasADi: written as CasADi "
+                "expressions).")
+
+
 def report_casadi(rows, curves, args):
     rows = [r for r in rows if r["section"] == "casadi"]
     if not rows:
@@ -776,9 +799,10 @@ def report_casadi(rows, curves, args):
              f"- **lsc**: `lsc.complete(dae, 'alternative', lam={LAM:g})`, then `lsc.solve_completion` with " +
              "; ".join(f"{v}" for v in lsc_rows.values()) + ".",
              f"- **CasADi**: the DAE written as CasADi expressions (`x_impl` the unknowns whose column of A is not "
-             f"zero, `z` the others, `alg = A x' + B x - f(t)`), then {CasadiPeer.SETTINGS}. `pole=0` is CasADi's default (no stabilisation), `pole=-{LAM:g}` the rate of lsc's λ. "
+             f"zero, `z` the others, `alg = A x' + B x - f(t)`), then {CasadiPeer.SETTINGS}. `pole=0` is "
+             f"CasADi's default (no stabilisation), `pole=-{LAM:g}` the rate of lsc's λ. "
              "Initial values of the reduced DAE's states come from the exact solution's derivatives; IDAS computes "
-             "the algebraic ones (`calc_ic`).", ""]
+             "the algebraic ones (`calc_ic`).", FORCING_NOTE, ""]
     lines += ["**Work-precision at equal error** (fastest run of each reaching the error; drift = max constraint "
               "residual over the run; ratios below 1 favour lsc):", ""]
     lines += equal_error_table(rows, "CasADi", LEVELS)
@@ -788,6 +812,9 @@ def report_casadi(rows, curves, args):
     lines += ["", "**Set-up** (`lsc.complete` against `dae_reduce_index` + `dae_map_semi_expl` + one IDAS "
               "integrator construction):", ""]
     lines += setup_table(rows, "CasADi")
+    lines += ["", "**IDAS's steps** (rtol 1e-8; with the algebraic variables in its error test, the default, and "
+              "without):", ""]
+    lines += idas_steps_table(rows, 1e-8)
     fail = failures(rows, "CasADi")
     if fail:
         lines += ["", "**Where CasADi did not solve the problem:**", ""] + fail
@@ -815,7 +842,8 @@ def report_ida(rows, curves, args):
              "exact solution. Forms: `DAE` = `A x' + B x - f` as given (index 1 only); `hand` = the gallery's "
              "hand-derived index-1 form (dynamic equations plus the hidden constraints written out from the "
              "forcing's derivatives); `completion` = `N^T (x' - G x - g) = 0` with lsc's constraints "
-             "`C x - c(t) = 0` (N spans the null space of C), i.e. lsc's set-up with IDA's integration.", ""]
+             "`C x - c(t) = 0` (N spans the null space of C), i.e. lsc's set-up with IDA's integration.",
+             FORCING_NOTE, ""]
     lines += ["**Work-precision at equal error** (fastest run of each reaching the error; ratios below 1 favour lsc):", ""]
     lines += equal_error_table(rows, "IDA", LEVELS)
     lines += ["", "**Every configuration at error <= 1e-6** (fastest run reaching it; `-`: not run on that problem):", ""]
