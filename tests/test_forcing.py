@@ -55,3 +55,31 @@ def test_compiled_forcing_reports_non_finite_values():
         c.rhs(1.0, np.zeros(2))
     with pytest.raises(ValueError, match="not finite"):
         c._forcing.jets(np.array([0.0, 1.0]), 2)
+
+
+@pytest.mark.xfail(strict=True, reason="slow path: a forcing that offers jet(t, order) is evaluated one time at a "
+                   "time by method='expm' (lsc._forcing.Forcing._callable_stack never tries an array of times on it); "
+                   "the gallery's canonical problems run expm about 15x slower than with the same forcing as a plain "
+                   "array callable (examples/bench_peers.py)")
+def test_expm_evaluates_a_jet_forcing_over_arrays_of_times():
+    from lsc import solve_completion
+    from lsc._timefunc import JetCallable
+
+    calls = []
+
+    def jet(t, order):  # x1 = sin t through an index-2 chain; accepts a scalar or an array of times
+        calls.append(np.ndim(t))
+        t = np.asarray(t, dtype=float)
+        d = np.arange(order + 1).reshape((-1,) + (1,) * t.ndim)
+        s = np.sin(t + d * np.pi / 2)
+        return np.stack([np.zeros_like(s), s], axis=1)  # (order + 1, 2) or (order + 1, 2, m)
+
+    dae = LinearDAE(np.eye(2, k=1), np.eye(2), JetCallable(jet))
+    c = complete(dae, "alternative", lam=1.0)
+    ts = np.linspace(0.0, 10.0, 51)
+    calls.clear()
+    res = solve_completion(c, (0.0, 10.0), np.array([-1.0, 0.0]), method="expm", t_eval=ts, rtol=1e-8, atol=1e-8)
+    np.testing.assert_allclose(res.x[1], np.sin(ts), atol=1e-7)
+    np.testing.assert_allclose(res.x[0], -np.cos(ts), atol=1e-7)
+    # one call per array of times (the step-size sampling, the step starts), not one per time
+    assert len(calls) <= 10, f"{len(calls)} calls, {calls.count(0)} of them with a single time"
