@@ -6,17 +6,22 @@ followed on a fresh instance: the setter's status in that state, every variable 
 the instance's life (initialization, one step or one derivative evaluation, every variable again,
 termination), each with its status. Values are float.hex strings, so the two traces compare bit for bit.
 "empty|<type>|<state>" is the status of a setter called with no value references (the state check
-alone); an FMI 3.0 trace also has it for every FMI 3.0 setter ("fmi3 only|<type>|<state>").
+alone); an FMI 3.0 trace also has it for every FMI 3.0 setter ("fmi3 only|<type>|<state>"), and the status
+of every setter of another type on every variable ("fmi3 only|foreign|<variable>|<type>").
 """
 import json
 import math
 import sys
-from ctypes import c_bool, c_double, c_int, c_uint32
+from ctypes import (c_bool, c_char_p, c_double, c_float, c_int, c_int8, c_int16, c_int32, c_int64, c_size_t,
+                    c_uint8, c_uint16, c_uint32, c_uint64)
 
 CS_STATES = ("instantiated", "initialization", "step", "terminated")
 ME_STATES = ("instantiated", "initialization", "event", "continuous", "terminated")
 FMI3_SETTERS = ("Float64", "Float32", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64",
                 "Boolean", "String")
+CTYPES3 = {"Float64": c_double, "Float32": c_float, "Int8": c_int8, "UInt8": c_uint8, "Int16": c_int16,
+           "UInt16": c_uint16, "Int32": c_int32, "UInt32": c_uint32, "Int64": c_int64, "UInt64": c_uint64,
+           "Boolean": c_bool, "String": c_char_p}
 
 
 def _hex(x):
@@ -125,6 +130,22 @@ class Api:
                 out[name] = [s, bool(v[0]) if s <= 1 else None]
         return out
 
+    def foreign_set(self, setter, vr):
+        """fmi3Set<setter> of one value on ``vr`` (a variable of another type): its status."""
+        refs = (c_uint32 * 1)(vr)
+        if setter == "Binary":
+            from ctypes import cast
+
+            from fmpy.fmi3 import fmi3Binary
+
+            data = (c_uint8 * 1)(120)
+            values = (fmi3Binary * 1)(cast(data, fmi3Binary))
+            return int(self.f["fmi3SetBinary"](self.c, refs, 1, (c_size_t * 1)(1), values, 1))
+        values = (CTYPES3[setter] * 1)()
+        if setter == "String":
+            values[0] = b"x"
+        return int(self.f[f"fmi3Set{setter}"](self.c, refs, 1, values, 1))
+
     def empty_set(self, setter):
         """A setter with no value references: the state check alone."""
         name = {"Real": "Real" if self.version == 2 else "Float64"}.get(setter, setter)
@@ -183,6 +204,16 @@ def trace(path, version, interface):
             out[f"empty|{setter}|{state}"] = api.empty_set(setter)
         if version == 3:
             out.update({f"fmi3 only|{setter}|{state}": api.empty_set(setter) for setter in FMI3_SETTERS})
+        api.free()
+    if version == 3:  # every setter of another type on every variable: refused, nothing changed
+        api.new()
+        before = api.read(vars_)
+        for name, kind, vr in vars_:
+            own = "Float64" if kind == "Real" else "Boolean"
+            for setter in (*FMI3_SETTERS, "Binary"):
+                if setter != own:
+                    out[f"fmi3 only|foreign|{name}|{setter}"] = api.foreign_set(setter, vr)
+        out["fmi3 only|foreign|unchanged"] = api.read(vars_) == before
         api.free()
     return out
 

@@ -61,6 +61,11 @@ def test_fmi3_setters_match_the_fmi2_core(built, kind, interface):
     # the traces are not trivially equal: some sets succeed, some are refused, in each kind
     sets = [next(s for what, s in events if what == "set") for k, events in fmi2.items() if not k.startswith("empty")]
     assert 0 in sets and 3 in sets
+    # FMI 3.0 value references are unique over all types: a setter of another type is refused, and changes
+    # nothing
+    foreign = {k: only3.pop(k) for k in list(only3) if k.startswith("fmi3 only|foreign|")}
+    assert foreign.pop("fmi3 only|foreign|unchanged") is True
+    assert foreign and set(foreign.values()) == {3}, {k: v for k, v in foreign.items() if v != 3}
     # a setter with no value references checks the state, in FMI 3.0 for every type as for Float64
     for key, status in only3.items():
         _, setter, state = key.split("|")
