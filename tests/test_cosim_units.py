@@ -260,3 +260,16 @@ def test_conversion_of_relative_quantities_and_conflicts():
                                ("the FMU", {"m": _units.Unit((0, 1, 0, 0, 0, 0, 0, 0), 1000.0)}))
     with pytest.raises(ValueError, match="one name, two units"):
         _units.conversion("m", "m", other, "x")
+
+
+def test_a_start_value_of_a_connected_input_is_in_its_own_unit(plants):
+    """start_values are never converted: 5 (cm) on the input in cm reads back 5 at the start; from the first
+    step on the input holds the connection's value, 100 cos t in cm."""
+    system = {"components": {"a": str(plants["osc_m"]), "b": str(plants["follow_cm"])},
+              "connections": [("a.y1", "b.u")]}
+    out = run(f"""
+r = cosimulate({system!r}, 0.2, 0.1, start_values={{"b.u": 5.0}}, output=["a.y1", "b.u"])
+print(json.dumps({{"u": r["b.u"].tolist(), "y": r["a.y1"].tolist()}}))
+""")[0]
+    assert out["u"][0] == 5.0
+    np.testing.assert_allclose(out["u"][1:], 100 * np.array(out["y"][1:]), rtol=1e-15)
