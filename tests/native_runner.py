@@ -4,7 +4,7 @@ Reads a scenario from stdin:
   {"fmu": path, "interface": "cs" | "me", "dt": h, "steps": N, "start_values": {...},
    "outputs": [...], "set_at": {"i": {name: value}}, "inputs": {name: [[u, u', ...] at each step start]},
    "send_derivatives": bool, "rollback_at": i, "serialize": bool, "block": ["lsc", ...],
-   "output_derivatives": [names], "bad_calls": bool}
+   "output_derivatives": [names], "bad_calls": bool, "tolerance": the host's relative tolerance}
 and prints {"time", "values", "status", "logs", ...}.
 """
 import json
@@ -80,7 +80,7 @@ def main():
                 status.append(f"set {name}: {exc}")
 
     vrs = [var[name].valueReference for name in sc["outputs"]]
-    fmu.setupExperiment(startTime=0.0)
+    fmu.setupExperiment(tolerance=sc.get("tolerance"), startTime=0.0)
     set_values(sc.get("start_values", {}))
     fmu.enterInitializationMode()
     fmu.exitInitializationMode()

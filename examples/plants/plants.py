@@ -29,10 +29,14 @@ def _fmpy_headers():
     return Path(fmpy.__file__).parent / "c-code"
 
 
-def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y2"), input_name="u", follower=False):
+def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y2"), input_name="u", follower=False,
+                       units=None, unit_definitions=None):
     """Compile ``linear_plant.c`` into ``dest/name.fmu`` with the given matrices as start values.
 
     ``follower=True``: the exact index-2 follower x1 = u, x2 = -u' instead (A, b unused).
+    ``units``: ``{variable: unit name}`` (the unit attribute of those variables); ``unit_definitions``:
+    ``{unit name: {"m": 1, "factor": 0.01, ...} or None}``, the model description's UnitDefinitions (the
+    BaseUnit's attributes; None: the name alone).
     """
     dest = Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
@@ -46,21 +50,34 @@ def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y
                         "-DFMI2_FUNCTION_PREFIX=", f"-I{_fmpy_headers()}", *defines,
                         str(HERE / "linear_plant.c"), "-o", str(tmp / "binaries" / "linux64" / f"{name}.so"), "-lm"],
                        check=True)
+        units = units or {}
+        unit = lambda key: f' unit="{escape(units[key])}"' if key in units else ""  # noqa: E731
         variables = []
         for vr, (key, v) in enumerate(zip(_NAMES, values)):
             variables.append(f'<ScalarVariable name="{key}" valueReference="{vr}" causality="parameter" '
-                             f'variability="{"tunable" if key == "substeps" else "fixed"}"><Real start="{v!r}"/></ScalarVariable>')
+                             f'variability="{"tunable" if key == "substeps" else "fixed"}"><Real start="{v!r}"'
+                             f'{unit(key)}/></ScalarVariable>')
         variables.append(f'<ScalarVariable name="{input_name}" valueReference="9" causality="input" '
-                         f'variability="continuous"><Real start="0.0"/></ScalarVariable>')
+                         f'variability="continuous"><Real start="0.0"{unit(input_name)}/></ScalarVariable>')
         for i, out in enumerate(output_names):
             variables.append(f'<ScalarVariable name="{out}" valueReference="{10 + i}" causality="output" '
-                             f'variability="continuous" initial="exact"><Real start="{values[6 + i]!r}"/></ScalarVariable>')
+                             f'variability="continuous" initial="exact"><Real start="{values[6 + i]!r}"{unit(out)}/>'
+                             '</ScalarVariable>')
+        definitions = ""
+        if unit_definitions:
+            items = []
+            for uname, base in unit_definitions.items():
+                attrs = "".join(f' {k}="{v!r}"' for k, v in (base or {}).items())
+                items.append(f'<Unit name="{escape(uname)}">' + (f"<BaseUnit{attrs}/>" if base is not None else "")
+                             + "</Unit>")
+            definitions = "<UnitDefinitions>" + "".join(items) + "</UnitDefinitions>"
         xml = f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{{{uuid.uuid4()}}}"
   description="linear two-state plant x' = A x + b u (RK4, output derivatives)" generationTool="lsc examples/plants"
   numberOfEventIndicators="0">
   <CoSimulation modelIdentifier="{name}" canHandleVariableCommunicationStepSize="true" canInterpolateInputs="true"
     maxOutputDerivativeOrder="2" canGetAndSetFMUstate="true" canSerializeFMUstate="true"/>
+  {definitions}
   <ModelVariables>
     {chr(10).join('    ' + v for v in variables).strip()}
   </ModelVariables>

@@ -141,7 +141,7 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
             for index, (name, path) in enumerate(system.components.items()):
                 comps[name] = Component(name, path, os.path.join(workdir, str(index)), _callbacks.callbacks(),
                                         budget)
-            check_types(comps, system.connections, system.connectors, system.origin)
+            check_types(comps, system.connections, system.connectors, system.origin, system)
             start_values = {**_bound(comps, system), **(start_values or {})}  # given values take precedence
             _check_start_values(comps, start_values)
             run = Run(comps, system.connections, sink, algorithm=algorithm, p=extrapolation, iterations=iterations,
@@ -206,18 +206,32 @@ def _check_horizon(start_time, stop_time, step_size):
 
 
 def _bound(comps, system):
-    """The SSD's parameter bindings as start values, each checked against its variable's type."""
+    """The SSD's parameter bindings as start values, each checked against its variable's type, a Real's
+    value converted from its unit to the variable's (`_units.conversion`; no unit: the variable's own)."""
+    from . import _units
     from ._exchange import convert
     from ._system import _split
 
     values = {}
-    for key, (kind, text) in system.parameters.items():
+    for key, binding in system.parameters.items():
+        kind, text = binding.kind, binding.text
         cname, var = _split(key, comps)
         v = comps[cname].variables.get(var)
         if v is None or v.type != kind or v.causality not in ("parameter", "input"):
             found = "no such variable" if v is None else f"a {v.causality} {v.type}"
             raise ValueError(f"{system.origin}: the ParameterBinding of {key} is a {kind}; the FMU has {found}.")
-        values[key] = convert(text, kind, f"{system.origin}: the ParameterBinding of {key}")
+        what = f"{system.origin}: the ParameterBinding of {key}"
+        value = convert(text, kind, what)
+        if binding.unit is not None:
+            # the variable's unit: the FMU's, else the one its connector in the SSD gives
+            target = _units.variable_unit(v) or system.connector_units.get((cname, var))
+            if target is None:
+                raise ValueError(f"{what} is in unit {binding.unit!r}; {key} has no unit in the FMU or the SSD to "
+                                 "convert it to; refused (give the value without a unit to apply it as it is).")
+            defs = _units.Definitions((f"{system.origin} (its ParameterSet)", binding.units),
+                                      (system.origin, system.units), (f"the FMU of {cname}", comps[cname].units))
+            value = _units.conversion(binding.unit, target, defs, what, _units.is_relative(v))(value)
+        values[key] = value
     return values
 
 

@@ -203,7 +203,7 @@ class Run(DivergenceCheck):
             mv = c.variable(var)
             wire = c.wire(var)
             x = convert(v, mv.type, f"`start_values`[{key!r}]")
-            self.call(cname, lambda: c.set(wire, [mv.valueReference], [x]), t, f"fmi2Set{wire}", var)
+            self.call(cname, lambda: c.set_start(wire, [mv.valueReference], [x]), t, f"fmi2Set{wire}", var)
         if self.lambda_refs:
             self._lambda(H, t)
         for n in self.names:
