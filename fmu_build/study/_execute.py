@@ -1,6 +1,8 @@
 """Running a study's jobs: serially, or on Dask worker processes."""
+import contextlib
 import math
 import os
+import sys
 
 class _Progress:
     """A tqdm bar of runs done, with running and failed counts."""
@@ -58,33 +60,68 @@ def _execute(runner, payload, settings, jobs, accept, scheduler, n_workers, bar,
             bar.update(1)
             accept(tag, runner(payload, point, settings))
         return
-    import dask
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
-    cluster = None
     if scheduler is None:
-        # A run that kills its worker is not retried on another one: it is recorded as failed.
-        # Temporary TLS credentials: no other local process can submit code to these workers.
-        # temporary-directory: Dask's scratch space goes into the study's folder, removed at the end
-        with dask.config.set({"distributed.scheduler.allowed-failures": 0,
-                              "temporary-directory": settings.get("workdir")}):
-            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                   dashboard_address=None, silence_logs=50, security=True,
-                                   local_directory=settings.get("workdir"))  # removed with the study
-            client = Client(cluster)
-    elif isinstance(scheduler, str):
-        client = Client(scheduler)
-    else:
-        client = scheduler
+        with _workers_without_the_script():
+            _execute_embedded(runner, payload, settings, jobs, accept, n_workers, bar, timeout)
+        return
+    client = Client(scheduler) if isinstance(scheduler, str) else scheduler
     try:
         if isinstance(payload, str) and payload.lower().endswith(".fmu") and not _local(client):
             with open(payload, "rb") as fh:  # workers elsewhere need not share a file system
                 payload = fh.read()
         _run_jobs(client, runner, payload, settings, jobs, accept, bar, timeout)
     finally:
-        if cluster is not None:
+        if isinstance(scheduler, str):
             client.close()
-            cluster.close()
+
+
+@contextlib.contextmanager
+def _workers_without_the_script():
+    """Worker processes start without running the calling script's top level.
+
+    multiprocessing's ``spawn`` (Dask's default) runs the parent's ``__main__``
+    again in every child, as ``__mp_main__``: a script that calls `sweep`
+    without an ``if __name__ == "__main__":`` guard started a study in every
+    worker, which failed to start. The runs need only ``fmu_build`` (metrics
+    and references are computed in this process), so while the cluster lives
+    (its nannies start and restart workers) ``__main__`` names no file or
+    module for the children to run.
+    """
+    main = sys.modules.get("__main__")
+    if main is None:
+        yield
+        return
+    saved = {name: main.__dict__[name] for name in ("__file__", "__spec__") if name in main.__dict__}
+    main.__dict__.pop("__file__", None)
+    main.__spec__ = None
+    try:
+        yield
+    finally:
+        main.__dict__.pop("__spec__", None)
+        main.__dict__.update(saved)
+
+
+def _execute_embedded(runner, payload, settings, jobs, accept, n_workers, bar, timeout):
+    """The jobs on a LocalCluster of `n_workers` processes, started here and closed at the end."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    # A run that kills its worker is not retried on another one: it is recorded as failed.
+    # Temporary TLS credentials: no other local process can submit code to these workers.
+    # temporary-directory: Dask's scratch space goes into the study's folder, removed at the end
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0,
+                          "temporary-directory": settings.get("workdir")}):
+        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, silence_logs=50, security=True,
+                               local_directory=settings.get("workdir"))  # removed with the study
+        client = Client(cluster)
+    try:
+        _run_jobs(client, runner, payload, settings, jobs, accept, bar, timeout)
+    finally:
+        client.close()
+        cluster.close()
 
 
 def _run_jobs(client, runner, payload, settings, jobs, accept, bar, timeout):
