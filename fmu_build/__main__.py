@@ -315,9 +315,10 @@ def _add_sweep(sub):
     sweep.add_argument("--lhs", type=int, metavar="N", help="Latin hypercube sample of N points of the --range inputs")
     sweep.add_argument("--range", action="append", default=[], metavar="NAME=LOW:HIGH", help="range of one input (with --lhs)")
     sweep.add_argument("-o", "--output", required=True, help="result file (.csv or .parquet); an existing one is resumed")
-    sweep.add_argument("--reference", default=None, choices=["exact", "tightest"],
-                       help="'exact' (gallery targets; their default) or 'tightest' (the run at the smallest step and "
-                            "tolerances and the largest lam of each group; the default otherwise)")
+    sweep.add_argument("--reference", default=None,
+                       help="'exact' (gallery targets; their default), 'tightest' (the run at the smallest step and "
+                            "tolerances and the largest lam of each group; the default otherwise) or gallery:NAME "
+                            "(the exact solution of an lsc.gallery problem, for an FMU of the same model)")
     sweep.add_argument("--t-span", type=float, nargs=2, metavar=("T0", "T1"), help="horizon (default: the target's)")
     sweep.add_argument("--error-from", type=float, help="the error counts from this time on")
     sweep.add_argument("--scheduler", help="address of an existing Dask scheduler, or 'serial' (default: an embedded cluster)")
@@ -345,17 +346,15 @@ def _run_sweep(args):
     try:
         grid = grid_of(args)
         check_files(args)
-        target = args.target
-        if target.startswith("gallery:"):
-            import lsc
-
-            name = target.split(":", 1)[1]
-            if name not in lsc.gallery.__all__ or name in ("Problem", "StateSpace"):
-                raise ValueError(f"gallery:NAME must name an lsc.gallery problem; found {name!r}")
-            target = getattr(lsc.gallery, name)()
+        target = _gallery(args.target) if args.target.startswith("gallery:") else args.target
+        reference = args.reference
+        if reference is not None and reference.startswith("gallery:"):
+            reference = _gallery(reference)
+        elif reference not in (None, "exact", "tightest"):
+            raise ValueError(f"`--reference` must be 'exact', 'tightest' or gallery:NAME; found {reference!r}.")
         check_names(grid, target)
         grid = typed_grid(grid, target)
-        df = sweep(target, grid, reference=args.reference, scheduler=args.scheduler, progress=not args.no_progress,
+        df = sweep(target, grid, reference=reference, scheduler=args.scheduler, progress=not args.no_progress,
                    output=args.output, t_span=args.t_span, error_from=args.error_from, n_workers=args.workers,
                    seed=args.seed, timeout=args.timeout)
     except (ValueError, TypeError, OSError, ImportError) as exc:
@@ -378,6 +377,16 @@ def _run_sweep(args):
                   f"when some may fail); the first: {first}", file=sys.stderr)
         return 1
     return 0
+
+def _gallery(text):
+    """The lsc.gallery problem a ``gallery:NAME`` names."""
+    import lsc
+
+    name = text.split(":", 1)[1]
+    if name not in lsc.gallery.__all__ or name in ("Problem", "StateSpace"):
+        raise ValueError(f"gallery:NAME must name an lsc.gallery problem; found {name!r}")
+    return getattr(lsc.gallery, name)()
+
 
 def _add_cosim(sub):
     cosim = sub.add_parser(

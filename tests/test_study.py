@@ -390,7 +390,8 @@ def test_the_readme_study_shows_what_lam_does(fmu, tmp_path, capsys):
     # between neighbours in the decay the error falls by exp(-(lam2 - lam1) T), within 5 %
     ratio = error[decaying][1:] / error[decaying][:-1]
     np.testing.assert_allclose(ratio, np.exp(-np.diff(lam[decaying]) * horizon), rtol=0.05)
-    assert (df["residual_final"] < 1e-2 * df["residual_peak"]).all()  # every residual decays
+    # every residual decays at the rate lam, down to the integrator's floor
+    assert (df["residual_final"] <= 1.1 * df["residual_peak"] * np.exp(-lam * horizon) + 1e-11).all()
     rule = math.log(offset / target) / horizon
     chosen = float(out.split("recommended (error <= ")[1].split("lam=")[1].split(",")[0])
     assert lam[lam >= rule].min() <= chosen and error[lam == chosen][0] <= target

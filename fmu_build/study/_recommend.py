@@ -198,6 +198,8 @@ def study_figure(df, *, cost="run_time", max_curves=12):
                 yscale=axis_scale(ok["error"]))
     axes[1].set(xlabel=lam_label, ylabel=label(cost, "s" if cost == "run_time" else None),
                 title=f"cost ({cost}) against lam", xscale="log", yscale=axis_scale(ok[cost]))
+    if axes[1].get_yscale() == "linear":
+        axes[1].set_ylim(bottom=0.0)  # a flat cost looks flat, not like noise magnified
     if inputs and len(ok.groupby(inputs)) <= 8:
         axes[0].legend(fontsize=7)
     curves = df.attrs.get("curves", {})

@@ -367,7 +367,7 @@ def _study(kind, payload, points, names, reference, settings, metrics, output, s
     jobs = [(("ref", key), point) for key, point in tight.items()] + [(("run", i), points[i]) for i in todo]
     bar = _Progress(len(points), table.done, table.failed, progress)
     try:
-        _execute(runner, payload, settings, jobs, table.accept, scheduler, n_workers, bar, timeout)
+        _execute(runner, payload, settings, jobs, table.accept, scheduler, n_workers, bar, timeout, kind)
     finally:
         bar.close()
     table.flush()
