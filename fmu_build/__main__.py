@@ -378,6 +378,7 @@ def _run_sweep(args):
         return 1
     return 0
 
+
 def _gallery(text):
     """The lsc.gallery problem a ``gallery:NAME`` names."""
     import lsc
