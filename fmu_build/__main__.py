@@ -25,7 +25,7 @@ commands:
   cosim     co-simulate FMUs connected in an SSP file (or .ssd) with a fixed macro step
               lsc-fmu cosim out/path_control.ssp --stop-time 10 --step-size 0.01 -o out/result.csv --plot
   sweep     run a parameter study (lambda, steps, tolerances, parameters) on Dask
-              lsc-fmu sweep out/PrescribedPath.fmu --grid lam=1,2,5,10 -o out/study.csv --plot out/study.png
+              lsc-fmu sweep gallery:prescribed_path --grid lam=0.5,1,2,4,8 --grid offset=0.01 -o out/study.csv
 
 Run `lsc-fmu COMMAND --help` for the options of one command.
 """
@@ -306,9 +306,11 @@ def _add_sweep(sub):
                     "processes and write one row per run: the inputs, success, message, error against the "
                     "reference, residuals, run time, steps. Needs the sweep extra (pip install -e \".[sweep]\"). "
                     "An existing output of the same study is resumed; the study's identity is kept in "
-                    "OUTPUT.study.json and a file of another study is refused.",
-        epilog="example: lsc-fmu sweep out/PrescribedPath.fmu --grid lam=1,2,5,10 --t-span 0 2 -o out/study.csv "
-               "--plot out/study.png")
+                    "OUTPUT.study.json and a file of another study is refused. Exits 1 when any run failed "
+                    "(with --allow-failures: when every run failed), 2 when the study is refused before running.",
+        epilog="example: lsc-fmu sweep out/PrescribedPath.fmu --grid lam=0.5,1,2,4,8 --grid offset=0.01 --t-span 0 4 "
+               "--error-from 4 --reference gallery:prescribed_path -o out/study.csv --plot out/study.png "
+               "--recommend 1e-5")
     sweep.add_argument("target", help="an .fmu, a .toml spec, an SSP scenario, or gallery:NAME (an lsc.gallery problem)")
     sweep.add_argument("--grid", action="append", default=[], metavar="NAME=V1,V2,...",
                        help="values of one input (repeat: every combination is run)")

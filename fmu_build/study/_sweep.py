@@ -279,7 +279,8 @@ def _check_inputs(fmu, names):
     missing = [name for name in inputs if name not in names]
     if missing:
         raise ValueError(f"the FMU has inputs {missing} and a study would hold them at their start values: give each "
-                         "a constant value in the grid (e.g. {" + f"{missing[0]!r}: [0.0]" + "}), or run the FMU "
+                         "a constant value in the grid (e.g. {" + f"{missing[0]!r}: [0.0]" + "}, "
+                         f"--grid {missing[0]}=0.0 on the command line), or run the FMU "
                          "with an input table (lsc-fmu simulate --input, fmpy.simulate_fmu(input=...)), or connect "
                          "it in an SSP scenario and sweep that.")
 
