@@ -131,8 +131,9 @@ def typed_grid(grid, target):
     """The grid with each text read by the type of the variable it sets.
 
     An FMU's variables convert by their declared type (Real, Integer, Boolean;
-    an Enumeration keeps an item's name, a String its text); a spec's by the
-    only types a spec declares, numbers; a ``"component.variable"`` of an SSP
+    an Enumeration keeps an item's name, a String its text); a spec's, not
+    typed before it is built, become numbers where they read as one and stay
+    texts otherwise (a run reads them by the type); a ``"component.variable"`` of an SSP
     scenario stays a text, read by ``cosimulate`` by the variable's type. A
     value the type cannot hold is refused naming the grid name.
     """
@@ -151,8 +152,8 @@ def typed_grid(grid, target):
             typed[name] = values
         elif name in variables:
             typed[name] = [_typed(name, text, variables[name]) for text in values]
-        else:  # a spec's parameter or start value: a number
-            typed[name] = [_number(name, text) for text in values]
+        else:  # a spec's variable, typed only once it is built: a number, or a text the run reads by the type
+            typed[name] = [_number_or_text(name, text) for text in values]
     return typed
 
 
@@ -168,8 +169,10 @@ def _typed(name, text, variable):
     return value
 
 
-def _number(name, text):
+def _number_or_text(name, text):
     value = decimal(text)
-    if value is None:
+    if value is not None:
+        return int(value) if text.strip().lstrip("+-").isdigit() else value
+    if not text or text[:1].isdigit() or text[:1] in "+-.":
         raise ValueError(f"`--grid` {name}: {text!r} is not a plain decimal number.")
-    return int(value) if text.strip().lstrip("+-").isdigit() else value
+    return text  # e.g. 'true' for a Boolean parameter

@@ -506,3 +506,13 @@ def test_a_study_in_a_script_without_a_main_guard(tmp_path):
     assert run.returncode == 0, run.stderr[-3000:]
     assert run.stdout.count("the script's top level ran") == 1, run.stdout
     assert "rows [True, True]" in run.stdout and "Traceback" not in run.stderr, run.stderr[-3000:]
+
+
+def test_cli_grid_values_of_a_spec_are_numbers_or_texts_for_the_run_to_type():
+    from fmu_build._cli_sweep import typed_grid
+
+    spec = os.path.join(SPECS, "prescribed_path.toml")  # typed only once built: a run reads the texts by the type
+    assert typed_grid({"lam": [2], "c": ["0.5", "1"], "project_initial": ["true"]}, spec) == \
+        {"lam": [2], "c": [0.5, 1], "project_initial": ["true"]}
+    with pytest.raises(ValueError, match="`--grid` c: '1e' is not a plain decimal number"):
+        typed_grid({"c": ["1e"]}, spec)
