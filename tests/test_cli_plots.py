@@ -26,23 +26,26 @@ def _cli(*args, cwd):
                           cwd=cwd, env={**os.environ, "MPLBACKEND": "Agg"})
 
 
-@pytest.mark.parametrize("fmi_version", ["2", "3"])
-def test_simulate_names_the_reason_a_native_fmu_logs(tmp_path, fmi_version):
+@pytest.fixture(scope="module")
+def native(tmp_path_factory):
+    """The prescribed-path example as native FMUs, {FMI version: path}."""
+    return {version: build_fmu(SPECS / "prescribed_path.toml", tmp_path_factory.mktemp(f"fmi{version}"),
+                               target="native", fix_parameters=True, fmi_version=version) for version in (2, 3)}
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_simulate_names_the_reason_a_native_fmu_logs(native, tmp_path, fmi_version):
     # FMI 3.0: fmpy called the CLI's logger with the FMI 3.0 arguments (no instance name): each message was
     # a TypeError printed by ctypes, and the error said only "fmi3SetFloat64 failed with status 3"
-    fmu = build_fmu(SPECS / "prescribed_path.toml", tmp_path, target="native", fix_parameters=True,
-                    fmi_version=int(fmi_version))
-    run = _cli("simulate", str(fmu), "--set", "lambda=-1", "-o", "r.csv", cwd=tmp_path)
+    run = _cli("simulate", str(native[fmi_version]), "--set", "lambda=-1", "-o", "r.csv", cwd=tmp_path)
     assert run.returncode == 2, run.stderr
     assert "TypeError" not in run.stderr and "Exception ignored" not in run.stderr, run.stderr
     assert "(the FMU logged: " in run.stderr and "lambda" in run.stderr.split("(the FMU logged: ")[1], run.stderr
 
 
 @pytest.fixture(scope="module")
-def description(tmp_path_factory):
-    fmu = build_fmu(SPECS / "prescribed_path.toml", tmp_path_factory.mktemp("fmu"), target="native",
-                    fix_parameters=True)
-    return read_model_description(str(fmu))
+def description(native):
+    return read_model_description(str(native[2]))
 
 
 def _result(columns):
