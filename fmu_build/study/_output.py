@@ -46,7 +46,10 @@ def check_identity(output, identity):
         different = [k for k in sorted(set(stored) | set(wanted)) if stored.get(k) != wanted.get(k)]
         if different:
             details = "; ".join(f"{k}: {stored.get(k)!r} there, {wanted.get(k)!r} here" for k in different)
-            raise ValueError(f"`output` {os.fspath(output)!r} holds another study: {details}.")
+            hint = (" Rows measured against another grid's reference ('tightest' takes it from the grid) would be "
+                    "mixed with new ones: write this study to another output." if "grid" in different
+                    or "reference" in different else "")
+            raise ValueError(f"`output` {os.fspath(output)!r} holds another study: {details}.{hint}")
         return
     tmp = f"{record}.tmp{os.getpid()}"
     with open(tmp, "w", encoding="utf-8") as fh:

@@ -83,15 +83,14 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
         (`scipy.stats.qmc.LatinHypercube`, seeded by `seed`); positive ranges
         of ``lam``, ``step``, ``rtol``, ``atol`` are sampled log-uniformly.
         See the module docstring for the names with a meaning of their own.
-    reference : None, 'exact', 'tightest', 'monolithic', callable or Problem
+    reference : None, 'exact', 'tightest', callable or Problem
         What the ``error`` column measures against. A callable maps times
-        ``t`` (shape (m,)) to states (shape (n, m)); a gallery Problem gives
-        its exact solution. 'tightest' runs, for every combination of the
-        model inputs, one extra run with the smallest step and tolerances and
-        the largest ``lam`` of the grid. 'monolithic' (SSP targets only) is
-        reserved: ``cosimulate`` has no monolithic solve, so it raises
-        NotImplementedError (pass the monolithic solution as a callable). None:
-        the exact solution if the target has one, else 'tightest'.
+        ``t`` (shape (m,)) to states (shape (n, m)), e.g. the monolithic
+        solution of an SSP scenario's system; a gallery Problem gives its
+        exact solution. 'tightest' runs, for every combination of the model
+        inputs, one extra run with the smallest step and tolerances and the
+        largest ``lam`` of the grid. None: the exact solution if the target
+        has one, else 'tightest'.
     metrics : dict, optional
         Extra columns ``{name: function(t, x, residual) -> float}``, computed
         on the client from each run's trajectory.
@@ -174,13 +173,15 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
     lock = None
     try:
         kind, payload, reference, settings = _setup(target, reference, t_span, x0, workdir)
+        if kind == "fmu":
+            _check_inputs(payload, names)
         settings["error_from"] = settings["t_span"][0] if error_from is None and settings["t_span"] else error_from
         _check_error_from(error_from, settings["t_span"])
         lock = None
         if output is not None:
             os.makedirs(os.path.dirname(os.path.abspath(output)), exist_ok=True)
             lock = _lock(output)
-            check_identity(output, _identity(target, payload, names, reference, settings, metrics))
+            check_identity(output, _identity(target, payload, grid, seed, names, reference, settings, metrics))
         return _study(kind, payload, points, names, reference, settings, metrics, output, scheduler, n_workers,
                       progress, curves, timeout)
     finally:
@@ -244,12 +245,17 @@ def _setup(target, reference, t_span, x0, workdir):
     if kind == "spec":
         payload = _build_spec(payload, workdir)
         kind = "fmu"
-    if kind == "fmu" and t_span is None:  # the FMU's default experiment (read from the archive, not run)
+    time_unit = None
+    if kind == "fmu":  # read from the archive, not run
         from fmpy import read_model_description
 
-        experiment = read_model_description(payload).defaultExperiment
-        if experiment is not None and experiment.stopTime is not None:
-            t_span = (float(experiment.startTime or 0.0), float(experiment.stopTime))
+        from .._cli_plots import time_unit as unit_of_time
+
+        md = read_model_description(payload)
+        time_unit = unit_of_time(md)
+        experiment = md.defaultExperiment
+        if t_span is None and experiment is not None and experiment.stopTime is not None:
+            t_span = (float(experiment.startTime or 0.0), float(experiment.stopTime))  # the default experiment
     if isinstance(reference, lsc.gallery.Problem):
         reference = reference.exact
     if reference is None:
@@ -259,19 +265,34 @@ def _setup(target, reference, t_span, x0, workdir):
             raise ValueError("`reference='exact'` needs a target with an exact solution (a gallery Problem); "
                              "pass a callable or 'tightest'.")
         reference = exact
-    elif reference == "monolithic":
-        if kind != "ssp":
-            raise ValueError("`reference='monolithic'` is for SSP targets; found a target of kind " + repr(kind) + ".")
-        raise NotImplementedError("`reference='monolithic'` needs a monolithic solve of the scenario from "
-                                  "fmu_build.cosim, which does not provide one yet: pass a callable or 'tightest'.")
     elif not (callable(reference) or reference == "tightest"):
-        raise ValueError(f"`reference` must be None, 'exact', 'tightest', 'monolithic', a callable or a gallery "
-                         f"Problem; found {reference!r}.")
-    return kind, payload, reference, {"t_span": t_span, "workdir": workdir}
+        raise ValueError(f"`reference` must be None, 'exact', 'tightest', a callable or a gallery Problem; "
+                         f"found {reference!r}.")
+    return kind, payload, reference, {"t_span": t_span, "workdir": workdir, "time_unit": time_unit}
 
 
-def _identity(target, payload, names, reference, settings, metrics):
-    """What makes two studies the same: stored with the output, compared when resuming."""
+def _check_inputs(fmu, names):
+    """Refuse an FMU whose inputs the study would hold at their start values without being told."""
+    from fmpy import read_model_description
+
+    inputs = [v.name for v in read_model_description(fmu).modelVariables if v.causality == "input"]
+    missing = [name for name in inputs if name not in names]
+    if missing:
+        raise ValueError(f"the FMU has inputs {missing} and a study would hold them at their start values: give each "
+                         "a constant value in the grid (e.g. {" + f"{missing[0]!r}: [0.0]" + "}, "
+                         f"--grid {missing[0]}=0.0 on the command line), or run the FMU "
+                         "with an input table (lsc-fmu simulate --input, fmpy.simulate_fmu(input=...)), or connect "
+                         "it in an SSP scenario and sweep that.")
+
+
+def _identity(target, payload, grid, seed, names, reference, settings, metrics):
+    """What makes two studies the same: stored with the output, compared when resuming.
+
+    The grid's values are part of it: 'tightest' takes its reference from the
+    grid, so rows of a smaller grid were measured against another reference.
+    A callable reference is identified by its values at three times of the
+    horizon, not only by its name (every lambda is called ``<lambda>``).
+    """
     import hashlib
 
     import lsc
@@ -288,13 +309,41 @@ def _identity(target, payload, names, reference, settings, metrics):
     if path:  # the FMU (built from a spec, or given) by its content
         with open(path, "rb") as fh:
             what["sha256"] = hashlib.sha256(fh.read()).hexdigest()
-    ref = reference if isinstance(reference, str) else "callable " + getattr(reference, "__qualname__",
-                                                                          type(reference).__name__)
     t_span = settings["t_span"]
-    return {"target": what, "grid names": list(names), "reference": ref,
+    if isinstance(grid, dict):
+        values = {name: [_plain(v) for v in grid[name]] for name in names}
+    else:
+        values = {"sample": int(grid[0]), "seed": _plain(seed),
+                  "ranges": {name: [_plain(v) for v in grid[1][name]] for name in names}}
+    return {"target": what, "grid names": list(names), "grid": values, "reference": _reference_identity(reference, t_span),
             "t_span": [float(t) for t in t_span] if t_span else None,
             "error_from": None if settings["error_from"] is None else float(settings["error_from"]),
             "metrics": sorted(metrics)}
+
+
+def _plain(value):
+    """A grid value as JSON keeps it (numpy scalars as Python numbers)."""
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value)
+    return value if isinstance(value, str) or value is None else repr(value)
+
+
+def _reference_identity(reference, t_span):
+    if isinstance(reference, str):
+        return reference
+    name = "callable " + getattr(reference, "__qualname__", type(reference).__name__)
+    if not t_span:
+        return name
+    times = [float(t_span[0]), 0.5 * (float(t_span[0]) + float(t_span[1])), float(t_span[1])]
+    try:
+        values = np.asarray(reference(np.array(times)), dtype=float)
+    except Exception as exc:  # a reference that cannot be evaluated fails every row's error, and says why there
+        return {"callable": name, "evaluated": f"{type(exc).__name__}: {exc}"}
+    return {"callable": name, "times": times, "values": [float(f"{v:.12g}") for v in values.ravel()]}
 
 
 def _study(kind, payload, points, names, reference, settings, metrics, output, scheduler, n_workers, progress,
@@ -319,7 +368,7 @@ def _study(kind, payload, points, names, reference, settings, metrics, output, s
     jobs = [(("ref", key), point) for key, point in tight.items()] + [(("run", i), points[i]) for i in todo]
     bar = _Progress(len(points), table.done, table.failed, progress)
     try:
-        _execute(runner, payload, settings, jobs, table.accept, scheduler, n_workers, bar, timeout)
+        _execute(runner, payload, settings, jobs, table.accept, scheduler, n_workers, bar, timeout, kind)
     finally:
         bar.close()
     table.flush()
@@ -328,6 +377,7 @@ def _study(kind, payload, points, names, reference, settings, metrics, output, s
     df["steps"] = df["steps"].astype(int)
     df.attrs["curves"] = table.curves
     df.attrs["t_span"] = settings["t_span"]
+    df.attrs["time_unit"] = settings.get("time_unit")
     if output is not None and os.fspath(output).lower().endswith(".parquet"):
         tmp = f"{os.fspath(output)}.tmp{os.getpid()}"
         plain = df.copy()
