@@ -7,7 +7,8 @@ from . import _cvode, _expm
 from ._chebyshev import ChebyshevCoefficients, EvaluationFailed
 from ._completion import Completion, complete
 from ._derivative_array import lam_jet
-from ._exceptions import StiffnessWarning
+from ._exceptions import IndexDeterminationError, RankDecisionWarning, StiffnessWarning
+from ._singular import _singular_time, find_stop
 from ._validate import check_state, check_t_eval, check_t_span, check_tolerances
 
 __all__ = ["CompletionResult", "solve_completion", "solve_dae"]
@@ -81,8 +82,12 @@ def _is_implicit(method):
 def _solve_expm(completion, t0, t1, x0, t_eval, rtol, atol, options):
     q = options.pop("taylor_degree", None)
     max_step = options.pop("max_step", None)
+    dense = options.pop("dense_output", False)
     if options:
-        raise TypeError(f"method='expm' takes only `taylor_degree` and `max_step` options; found {sorted(options)}.")
+        raise TypeError("method='expm' takes only `taylor_degree`, `max_step` and `dense_output` options; found "
+                        f"{sorted(options)}.")
+    if not isinstance(dense, (bool, np.bool_)):
+        raise TypeError(f"`dense_output` must be True or False; found {dense!r}.")
     if not completion.dae.is_constant:
         raise ValueError("method='expm' needs constant coefficients; use an ODE method for time-varying ones.")
     if q is not None and (isinstance(q, bool) or not isinstance(q, int) or q < 0):
@@ -90,10 +95,11 @@ def _solve_expm(completion, t0, t1, x0, t_eval, rtol, atol, options):
     if max_step is not None and not max_step > 0:
         raise ValueError(f"`max_step` must be positive; found {max_step!r}.")
     t_out = np.linspace(t0, t1, 101) if t_eval is None else t_eval  # checked by solve_completion
-    X, message = _expm.integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=q, max_step=max_step)
+    X, message, sol = _expm.integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=q, max_step=max_step,
+                                      dense_output=bool(dense))
     return CompletionResult(
         t=t_out, x=X, success=True, status=0, message=message,
-        nfev=0, njev=0, nlu=0, sol=None, completion=completion,
+        nfev=0, njev=0, nlu=0, sol=sol, completion=completion,
     )
 
 
@@ -246,49 +252,184 @@ def solve_completion(
     # non-finite values at t0) raises here, with its own message.
     completion.rhs(t0, x0)
 
-    rhs, jac, built = completion.rhs, completion.jac, ""
+    coefficients, built, stop = None, "", None
     if tol is not None and not completion.dae.is_constant and t1 != t0:
-        try:
-            coefficients = ChebyshevCoefficients(completion, (t0, t1), tol)
-            rhs, jac, built = coefficients.rhs, coefficients.jac, f"; {coefficients.describe()}"
-        except EvaluationFailed as exc:
-            # The forcing or a rank check failed at a Chebyshev point: integrate pointwise, so a
-            # failure is reported where the integration itself breaks (the earliest such time).
-            built = f"; no interpolation (evaluating the completion failed at t={exc.t!r})"
-
-    def fun(t, x):
-        try:
-            return rhs(t, x)
-        except Exception as exc:  # noqa: BLE001 - anything from the coefficients ends the run with what it has
-            raise _ForcingFailed(t, exc) from exc
+        coefficients, built, stop = _interpolant(completion, t0, t1, tol)
+    t_end = t1 if stop is None else stop.t_clear
+    if t_end == t0:  # the completion cannot be evaluated clearly beyond t0
+        return _stopped(completion, stop, np.array([t0]), x0[:, None].copy(), 0, None, t0, built)
+    # With an interpolant the integrator runs in the offset s = t - origin (the interpolant's own coordinate,
+    # `ChebyshevCoefficients.matrices_local`): its stage times are then exact to the rounding of s, not of t.
+    origin = 0.0 if coefficients is None else coefficients.origin
+    if coefficients is None:
+        rhs, jac = completion.rhs, completion.jac
+    else:
+        rhs, jac = coefficients.rhs_local, coefficients.jac_local
+    span = (t0 - origin, t_end - origin)
+    t_eval_run = None if t_eval is None else t_eval[np.sign(t1 - t0) * (t_eval - t_end) <= 0] - origin
 
     if method == "CVODE":
-        return _solve_cvode(completion, _as_value_error(rhs), jac, (t0, t1), x0, t_eval, rtol, atol, options, built)
+        res = _solve_cvode(completion, _as_value_error(rhs), jac, span, x0, t_eval_run, rtol, atol, options, built,
+                           origin)
+        return res if stop is None else _stopped(completion, stop, res.t, res.x, res.nfev, None, t_end, built, res)
     if _is_implicit(method) and "jac" not in options:
         options["jac"] = completion.jac(t0, x0) if completion.dae.is_constant else jac
     if not _is_implicit(method):
         _warn_if_costly(method, stiffness, completion, t0, x0)
-    solvers = []
-    try:
-        sol = solve_ivp(fun, (t0, t1), x0, method=_recording(method, solvers), t_eval=t_eval, rtol=rtol, atol=atol,
-                        **options)
-    except _ForcingFailed as exc:
-        t_ok = getattr(solvers[-1], "t", t0) if solvers else t0
-        partial = _partial_run(fun, t0, t_ok, x0, method, t_eval, dict(options, rtol=rtol, atol=atol))
-        return _failed(completion, exc.t, exc.exc, partial)
-    x = sol.y
+    if "events" in options and origin != 0.0:
+        options["events"] = _shifted_events(options["events"], origin)
+    run = _run(rhs, (t0, t_end), x0, method, t_eval_run, rtol, atol, options, origin,
+               None if t_eval is None else t_eval[: t_eval_run.size])
+    if run.failure is not None:
+        return _failed(completion, run.failure, run.t, run.x, run.nfev, t_end, built)
+    sol = run.sol
+    dense = None if sol.sol is None else _Dense(sol.sol, origin, t0, t_end)
+    if stop is not None:
+        return _stopped(completion, stop, run.t, run.x, sol.nfev, dense, t_end, built, sol)
     message = sol.message + built
     if not _is_implicit(method) and stiffness > _STIFF:
         message += (f" (the completion is stiff on this interval: |rate| x length = {stiffness:.3g}; "
                     "method='Radau' or 'auto' takes far fewer steps)")
     elif not sol.success and not _is_implicit(method):
-        message += (f" (the step size collapsed after t={float(sol.t[-1]):g}, but the completion is not stiff: its known "
+        message += (f" (the step size collapsed after t={float(run.t[-1]):g}, but the completion is not stiff: its known "
                     f"rates (lam, and the eigenvalues of G for constant coefficients) x length = {stiffness:.3g}; look "
                     "for a singularity of the coefficients or the forcing just after it)")
     return CompletionResult(
-        t=sol.t, x=x, success=bool(sol.success), status=sol.status, message=message,
-        nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=sol.sol, completion=completion,
+        t=run.t, x=run.x, success=bool(sol.success), status=sol.status, message=message,
+        nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=dense, completion=completion,
     )
+
+
+def _interpolant(completion, t0, t1, tol):
+    """``(ChebyshevCoefficients or None, note, Stop or None)`` for a run from t0 to t1.
+
+    Where evaluating the completion fails at a Chebyshev point, or a piece stays unresolved (a
+    singular time need not fail at any point sampled), `lsc._singular.find_stop` looks for the first
+    time the completion cannot be evaluated clearly; the interpolant is then built up to the last clear
+    time before it, and the run ends there.
+    """
+    failed_at, coefficients = None, None
+    try:
+        coefficients = ChebyshevCoefficients(completion, (t0, t1), tol)
+    except EvaluationFailed as exc:
+        failed_at = exc.t
+    unresolved = () if coefficients is None else coefficients.unresolved
+    stop = find_stop(completion, t0, t1, failed_at, unresolved) if failed_at is not None or unresolved else None
+    if stop is not None and coefficients is None and stop.t_clear != t0:
+        # (an interpolant built on the whole interval is kept: its pieces before the stop are resolved, and
+        # one built up to a singular time spends its budget on pieces far from it)
+        try:
+            coefficients = ChebyshevCoefficients(completion, (t0, stop.t_clear), tol)
+        except EvaluationFailed as exc:
+            failed_at = exc.t
+    if coefficients is not None:
+        return coefficients, f"; {coefficients.describe()}", stop
+    # The forcing or a rank check failed at a Chebyshev point: integrate pointwise, so a
+    # failure is reported where the integration itself breaks (the earliest such time).
+    return None, f"; no interpolation (evaluating the completion failed at t={failed_at!r})", stop
+
+
+def _stopped(completion, stop, t, x, nfev, dense, t_end, built, sol=None):
+    """The result of a run that ended where the completion cannot be evaluated (`lsc._singular.Stop`)."""
+    reached = t.size and t[-1] == t_end
+    how = "" if sol is None or reached else f"; the integrator stopped before it: {sol.message}"
+    kept = (f"; the result holds the {t.size} point(s) computed before it, up to t={float(t[-1])!r}" if t.size
+            else "; no point was computed")
+    return CompletionResult(
+        t=t, x=x, success=False, status=-2, message=f"{stop.message}{kept}{how}{built}",
+        nfev=nfev, njev=getattr(sol, "njev", 0), nlu=getattr(sol, "nlu", 0), sol=dense, completion=completion,
+    )
+
+
+class _Dense:
+    """Dense output of a run, refusing times outside the interval integrated (an OdeSolution extrapolates).
+
+    Called like `scipy.integrate.OdeSolution`; evaluated in the integrator's coordinate ``t - origin``.
+    """
+
+    def __init__(self, sol, origin, t0, t1):
+        self._sol, self._origin, self._t0, self._t1 = sol, origin, t0, t1
+        self.t_min, self.t_max = min(t0, t1), max(t0, t1)
+
+    def __call__(self, t):
+        t = np.asarray(t, dtype=float)
+        _expm.check_inside(t.reshape(-1), self._t0, self._t1)
+        return self._sol(t - self._origin)
+
+    def __getattr__(self, name):  # ts, interpolants, n_segments of the OdeSolution (in the integrator's time)
+        return getattr(self._sol, name)
+
+
+def _shifted_events(events, origin):
+    """Event functions of t called with the integrator's offset ``s = t - origin``, their attributes kept."""
+    def shift(event):
+        def shifted(s, x):
+            return event(origin + s, x)
+        for attribute in ("terminal", "direction"):
+            if hasattr(event, attribute):
+                setattr(shifted, attribute, getattr(event, attribute))
+        return shifted
+    return [shift(e) for e in events] if isinstance(events, (list, tuple)) else shift(events)
+
+
+class _Run:
+    """What `_run` returns: ``t``, ``x`` (in the given time), the OdeResult ``sol`` or a ``failure``."""
+
+    def __init__(self, t, x, nfev, sol=None, failure=None):
+        self.t, self.x, self.nfev, self.sol, self.failure = t, x, nfev, sol, failure
+
+
+def _run(rhs, t_span, x0, method, t_eval, rtol, atol, options, origin, t_given=None):
+    """`scipy.integrate.solve_ivp` from ``t_span[0]`` to ``t_span[1]`` in the offsets ``s = t - origin`` (which
+    `rhs` and `t_eval` take), every accepted step recorded.
+
+    When evaluating `rhs` raises, the trajectory up to the last accepted step is what the steps recorded
+    (at `t_eval` from each step's interpolant): the run is not repeated. `t_given`: the output times as
+    given (`t_eval` are their offsets), which the result reports as they are; the ends likewise.
+    """
+    span = (t_span[0] - origin, t_span[1] - origin)
+    nfev = [0]
+
+    def fun(s, x):
+        nfev[0] += 1
+        try:
+            return rhs(s, x)
+        except Exception as exc:  # noqa: BLE001 - anything from the coefficients ends the run with what it has
+            raise _ForcingFailed(origin + s, exc) from exc
+
+    steps = []
+    try:
+        sol = solve_ivp(fun, span, x0, method=_recording(method, steps, t_eval is not None), t_eval=t_eval,
+                        rtol=rtol, atol=atol, **options)
+    except _ForcingFailed as exc:
+        ts, xs = _recorded(steps, span[0], x0, t_eval)
+        if t_given is not None:
+            return _Run(t_given[: ts.size], xs, nfev[0], failure=exc)
+        t = origin + ts
+        t[0] = t_span[0]
+        return _Run(t, xs, nfev[0], failure=exc)
+    if t_given is not None:
+        return _Run(t_given[: sol.t.size], sol.y, sol.nfev, sol=sol)
+    t = sol.t if origin == 0.0 else origin + sol.t
+    if t.size:  # the ends as given, not as the offsets add up again
+        t[0] = t_span[0]
+        if sol.status == 0:
+            t[-1] = t_span[1]
+    return _Run(t, sol.y, sol.nfev, sol=sol)
+
+
+def _recorded(steps, s0, x0, t_eval):
+    """``(s, x)`` of a run that failed: its accepted steps, or its `t_eval` points up to the last of them."""
+    if t_eval is None:
+        return np.array([s0] + [s for s, _, _ in steps]), np.column_stack([x0] + [x for _, x, _ in steps])
+    times = np.array([s0] + [s for s, _, _ in steps])
+    direction = 1.0 if times[-1] >= s0 else -1.0
+    wanted = t_eval[direction * (t_eval - times[-1]) <= 0]
+    out = np.empty((x0.size, wanted.size))
+    for j, s in enumerate(wanted):
+        i = int(np.searchsorted(direction * times, direction * s, side="left"))  # the step that ends at or after s
+        out[:, j] = x0 if i == 0 else steps[i - 1][1] if s == times[i] else steps[i - 1][2](s)
+    return wanted, out
 
 
 def _as_value_error(rhs):
@@ -318,17 +459,18 @@ def _backward_refusal(completion, t0, t1):
     )
 
 
-def _solve_cvode(completion, rhs, jac, t_span, x0, t_eval, rtol, atol, options, built):
+def _solve_cvode(completion, rhs, jac, t_span, x0, t_eval, rtol, atol, options, built, origin=0.0):
+    """CVODE on `t_span` (offsets from `origin`, as `rhs` and `jac` take them)."""
     constant_jac = completion.jac(t_span[0], x0) if completion.dae.is_constant else None
     out = _cvode.solve(rhs, jac, *t_span, x0, t_eval, rtol, atol, options, constant_jac=constant_jac)
     message = out["message"] + built
     status = out["status"]
     if "failure" in out:
         t_fail, exc = out["failure"]
-        message, status = f"evaluating the right-hand side failed at t={float(t_fail)!r}: {exc}", -2
+        message, status = f"evaluating the right-hand side failed at t={float(origin + t_fail)!r}: {exc}", -2
     return CompletionResult(
-        t=out["t"], x=out["x"], success=out["success"], status=status, message=message,
-        nfev=out["nfev"], njev=out["njev"], nlu=0, sol=None, completion=completion,
+        t=out["t"] if origin == 0.0 else origin + out["t"], x=out["x"], success=out["success"], status=status,
+        message=message, nfev=out["nfev"], njev=out["njev"], nlu=0, sol=None, completion=completion,
     )
 
 
@@ -343,13 +485,20 @@ def _interpolation_tol(interpolate, rtol):
     raise ValueError(f"`interpolate` must be None, True, False or a relative accuracy in (0, 1); found {interpolate!r}.")
 
 
-def _failed(completion, t, exc, partial=None):
-    """A failed run's result: the trajectory computed before the failure (like solve_ivp), and why."""
-    ts, xs, nfev = partial if partial is not None else (np.zeros(0), np.zeros((completion.n, 0)), 0)
+def _failed(completion, failure, ts, xs, nfev, t_end, built):
+    """A run whose right-hand side failed mid-run (`failure`, a _ForcingFailed): the trajectory computed
+    before it, and why; where the derivative array loses rank near the failure, the time it does."""
+    t, exc = failure.t, failure.exc
     kept = f"; the result holds the {ts.size} point(s) computed before it, up to t={float(ts[-1])!r}" if ts.size else ""
+    singular = ""
+    if isinstance(exc, (IndexDeterminationError, RankDecisionWarning)) and ts.size:
+        t_s = _singular_time(completion, float(t), float(t), abs(t_end - float(ts[0])), 1.0 if t_end >= ts[0] else -1.0)
+        if t_s is not None:
+            singular = (f"; the DAE is not uniquely solvable at t={t_s!r} (the derivative array (k={completion.k}) "
+                        "loses rank there)")
     return CompletionResult(
         t=ts, x=xs, success=False, status=-2,
-        message=f"evaluating the right-hand side failed at t={float(t)!r}: {exc}{kept}",
+        message=f"evaluating the right-hand side failed at t={float(t)!r}: {exc}{singular}{kept}{built}",
         nfev=nfev, njev=0, nlu=0, sol=None, completion=completion,
     )
 
@@ -381,8 +530,9 @@ def _warn_if_costly(method, stiffness, completion, t0, x0):
     )
 
 
-def _recording(method, solvers):
-    """`method` as an OdeSolver class that appends each instance to `solvers` (to know how far a failed run got)."""
+def _recording(method, steps, dense):
+    """`method` as an OdeSolver class that appends ``(t, y, interpolant or None)`` of each accepted step to
+    `steps` (the interpolant when `dense`): a run that fails keeps what it computed without running again."""
     import scipy.integrate
 
     base = getattr(scipy.integrate, method, None) if method in ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA") \
@@ -390,28 +540,14 @@ def _recording(method, solvers):
     if not (isinstance(base, type) and issubclass(base, OdeSolver)):
         return method  # solve_ivp reports an unknown name
 
-    def __init__(self, *args, **kwargs):
-        solvers.append(self)
-        base.__init__(self, *args, **kwargs)
+    def step(self):
+        t_before = self.t
+        message = base.step(self)
+        if self.status != "failed" and self.t != t_before:
+            steps.append((self.t, self.y.copy(), self.dense_output() if dense else None))
+        return message
 
-    return type(base.__name__, (base,), {"__init__": __init__})
-
-
-def _partial_run(fun, t0, t_ok, x0, method, t_eval, options):
-    """``(t, x, nfev)`` of the run up to the last accepted step `t_ok` before a failed evaluation."""
-    if t_eval is not None:
-        t_eval = np.asarray(t_eval, dtype=float)
-        t_eval = t_eval[np.sign(t_ok - t0) * (t_eval - t_ok) <= 0] if t_ok != t0 else t_eval[t_eval == t0]
-    if t_ok == t0:
-        keep = t_eval is None or t_eval.size > 0
-        return (np.array([t0]), x0[:, None].copy(), 0) if keep else (np.zeros(0), np.zeros((x0.size, 0)), 0)
-    options.pop("dense_output", None)
-    options.pop("events", None)
-    try:
-        sol = solve_ivp(fun, (t0, t_ok), x0, method=method, t_eval=t_eval, **options)
-    except (_ForcingFailed, ValueError):  # fails again (a solver probing past its bound, a first_step too long)
-        return np.array([t0]), x0[:, None].copy(), 0
-    return sol.t, sol.y, sol.nfev
+    return type(base.__name__, (base,), {"step": step})
 
 
 def solve_dae(dae, t_span, x0, *, completion="alternative", lam=None, k=None, rcond=None, **options):

@@ -158,16 +158,9 @@ def _maps_at(comp, t):
     """``(G, W, C, cmap)`` of a time-varying completion at t: ``x' = G x + W [f; ...; f^(p)]``, ``c = C x -
     cmap [f; ...; f^(p)]``, in the given unknowns and f (the library's own maps, as for constant coefficients)."""
     from lsc._completion import _Factors
-    from lsc._problem import unscale_columns
 
     fac = _Factors(comp._eq, comp.k, t, comp.extra_order, comp.rcond, expected_rank=comp._rank)
-    G, W = comp._maps(fac, t)
-    if comp._col_scales is not None:
-        G, W = unscale_columns(fac, G, W, comp._col_scales)
-    cmap = fac.cg
-    if comp._row_scales is not None:
-        columns = np.tile(comp._row_scales, comp._order + 1)
-        W, cmap = W * columns, cmap * columns
+    G, W, cmap = comp._unscaled(fac, *comp._maps(fac, t))  # rows, unknowns and unit of time mapped back
     return G, W, fac.C, cmap
 
 
