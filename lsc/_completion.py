@@ -566,7 +566,11 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None, setup="a
     of two that equilibrate them before any rank decision: the solutions,
     the DAE's eigenvalues and the added eigenvalues ``-lam`` do not change,
     the standard and stabilized LSC's least-squares metric does (see
-    docs/reliability_library.md). A time-varying ``lam`` makes the
+    docs/reliability_library.md). The unknowns are scaled likewise, and a
+    pencil whose rate (``||B|| / ||A||``, and the rates its coefficients
+    vary at) is off 1 by more than 4 is completed in its own unit of time
+    (a power of two), then mapped back exactly
+    (`lsc._problem.balance`). A time-varying ``lam`` makes the
     completion time-varying even for constant ``A`` and ``B``.
 
     Examples

@@ -158,7 +158,8 @@ def solve_completion(
         (options ``taylor_degree`` and ``max_step`` fix them instead), and
         the output points are read from the exact propagator (one
         exponential for an equally spaced ``t_eval``, which defaults to 101
-        equally spaced times). ``'CVODE'`` integrates with SUNDIALS CVODE
+        equally spaced times); with ``dense_output=True``, ``sol(t)`` is that
+        propagator from the last step point before ``t``. ``'CVODE'`` integrates with SUNDIALS CVODE
         (BDF, dense direct solver, the constant Jacobian ``G`` or
         ``G(t)``; needs the optional package scikit-sundae; options
         ``cvode_method`` ('BDF' or 'Adams'), ``first_step``, ``min_step``,
@@ -196,18 +197,26 @@ def solve_completion(
         stage (exact to rounding; the way to go when the run may stop early,
         e.g. at a terminal event, or the coefficients are not smooth). Pieces
         the construction cannot resolve within 500 evaluations are evaluated
-        pointwise; the result's message says what was built.
+        pointwise; the result's message says what was built. With an
+        interpolant the integrator runs in the offset ``t - t0``, so a run that
+        starts at t = 1e8 costs what one from 0 does. Where the construction
+        meets a time at which the completion cannot be evaluated clearly (the
+        derivative array loses rank, a coefficient is not finite), that time is
+        located once and the run ends before it (`lsc._singular`).
     **options
         Passed to solve_ivp (``dense_output``, ``max_step``, ``first_step``,
-        ``events``, ...).
+        ``events``, ...). The dense output ``sol`` refuses times outside the
+        interval integrated (a ValueError naming it; it does not extrapolate).
 
     Returns
     -------
     CompletionResult
         ``success=False`` with a message when the integration fails,
         including when the forcing becomes non-finite or cannot be evaluated
-        during the run; the result then holds the trajectory computed up to
-        the last accepted step, as `scipy.integrate.solve_ivp` does. Bad
+        during the run, or the DAE is singular at a time inside `t_span` (the
+        message names it); the result then holds the trajectory computed up to
+        the last accepted step (from the one run: each step is kept as it is
+        taken), as `scipy.integrate.solve_ivp` does. Bad
         arguments (including a time-varying ``lam`` that is not positive on
         `t_span`) raise before integrating.
 
@@ -399,7 +408,7 @@ def _run(rhs, t_span, x0, method, t_eval, rtol, atol, options, origin, t_given=N
 
     steps = []
     try:
-        sol = solve_ivp(fun, span, x0, method=_recording(method, steps, t_eval is not None), t_eval=t_eval,
+        sol = solve_ivp(fun, span, x0, method=_recording(method, steps, t_eval), t_eval=t_eval,
                         rtol=rtol, atol=atol, **options)
     except _ForcingFailed as exc:
         ts, xs = _recorded(steps, span[0], x0, t_eval)
@@ -530,9 +539,12 @@ def _warn_if_costly(method, stiffness, completion, t0, x0):
     )
 
 
-def _recording(method, steps, dense):
+def _recording(method, steps, t_eval):
     """`method` as an OdeSolver class that appends ``(t, y, interpolant or None)`` of each accepted step to
-    `steps` (the interpolant when `dense`): a run that fails keeps what it computed without running again."""
+    `steps`: a run that fails keeps what it computed without running again.
+
+    The interpolant is kept for the steps that hold points of `t_eval` (solve_ivp forms it for those
+    anyway; it is formed once per step and shared: DOP853's costs three more evaluations)."""
     import scipy.integrate
 
     base = getattr(scipy.integrate, method, None) if method in ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA") \
@@ -544,10 +556,17 @@ def _recording(method, steps, dense):
         t_before = self.t
         message = base.step(self)
         if self.status != "failed" and self.t != t_before:
-            steps.append((self.t, self.y.copy(), self.dense_output() if dense else None))
+            holds = t_eval is not None and np.any((t_eval - t_before) * (t_eval - self.t) <= 0)
+            steps.append((self.t, self.y.copy(), self.dense_output() if holds else None))
         return message
 
-    return type(base.__name__, (base,), {"step": step})
+    def dense_output(self):
+        cached = getattr(self, "_lsc_dense", None)
+        if cached is None or cached[0] != self.t:
+            cached = self._lsc_dense = (self.t, base.dense_output(self))
+        return cached[1]
+
+    return type(base.__name__, (base,), {"step": step, "dense_output": dense_output})
 
 
 def solve_dae(dae, t_span, x0, *, completion="alternative", lam=None, k=None, rcond=None, **options):

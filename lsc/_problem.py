@@ -12,7 +12,7 @@ __all__ = ["LinearDAE", "check_dae"]
 ROW_SPREAD = 2.0**10
 # A pencil whose rate (||B|| / ||A||, and the rates its coefficients vary at) is off 1 by more than this factor is
 # solved in a unit of time that brings it to ~1 (see `balance`); within it, time is used as given.
-TIME_SPREAD = 8.0
+TIME_SPREAD = 4.0
 _MAX_TIME_EXPONENT = 60  # the unit of time stays within 2^-60..2^60: its powers up to the 17th are exact doubles
 
 
