@@ -29,6 +29,8 @@ import math
 
 import numpy as np
 
+from ._validate import check_dense_times
+
 __all__ = ["ExactSolution", "Propagator", "integrate"]
 
 _DEGREES = (1, 3, 5, 7)
@@ -204,23 +206,6 @@ def integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=None, max
     return X, message, sol
 
 
-def _number(x):
-    """A float as its shortest repr, without a trailing '.0' (10.0 -> '10', 1000002.0 -> '1000002')."""
-    text = repr(float(x))
-    return text[:-2] if text.endswith(".0") else text
-
-
-def check_inside(t, t0, t1):
-    """`t` (array) within ``[t0, t1]``, or a ValueError naming the interval: dense output does not extrapolate."""
-    low, high = min(t0, t1), max(t0, t1)
-    outside = t[(t < low) | (t > high) | ~np.isfinite(t)]
-    if outside.size:
-        raise ValueError(
-            f"dense output asked for t={_number(outside[0])}, outside the interval [{_number(low)}, {_number(high)}] "
-            "that was integrated: it does not extrapolate (integrate over a longer `t_span`)."
-        )
-
-
 class ExactSolution:
     """Dense output of exact stepping: ``x(t)`` propagated exactly from the last step point before ``t``.
 
@@ -246,7 +231,7 @@ class ExactSolution:
 
     def __call__(self, t):
         t = np.asarray(t, dtype=float)
-        check_inside(t.reshape(-1), self._t0, self._t1)
+        check_dense_times(t.reshape(-1), self._t0, self._t1)
         ts = t.reshape(-1)
         u = self._direction * self._times  # increasing
         i = np.clip(np.searchsorted(u, self._direction * ts, side="right") - 1, 0, u.size - 1)

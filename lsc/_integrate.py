@@ -1,13 +1,14 @@
 """Integration of a completion with `scipy.integrate.solve_ivp`."""
 
 import numpy as np
-from scipy.integrate import BDF, LSODA, OdeSolver, Radau, solve_ivp
+from scipy.integrate import BDF, LSODA, OdeSolver, Radau
 
 from . import _cvode, _expm
 from ._chebyshev import ChebyshevCoefficients, EvaluationFailed
 from ._completion import Completion, complete
 from ._derivative_array import lam_jet
 from ._exceptions import IndexDeterminationError, RankDecisionWarning, StiffnessWarning
+from ._ivp import BoundedSolution, run, shifted_events
 from ._singular import _singular_time, find_stop
 from ._validate import check_state, check_t_eval, check_t_span, check_tolerances
 
@@ -65,12 +66,6 @@ class CompletionResult:
             f"points={self.t.size}, nfev={self.nfev}, final residual="
             f"{self.residual[-1] if self.residual.size else float('nan'):.3e})"
         )
-
-
-class _ForcingFailed(Exception):
-    def __init__(self, t, exc):
-        super().__init__(str(exc))
-        self.t, self.exc = t, exc
 
 
 def _is_implicit(method):
@@ -266,7 +261,7 @@ def solve_completion(
         coefficients, built, stop = _interpolant(completion, t0, t1, tol)
     t_end = t1 if stop is None else stop.t_clear
     if t_end == t0:  # the completion cannot be evaluated clearly beyond t0
-        return _stopped(completion, stop, np.array([t0]), x0[:, None].copy(), 0, None, t0, built)
+        return _stopped(completion, stop, np.array([t0]), x0[:, None].copy(), 0, None, built)
     # With an interpolant the integrator runs in the offset s = t - origin (the interpolant's own coordinate,
     # `ChebyshevCoefficients.matrices_local`): its stage times are then exact to the rounding of s, not of t.
     origin = 0.0 if coefficients is None else coefficients.origin
@@ -280,31 +275,31 @@ def solve_completion(
     if method == "CVODE":
         res = _solve_cvode(completion, _as_value_error(rhs), jac, span, x0, t_eval_run, rtol, atol, options, built,
                            origin)
-        return res if stop is None else _stopped(completion, stop, res.t, res.x, res.nfev, None, t_end, built, res)
+        return res if stop is None else _stopped(completion, stop, res.t, res.x, res.nfev, None, built, res)
     if _is_implicit(method) and "jac" not in options:
         options["jac"] = completion.jac(t0, x0) if completion.dae.is_constant else jac
     if not _is_implicit(method):
         _warn_if_costly(method, stiffness, completion, t0, x0)
     if "events" in options and origin != 0.0:
-        options["events"] = _shifted_events(options["events"], origin)
-    run = _run(rhs, (t0, t_end), x0, method, t_eval_run, rtol, atol, options, origin,
-               None if t_eval is None else t_eval[: t_eval_run.size])
-    if run.failure is not None:
-        return _failed(completion, run.failure, run.t, run.x, run.nfev, t_end, built)
-    sol = run.sol
-    dense = None if sol.sol is None else _Dense(sol.sol, origin, t0, t_end)
+        options["events"] = shifted_events(options["events"], origin)
+    result = run(rhs, (t0, t_end), x0, method, t_eval_run, rtol, atol, options, origin,
+                 None if t_eval is None else t_eval[: t_eval_run.size])
+    if result.failure is not None:
+        return _failed(completion, result.failure, result.t, result.x, result.nfev, t_end, built)
+    sol = result.sol
+    dense = None if sol.sol is None else BoundedSolution(sol.sol, origin, t0, t_end)
     if stop is not None:
-        return _stopped(completion, stop, run.t, run.x, sol.nfev, dense, t_end, built, sol)
+        return _stopped(completion, stop, result.t, result.x, sol.nfev, dense, built, sol)
     message = sol.message + built
     if not _is_implicit(method) and stiffness > _STIFF:
         message += (f" (the completion is stiff on this interval: |rate| x length = {stiffness:.3g}; "
                     "method='Radau' or 'auto' takes far fewer steps)")
     elif not sol.success and not _is_implicit(method):
-        message += (f" (the step size collapsed after t={float(run.t[-1]):g}, but the completion is not stiff: its known "
+        message += (f" (the step size collapsed after t={float(result.t[-1]):g}, but the completion is not stiff: its known "
                     f"rates (lam, and the eigenvalues of G for constant coefficients) x length = {stiffness:.3g}; look "
                     "for a singularity of the coefficients or the forcing just after it)")
     return CompletionResult(
-        t=run.t, x=run.x, success=bool(sol.success), status=sol.status, message=message,
+        t=result.t, x=result.x, success=bool(sol.success), status=sol.status, message=message,
         nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=dense, completion=completion,
     )
 
@@ -338,107 +333,15 @@ def _interpolant(completion, t0, t1, tol):
     return None, f"; no interpolation (evaluating the completion failed at t={failed_at!r})", stop
 
 
-def _stopped(completion, stop, t, x, nfev, dense, t_end, built, sol=None):
+def _stopped(completion, stop, t, x, nfev, dense, built, sol=None):
     """The result of a run that ended where the completion cannot be evaluated (`lsc._singular.Stop`)."""
-    reached = t.size and t[-1] == t_end
-    how = "" if sol is None or reached else f"; the integrator stopped before it: {sol.message}"
+    how = "" if sol is None or sol.success else f"; the integrator stopped before it: {sol.message}"
     kept = (f"; the result holds the {t.size} point(s) computed before it, up to t={float(t[-1])!r}" if t.size
             else "; no point was computed")
     return CompletionResult(
         t=t, x=x, success=False, status=-2, message=f"{stop.message}{kept}{how}{built}",
         nfev=nfev, njev=getattr(sol, "njev", 0), nlu=getattr(sol, "nlu", 0), sol=dense, completion=completion,
     )
-
-
-class _Dense:
-    """Dense output of a run, refusing times outside the interval integrated (an OdeSolution extrapolates).
-
-    Called like `scipy.integrate.OdeSolution`; evaluated in the integrator's coordinate ``t - origin``.
-    """
-
-    def __init__(self, sol, origin, t0, t1):
-        self._sol, self._origin, self._t0, self._t1 = sol, origin, t0, t1
-        self.t_min, self.t_max = min(t0, t1), max(t0, t1)
-
-    def __call__(self, t):
-        t = np.asarray(t, dtype=float)
-        _expm.check_inside(t.reshape(-1), self._t0, self._t1)
-        return self._sol(t - self._origin)
-
-    def __getattr__(self, name):  # ts, interpolants, n_segments of the OdeSolution (in the integrator's time)
-        return getattr(self._sol, name)
-
-
-def _shifted_events(events, origin):
-    """Event functions of t called with the integrator's offset ``s = t - origin``, their attributes kept."""
-    def shift(event):
-        def shifted(s, x):
-            return event(origin + s, x)
-        for attribute in ("terminal", "direction"):
-            if hasattr(event, attribute):
-                setattr(shifted, attribute, getattr(event, attribute))
-        return shifted
-    return [shift(e) for e in events] if isinstance(events, (list, tuple)) else shift(events)
-
-
-class _Run:
-    """What `_run` returns: ``t``, ``x`` (in the given time), the OdeResult ``sol`` or a ``failure``."""
-
-    def __init__(self, t, x, nfev, sol=None, failure=None):
-        self.t, self.x, self.nfev, self.sol, self.failure = t, x, nfev, sol, failure
-
-
-def _run(rhs, t_span, x0, method, t_eval, rtol, atol, options, origin, t_given=None):
-    """`scipy.integrate.solve_ivp` from ``t_span[0]`` to ``t_span[1]`` in the offsets ``s = t - origin`` (which
-    `rhs` and `t_eval` take), every accepted step recorded.
-
-    When evaluating `rhs` raises, the trajectory up to the last accepted step is what the steps recorded
-    (at `t_eval` from each step's interpolant): the run is not repeated. `t_given`: the output times as
-    given (`t_eval` are their offsets), which the result reports as they are; the ends likewise.
-    """
-    span = (t_span[0] - origin, t_span[1] - origin)
-    nfev = [0]
-
-    def fun(s, x):
-        nfev[0] += 1
-        try:
-            return rhs(s, x)
-        except Exception as exc:  # noqa: BLE001 - anything from the coefficients ends the run with what it has
-            raise _ForcingFailed(origin + s, exc) from exc
-
-    steps = []
-    try:
-        sol = solve_ivp(fun, span, x0, method=_recording(method, steps, t_eval), t_eval=t_eval,
-                        rtol=rtol, atol=atol, **options)
-    except _ForcingFailed as exc:
-        ts, xs = _recorded(steps, span[0], x0, t_eval)
-        if t_given is not None:
-            return _Run(t_given[: ts.size], xs, nfev[0], failure=exc)
-        t = origin + ts
-        t[0] = t_span[0]
-        return _Run(t, xs, nfev[0], failure=exc)
-    if t_given is not None:
-        return _Run(t_given[: sol.t.size], sol.y, sol.nfev, sol=sol)
-    t = sol.t if origin == 0.0 else origin + sol.t
-    if t.size:  # the ends as given, not as the offsets add up again
-        t[0] = t_span[0]
-        if sol.status == 0:
-            t[-1] = t_span[1]
-    return _Run(t, sol.y, sol.nfev, sol=sol)
-
-
-def _recorded(steps, s0, x0, t_eval):
-    """``(s, x)`` of a run that failed: its accepted steps, or its `t_eval` points up to the last of them."""
-    if t_eval is None:
-        return np.array([s0] + [s for s, _, _ in steps]), np.column_stack([x0] + [x for _, x, _ in steps])
-    times = np.array([s0] + [s for s, _, _ in steps])
-    direction = 1.0 if times[-1] >= s0 else -1.0
-    wanted = t_eval[direction * (t_eval - times[-1]) <= 0]
-    out = np.empty((x0.size, wanted.size))
-    for j, s in enumerate(wanted):
-        i = int(np.searchsorted(direction * times, direction * s, side="left"))  # the step that ends at or after s
-        out[:, j] = x0 if i == 0 else steps[i - 1][1] if s == times[i] else steps[i - 1][2](s)
-    return wanted, out
 
 
 def _as_value_error(rhs):
@@ -495,7 +398,7 @@ def _interpolation_tol(interpolate, rtol):
 
 
 def _failed(completion, failure, ts, xs, nfev, t_end, built):
-    """A run whose right-hand side failed mid-run (`failure`, a _ForcingFailed): the trajectory computed
+    """A run whose right-hand side failed mid-run (`failure`, a ForcingFailed): the trajectory computed
     before it, and why; where the derivative array loses rank near the failure, the time it does."""
     t, exc = failure.t, failure.exc
     kept = f"; the result holds the {ts.size} point(s) computed before it, up to t={float(ts[-1])!r}" if ts.size else ""
@@ -537,36 +440,6 @@ def _warn_if_costly(method, stiffness, completion, t0, x0):
         "constant coefficients, or a smaller lam.",
         StiffnessWarning, stacklevel=3,
     )
-
-
-def _recording(method, steps, t_eval):
-    """`method` as an OdeSolver class that appends ``(t, y, interpolant or None)`` of each accepted step to
-    `steps`: a run that fails keeps what it computed without running again.
-
-    The interpolant is kept for the steps that hold points of `t_eval` (solve_ivp forms it for those
-    anyway; it is formed once per step and shared: DOP853's costs three more evaluations)."""
-    import scipy.integrate
-
-    base = getattr(scipy.integrate, method, None) if method in ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA") \
-        else method
-    if not (isinstance(base, type) and issubclass(base, OdeSolver)):
-        return method  # solve_ivp reports an unknown name
-
-    def step(self):
-        t_before = self.t
-        message = base.step(self)
-        if self.status != "failed" and self.t != t_before:
-            holds = t_eval is not None and np.any((t_eval - t_before) * (t_eval - self.t) <= 0)
-            steps.append((self.t, self.y.copy(), self.dense_output() if holds else None))
-        return message
-
-    def dense_output(self):
-        cached = getattr(self, "_lsc_dense", None)
-        if cached is None or cached[0] != self.t:
-            cached = self._lsc_dense = (self.t, base.dense_output(self))
-        return cached[1]
-
-    return type(base.__name__, (base,), {"step": step, "dense_output": dense_output})
 
 
 def solve_dae(dae, t_span, x0, *, completion="alternative", lam=None, k=None, rcond=None, **options):
