@@ -106,6 +106,18 @@ def with_k(k):
 TWO_TS = [sympy.Symbol("t", real=True), sympy.sin(t)]
 
 
+def time_scaled_pencil(s):
+    """`gallery.random_pencil` (n = 10, index 3) in the time unit `s`: ``(s A, B, f(t / s))``, exact ``x(t / s)``."""
+    p = gallery.random_pencil(n=10, blocks=(3,), seed=0)
+    f = p.dae.f
+    dae = LinearDAE(s * p.dae.A(0.0), p.dae.B(0.0),
+                    JetCallable(lambda u, order: f.jet(u / s, order) / s ** np.arange(order + 1)[:, None]))
+    ts = np.linspace(0.0, 2.0 * s, 11)
+    res = solve_dae(dae, (0.0, 2.0 * s), p.exact(0.0), lam=2.0 / s, method="Radau", t_eval=ts, rtol=1e-10, atol=1e-12)
+    res.error = float(np.max(np.abs(res.x - p.exact(ts / s)) / (1 + np.abs(p.exact(ts / s)))))
+    return res
+
+
 CASES = [
     # (callable, exception, fragment of the message)
     (lambda: LinearDAE([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], np.eye(3)), DimensionError, "`A` must be a square matrix: expected (n, n), got (2, 3)"),
@@ -195,6 +207,13 @@ CASES = [
     (lambda: column_scaled_chain([1, 1e-12, 1, 1], "stabilized"), SOLVED, None),
     (lambda: column_scaled_chain([1e-12, 1, 1e12, 1]), SOLVED, None),
     (lambda: column_scaled_chain(np.logspace(-6, 6, 4)), SOLVED, None),
+    # a pencil in another unit of time is solved in its own (it came out index 9 at 0.01, "not solvable" at 1e4)
+    (lambda: time_scaled_pencil(1e-2), SOLVED, None),
+    (lambda: time_scaled_pencil(1e4), SOLVED, None),
+    # dense output does not extrapolate; complex sympy entries are named
+    (lambda: solve_dae(CHAIN, (0.0, 1.0), [0.0, 0.0], lam=1.0, dense_output=True).sol(2.0), ValueError,
+     "dense output asked for t=2, outside the interval [0, 1] that was integrated"),
+    (lambda: LinearDAE(N2, I2, [sympy.I, sympy.sin(t)]), TypeError, "`f[0]` is complex: I"),
 ]
 
 
