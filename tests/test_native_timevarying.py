@@ -338,7 +338,7 @@ def _rot2_in(eps, start):
 
 
 @pytest.mark.parametrize("eps, start", [(1e-6, 0.0), (1.0, 1e5), (1.0, 1e6)], ids=["microseconds", "1e5", "1e6"])
-def test_a_time_scaled_or_late_horizon_is_tabulated_like_the_unit_one(tmp_path, eps, start):
+def test_a_time_scaled_or_late_horizon_is_tabulated_like_the_unit_one(built, tmp_path, eps, start):
     """Rot2 on [0, 2e-6] (in microseconds) was refused as 'not solvable'; from t = 1e5 its tables took 8x the
     pieces and lost the margin past the stop time that Model Exchange hosts use, from t = 1e6 it was refused
     naming '[1e+06, 1e+06]'. Each is Rot2 on [0, 2]: the same tables, and the exact solution in CS and ME."""
@@ -347,7 +347,7 @@ def test_a_time_scaled_or_late_horizon_is_tabulated_like_the_unit_one(tmp_path, 
 
     from fmpy import read_model_description
 
-    base = read_model_description(str(build_fmu(PROBLEMS["Rot2"][0], tmp_path / "base", target="native"))).description
+    base = read_model_description(str(built["Rot2"])).description
     name, d = _rot2_in(eps, start)
     fmu = build_fmu(d, tmp_path, target="native")
     description = read_model_description(str(fmu)).description
