@@ -236,7 +236,7 @@ def eigenanalysis(completion, rtol=1e-10):
     # The scale H is computed at: G is built from J^+ F, so entries that
     # cancel to zero are left at rounding relative to ||F|| / sigma_min(J)
     # (the standard LSC of an index-1 DAE has H = 0, G may be 0 too).
-    scale = max(np.linalg.norm(H, 2), np.linalg.norm(G, 2), abs(mu), std.rounding_scale)
+    scale = max(np.linalg.norm(H, 2), np.linalg.norm(G, 2), abs(mu), std.rounding_scale / completion._sigma)
     if norm_M <= 1e-9 * scale:
         # H = mu I to rounding: a diagonal added part (no Jordan blocks).
         residual = norm_M / scale if scale else 0.0

@@ -94,9 +94,10 @@ def matrices_many(completion, ts):
         res = completion._stacked_maps(st, times)
     except (np.linalg.LinAlgError, ValueError):  # the per-time path decides, and says why
         return out
+    sigma = completion._sigma  # the equilibrated DAE's unit of time (lsc._problem.balance): G, g per unit of t
     for j, G, g in zip(good, *res) if res is not None else ():
         if G is not None:
-            out[kept[j]] = (G, g)
+            out[kept[j]] = (G, g) if sigma == 1.0 else (G / sigma, g / sigma)
     return out
 
 

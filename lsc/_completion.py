@@ -33,7 +33,7 @@ from ._exceptions import DimensionError, IndexDeterminationError
 from ._forcing import Forcing
 from ._index import check_solvability, determine_index, k_works
 from ._linalg import validate_rcond
-from ._problem import check_dae, column_equilibration, row_equilibration, row_scaled, unscale_columns, varying_view
+from ._problem import balance, check_dae, unscale_columns, varying_view
 from ._rate import as_rate, lam_at
 from ._structured import StructuredFactors, StructuredFallback
 from ._timefunc import TimeFunction, _shape_str
@@ -129,27 +129,22 @@ class Completion:
         if dae.is_constant and isinstance(self.lam, TimeFunction):
             # G(t) follows lam(t): evaluate it where it is asked for, like time-varying coefficients.
             self.dae = dae = varying_view(dae)
-        # Badly scaled rows are equilibrated once (constant scales, so the solutions do not change);
-        # the arrays (dense or structured) are built from the scaled equations, `_W` still acts on the given f.
-        self._row_scales = row_equilibration(dae, self._t_ref)
-        self._col_scales = column_equilibration(dae, self._t_ref)  # unknowns too: x = diag(c) y
-        self._eq = dae if self._row_scales is None and self._col_scales is None else \
-            row_scaled(dae, self._row_scales, self._col_scales)
+        # Badly scaled rows, unknowns (x = diag(c) y) and a pencil written in a time unit far from its rate
+        # (t = sigma tau) are equilibrated once (constant scales, so the solutions map one to one); the arrays
+        # (dense or structured) are built from the equilibrated DAE, and `_unscaled` maps what they give back.
+        self._scaling = balance(dae, self._t_ref)
+        self._row_scales, self._col_scales, self._sigma = self._scaling.r, self._scaling.c, self._scaling.sigma
+        self._eq = self._scaling.apply(dae)
         self.setup, self.setup_note, self._structured = self._check_setup(setup), None, None
         self.k = self._structured_k(k) if self.setup == "structured" else self._check_k(k)
         self._order = self.k + self.extra_order
         self._cache = OrderedDict()
         self._last_factors = None
         if dae.is_constant:
-            fac, (self._G, self._W) = self._constant_maps()
+            fac, (G, W) = self._constant_maps()
             self._std = fac
             self._rank = fac.rank
-            if self._col_scales is not None:
-                self._G, self._W = unscale_columns(fac, self._G, self._W, self._col_scales)
-            self._W_c = fac.cg
-            if self._row_scales is not None:
-                columns = np.tile(self._row_scales, self._order + 1)
-                self._W, self._W_c = self._W * columns, self._W_c * columns
+            self._G, self._W, self._W_c = self._unscaled(fac, G, W)
             self._setup_forcing()
         else:
             fac = self._factors(self._t_ref, check=False)
@@ -272,16 +267,36 @@ class Completion:
             self._cache.move_to_end(t)
             return hit
         fac = self._factors(t)
-        G, g = self._maps(fac, t)
-        if self._col_scales is not None:
-            G, g = unscale_columns(fac, G, g, self._col_scales)
+        G, g, _ = self._unscaled(fac, *self._maps(fac, t))
         self._cache[t] = (fac, G, g)
         if len(self._cache) > _CACHE_SIZE:
             self._cache.popitem(last=False)
         return self._cache[t]
 
     def _lam_jet(self, t, order=0):
-        return lam_at(self.lam, t, order)
+        """The rate's derivatives ``0..order`` at `t` in the equilibrated DAE's time ``tau = t / sigma``."""
+        jet = lam_at(self.lam, t, order)
+        return jet if self._sigma == 1.0 else jet * self._sigma ** np.arange(1.0, order + 2)
+
+    def _unscaled(self, fac, G, W):
+        """``(G, W, W_c)`` in the given unknowns, equations and time from the equilibrated DAE's (`_eq`).
+
+        ``W`` is the forcing map on the equilibrated jet ``[f~; f~'; ...]`` (constant coefficients; then ``W_c``
+        is the constraints' map ``fac.cg`` on the given jet) or the forcing's value (time-varying; ``W_c`` None).
+        With ``x = diag(c) y`` and ``t = sigma tau``: ``x' = diag(c) (G_y diag(c)^-1 x + g_y) / sigma``, and the
+        equilibrated jet is the given one times `lsc._problem.Scaling.fstack_scales`.
+        """
+        if self._col_scales is not None:
+            G, W = unscale_columns(fac, G, W, self._col_scales)
+        W_c = None
+        if np.ndim(W) == 2:
+            W_c = fac.cg
+            if self._row_scales is not None or self._sigma != 1.0:  # (no copies of the wide maps when not needed)
+                columns = self._scaling.fstack_scales(self.n, self._order)
+                W, W_c = W * columns, W_c * columns
+        if self._sigma != 1.0:
+            G, W = G / self._sigma, W / self._sigma
+        return G, W, W_c
 
     # -- forcing (constant coefficients) -------------------------------------
     def _setup_forcing(self):
@@ -551,7 +566,11 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None, setup="a
     of two that equilibrate them before any rank decision: the solutions,
     the DAE's eigenvalues and the added eigenvalues ``-lam`` do not change,
     the standard and stabilized LSC's least-squares metric does (see
-    docs/reliability_library.md). A time-varying ``lam`` makes the
+    docs/reliability_library.md). The unknowns are scaled likewise, and a
+    pencil whose rate (``||B|| / ||A||``, and the rates its coefficients
+    vary at) is off 1 by more than 4 is completed in its own unit of time
+    (a power of two), then mapped back exactly
+    (`lsc._problem.balance`). A time-varying ``lam`` makes the
     completion time-varying even for constant ``A`` and ``B``.
 
     Examples

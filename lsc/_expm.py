@@ -29,7 +29,9 @@ import math
 
 import numpy as np
 
-__all__ = ["Propagator", "integrate"]
+from ._validate import check_dense_times
+
+__all__ = ["ExactSolution", "Propagator", "integrate"]
 
 _DEGREES = (1, 3, 5, 7)
 _SAFETY = 0.5
@@ -153,12 +155,14 @@ def choose_step(completion, t0, t1, x0, rtol, atol, taylor_degree=None):
     return best[1], best[2]
 
 
-def integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=None, max_step=None):
-    """States at `t_out` (sorted, inside ``[t0, t1]``): ``(X, message)``.
+def integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=None, max_step=None, dense_output=False):
+    """States at `t_out` (sorted, inside ``[t0, t1]``): ``(X, message, sol)``.
 
     ``max_step`` (if given) fixes the step length, with ``taylor_degree``
     (default 3); otherwise both come from `choose_step` (a given
-    ``taylor_degree`` is kept).
+    ``taylor_degree`` is kept). With `dense_output`, the stepping goes on to
+    `t1` (if `t_out` ends before it) and ``sol`` is an `ExactSolution` on
+    ``[t0, t1]``; otherwise it is None.
     """
     kind = _forcing_kind(completion)
     if max_step is None:
@@ -172,6 +176,7 @@ def integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=None, max
     n = completion.n
     X = np.empty((n, t_out.size))
     x, nsteps = x0.copy(), 0
+    knots = [] if dense_output else None  # (step starts, states there, forcing jets there) of every step
     start = 0
     # Leading output times equal to t0, then (for an equally spaced rest) the one-exponential path.
     while start < t_out.size and t_out[start] == t0:
@@ -182,20 +187,78 @@ def integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=None, max
     uniform = rest.size >= 3 and np.all(np.abs(diffs - diffs.mean()) <= 1e-10 * abs(diffs.mean()))
     if uniform:
         # step from t0 to the grid's first point like any other interval, then the grid itself
-        x, steps = _march(completion, kind, prop, t0, x, np.array([rest[0]]), H, X[:, start : start + 1])
+        x, steps = _march(completion, kind, prop, t0, x, np.array([rest[0]]), H, X[:, start : start + 1], knots)
         nsteps += steps
-        x, steps = _uniform(completion, kind, prop, rest, x, H, X[:, start:])
+        x, steps = _uniform(completion, kind, prop, rest, x, H, X[:, start:], knots)
         nsteps += steps
     elif rest.size:
-        x, steps = _march(completion, kind, prop, t0, x, rest, H, X[:, start:])
+        x, steps = _march(completion, kind, prop, t0, x, rest, H, X[:, start:], knots)
         nsteps += steps
+    sol = None
+    if dense_output:
+        t_last = rest[-1] if rest.size else t0
+        if t_last != t1:  # the dense output covers t_span whatever the output times
+            x, steps = _march(completion, kind, prop, t_last, x, np.array([t1]), H, np.empty((n, 1)), knots)
+            nsteps += steps
+        sol = ExactSolution(prop, knots, t0, t1)
     message = (f"exact stepping: {nsteps} steps (taylor_degree={q}), "
                f"{prop.n_exponentials} matrix exponential(s)")
-    return X, message
+    return X, message, sol
 
 
-def _march(completion, kind, prop, t, x, targets, H, out):
-    """Step from `t` through each of `targets` (in equal substeps no longer than `H`), writing `out`."""
+class ExactSolution:
+    """Dense output of exact stepping: ``x(t)`` propagated exactly from the last step point before ``t``.
+
+    Between step points the method's solution is ``exp(M h) z(t_i)`` for any ``h`` (see the module
+    docstring): evaluating it at ``t`` is what the stepping itself would have given there, so dense output
+    has the accuracy of the output points. One exponential per distinct ``h`` (not cached).
+
+    Call it with a time or an array of times within the interval integrated (a ValueError otherwise):
+    shape ``(n,)`` or ``(n, m)``, like `scipy.integrate.OdeSolution`.
+    """
+
+    def __init__(self, prop, knots, t0, t1):
+        self._prop, self.t_min, self.t_max = prop, min(t0, t1), max(t0, t1)
+        self._t0, self._t1 = t0, t1
+        self._direction = 1.0 if t1 >= t0 else -1.0
+        if knots:
+            self._times = np.concatenate([k[0] for k in knots])
+            self._states = np.concatenate([k[1] for k in knots], axis=1)
+            self._jets = np.concatenate([k[2] for k in knots], axis=1)
+        else:  # t0 == t1: nothing was stepped
+            n = prop.n
+            self._times, self._states, self._jets = np.array([t0]), np.zeros((n, 1)), np.zeros((n * (prop.q + 1), 1))
+
+    def __call__(self, t):
+        t = np.asarray(t, dtype=float)
+        check_dense_times(t.reshape(-1), self._t0, self._t1)
+        ts = t.reshape(-1)
+        u = self._direction * self._times  # increasing
+        i = np.clip(np.searchsorted(u, self._direction * ts, side="right") - 1, 0, u.size - 1)
+        out = np.empty((self._prop.n, ts.size))
+        for j, (tj, ij) in enumerate(zip(ts, i)):
+            out[:, j] = self._propagate(ij, tj - self._times[ij])
+        return out[:, 0] if t.ndim == 0 else out
+
+    def _propagate(self, i, h):
+        x, u = self._states[:, i], self._jets[:, i]
+        if h == 0.0:
+            return x.copy()
+        import scipy.linalg
+
+        n, m = self._prop.n, self._prop.q + 2
+        M = np.zeros((m * n, m * n))
+        M[:n, :n] = self._prop.G * h
+        for j in range(1, m):
+            M[(j - 1) * n : j * n, j * n : (j + 1) * n] = h * np.eye(n)
+        E = scipy.linalg.expm(M)[:n]
+        return E[:, :n] @ x + E[:, n:] @ u
+
+
+def _march(completion, kind, prop, t, x, targets, H, out, knots=None):
+    """Step from `t` through each of `targets` (in equal substeps no longer than `H`), writing `out`.
+
+    `knots` (a list, or None): gets ``(starts, states, jets)`` of the steps taken, for dense output."""
     plan = []  # (start time, step) of every step, known in advance
     for target in targets:
         span = target - t
@@ -207,18 +270,23 @@ def _march(completion, kind, prop, t, x, targets, H, out):
         plan.append((None, target))  # an output marker
     starts = np.array([s for s, _ in plan if s is not None])
     U = _node_jets(completion, kind, starts, prop.q) if starts.size else None
+    states = np.empty((prop.n, starts.size)) if knots is not None else None
     i = col = 0
     for s, h in plan:
         if s is None:
             out[:, col] = x
             col += 1
         else:
+            if states is not None:
+                states[:, i] = x
             x = prop.step(x, U[:, i], h)
             i += 1
+    if knots is not None and starts.size:
+        knots.append((starts, states, U))
     return x, int(starts.size)
 
 
-def _uniform(completion, kind, prop, grid, x, H, out):
+def _uniform(completion, kind, prop, grid, x, H, out, knots=None):
     """Dense output on an equally spaced grid from one exponential (see the module docstring)."""
     N = grid.size
     d = (grid[-1] - grid[0]) / (N - 1)
@@ -249,4 +317,6 @@ def _uniform(completion, kind, prop, grid, x, H, out):
         Z[:n, i + 1] = Phi @ Z[:n, i] + C[:, i]
     fine = (np.vstack(powers[:m]) @ Z).reshape(m, n, K).transpose(1, 2, 0).reshape(n, K * m)[:, :L]
     out[:, :] = fine[:, ::s]
+    if knots is not None:
+        knots.append((starts, Z[:n].copy(), U))
     return fine[:, L - 1].copy(), K

@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from ._timefunc import SympyFunction
+from ._timefunc import ComplexValueError, SympyFunction, complex_entry_error
 
 __all__ = ["Forcing"]
 
@@ -129,9 +129,21 @@ class Forcing:
             raise ValueError(f"`{self.f.name}` cannot be evaluated at t={float(t)!r} (the derivatives the completion "
                              f"uses): {type(exc).__name__}: {exc}. Is t outside the expression's domain?") from None
         # a sum is non-finite when an entry is (and the builtin sum of a short list costs next to nothing)
-        if not math.isfinite(sum(values)):
+        try:
+            finite = math.isfinite(sum(values))
+        except TypeError:  # a complex entry (math: a negative number to a fractional power)
+            self._raise_complex(values, self._cols0, t)
+            raise
+        if not finite:
             _check_finite(np.array(values, dtype=float), self.f.name, t)
         return self._W0 @ np.array(values, dtype=float)
+
+    def _raise_complex(self, values, cols, t):
+        """Raise the error naming the entry of f (and its derivative order) of the first complex value."""
+        for col, value in zip(cols, values):
+            if isinstance(value, complex):
+                stacked = [0.0] * int(col) + [value]  # its place in the stacked jet [f; f'; ...]
+                raise complex_entry_error(self.f.name, self.f.shape, stacked, t) from None
 
     # -- many times ----------------------------------------------------------------------------
     def jets(self, ts, order):
@@ -158,6 +170,13 @@ class Forcing:
             out = (Wused @ F).reshape(order + 1, self.n, ts.size)
         if not np.all(np.isfinite(out)):
             bad = int(np.argmin(np.all(np.isfinite(out), axis=(0, 1))))
+            if self._sympy:  # numpy gives nan where math gives a complex number: then say which entry it is
+                try:
+                    self.f.jet(float(ts[bad]), self.p + order)
+                except ComplexValueError:
+                    raise
+                except ValueError:
+                    pass
             raise ValueError(f"`{self.f.name}` is not finite at t={float(ts[bad])!r} (the forcing or one of its "
                              f"derivatives of order <= {self.p + order}).")
         return out

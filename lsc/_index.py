@@ -6,7 +6,7 @@ import scipy.linalg
 from ._derivative_array import array_jets
 from ._exceptions import IndexDeterminationError
 from ._linalg import default_rcond, numerical_rank, validate_rcond
-from ._problem import check_dae, column_equilibration, row_equilibration
+from ._problem import balance, check_dae
 from ._validate import check_k, check_t_span, check_time
 
 __all__ = ["differentiation_index", "check_solvability", "ArrayRanks", "SolvabilityReport"]
@@ -70,13 +70,7 @@ def array_ranks(dae, k, t, rcond, previous=None, memo=None):
     jets = array_jets(dae, k, t)
     J, F = jets.J[0], jets.F[0]
     rows = J.shape[0]
-    r = row_equilibration(dae, t)
-    if r is not None:  # diag(r) on every block row: the same ranks, told apart in floating point
-        scale = np.tile(r, k + 1)[:, None]
-        J, F = scale * J, scale * F
-    c = column_equilibration(dae, t)
-    if c is not None:  # unknowns x = diag(c) y, and their derivatives: the same ranks
-        J, F = J * np.tile(c, k + 1), F * c
+    J, F = _equilibrated(dae, k, t, J, F)
     rcond = default_rcond(J.shape) if rcond is None else rcond
     s = scipy.linalg.svdvals(J)
     scale = s[0] if s.size else 0.0
@@ -97,6 +91,23 @@ def array_ranks(dae, k, t, rcond, previous=None, memo=None):
     return ranks
 
 
+def _equilibrated(dae, k, t, J, F):
+    """``J``, ``F`` of the equilibrated DAE (`lsc._problem.balance`): the same ranks, told apart in floating point.
+
+    Rows ``r``: ``diag(r)`` on every block row. Unknowns ``x = diag(c) y``: ``diag(c)`` on every block column.
+    Time ``t = sigma tau``: the array in ``tau`` is the given one with block row i times ``sigma^i`` and block
+    column m (the derivative ``x^(m+1)``) times ``sigma^-(m+1)``; ``F``'s block row i times ``sigma^i``.
+    """
+    scaling = balance(dae, t)
+    if scaling.identity:
+        return J, F
+    n = dae.n
+    rows = scaling.fstack_scales(n, k)  # sigma^i r in block row i
+    c = np.ones(n) if scaling.c is None else scaling.c
+    columns = np.kron(scaling.sigma ** -np.arange(1.0, k + 2), c)
+    return rows[:, None] * J * columns, rows[:, None] * F * c
+
+
 def pencil_is_regular(dae, rcond=None):
     """True when ``det(s A + B)`` is not identically zero (constant coefficients).
 
@@ -104,13 +115,8 @@ def pencil_is_regular(dae, rcond=None):
     singular at no more than n points, so both being rank-deficient means
     the pencil is singular.
     """
-    A, B = dae.A(0.0), dae.B(0.0)
-    r = row_equilibration(dae)
-    if r is not None:
-        A, B = r[:, None] * A, r[:, None] * B
-    c = column_equilibration(dae)
-    if c is not None:
-        A, B = A * c, B * c
+    eq = balance(dae).apply(dae)
+    A, B = eq.A(0.0), eq.B(0.0)
     scale = (np.linalg.norm(B, 2) or 1.0) / (np.linalg.norm(A, 2) or 1.0)
     for s in (0.7317 * scale, -1.3641 * scale):
         M = s * A + B

@@ -1,13 +1,15 @@
 """Integration of a completion with `scipy.integrate.solve_ivp`."""
 
 import numpy as np
-from scipy.integrate import BDF, LSODA, OdeSolver, Radau, solve_ivp
+from scipy.integrate import BDF, LSODA, OdeSolver, Radau
 
 from . import _cvode, _expm
 from ._chebyshev import ChebyshevCoefficients, EvaluationFailed
 from ._completion import Completion, complete
 from ._derivative_array import lam_jet
-from ._exceptions import StiffnessWarning
+from ._exceptions import IndexDeterminationError, RankDecisionWarning, StiffnessWarning
+from ._ivp import BoundedSolution, run, shifted_events
+from ._singular import _singular_time, find_stop
 from ._validate import check_state, check_t_eval, check_t_span, check_tolerances
 
 __all__ = ["CompletionResult", "solve_completion", "solve_dae"]
@@ -66,12 +68,6 @@ class CompletionResult:
         )
 
 
-class _ForcingFailed(Exception):
-    def __init__(self, t, exc):
-        super().__init__(str(exc))
-        self.t, self.exc = t, exc
-
-
 def _is_implicit(method):
     if isinstance(method, str):
         return method in _IMPLICIT
@@ -81,8 +77,12 @@ def _is_implicit(method):
 def _solve_expm(completion, t0, t1, x0, t_eval, rtol, atol, options):
     q = options.pop("taylor_degree", None)
     max_step = options.pop("max_step", None)
+    dense = options.pop("dense_output", False)
     if options:
-        raise TypeError(f"method='expm' takes only `taylor_degree` and `max_step` options; found {sorted(options)}.")
+        raise TypeError("method='expm' takes only `taylor_degree`, `max_step` and `dense_output` options; found "
+                        f"{sorted(options)}.")
+    if not isinstance(dense, (bool, np.bool_)):
+        raise TypeError(f"`dense_output` must be True or False; found {dense!r}.")
     if not completion.dae.is_constant:
         raise ValueError("method='expm' needs constant coefficients; use an ODE method for time-varying ones.")
     if q is not None and (isinstance(q, bool) or not isinstance(q, int) or q < 0):
@@ -90,10 +90,11 @@ def _solve_expm(completion, t0, t1, x0, t_eval, rtol, atol, options):
     if max_step is not None and not max_step > 0:
         raise ValueError(f"`max_step` must be positive; found {max_step!r}.")
     t_out = np.linspace(t0, t1, 101) if t_eval is None else t_eval  # checked by solve_completion
-    X, message = _expm.integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=q, max_step=max_step)
+    X, message, sol = _expm.integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=q, max_step=max_step,
+                                      dense_output=bool(dense))
     return CompletionResult(
         t=t_out, x=X, success=True, status=0, message=message,
-        nfev=0, njev=0, nlu=0, sol=None, completion=completion,
+        nfev=0, njev=0, nlu=0, sol=sol, completion=completion,
     )
 
 
@@ -152,7 +153,8 @@ def solve_completion(
         (options ``taylor_degree`` and ``max_step`` fix them instead), and
         the output points are read from the exact propagator (one
         exponential for an equally spaced ``t_eval``, which defaults to 101
-        equally spaced times). ``'CVODE'`` integrates with SUNDIALS CVODE
+        equally spaced times); with ``dense_output=True``, ``sol(t)`` is that
+        propagator from the last step point before ``t``. ``'CVODE'`` integrates with SUNDIALS CVODE
         (BDF, dense direct solver, the constant Jacobian ``G`` or
         ``G(t)``; needs the optional package scikit-sundae; options
         ``cvode_method`` ('BDF' or 'Adams'), ``first_step``, ``min_step``,
@@ -190,18 +192,26 @@ def solve_completion(
         stage (exact to rounding; the way to go when the run may stop early,
         e.g. at a terminal event, or the coefficients are not smooth). Pieces
         the construction cannot resolve within 500 evaluations are evaluated
-        pointwise; the result's message says what was built.
+        pointwise; the result's message says what was built. With an
+        interpolant the integrator runs in the offset ``t - t0``, so a run that
+        starts at t = 1e8 costs what one from 0 does. Where the construction
+        meets a time at which the completion cannot be evaluated clearly (the
+        derivative array loses rank, a coefficient is not finite), that time is
+        located once and the run ends before it (`lsc._singular`).
     **options
         Passed to solve_ivp (``dense_output``, ``max_step``, ``first_step``,
-        ``events``, ...).
+        ``events``, ...). The dense output ``sol`` refuses times outside the
+        interval integrated (a ValueError naming it; it does not extrapolate).
 
     Returns
     -------
     CompletionResult
         ``success=False`` with a message when the integration fails,
         including when the forcing becomes non-finite or cannot be evaluated
-        during the run; the result then holds the trajectory computed up to
-        the last accepted step, as `scipy.integrate.solve_ivp` does. Bad
+        during the run, or the DAE is singular at a time inside `t_span` (the
+        message names it); the result then holds the trajectory computed up to
+        the last accepted step (from the one run: each step is kept as it is
+        taken), as `scipy.integrate.solve_ivp` does. Bad
         arguments (including a time-varying ``lam`` that is not positive on
         `t_span`) raise before integrating.
 
@@ -246,48 +256,91 @@ def solve_completion(
     # non-finite values at t0) raises here, with its own message.
     completion.rhs(t0, x0)
 
-    rhs, jac, built = completion.rhs, completion.jac, ""
+    coefficients, built, stop = None, "", None
     if tol is not None and not completion.dae.is_constant and t1 != t0:
-        try:
-            coefficients = ChebyshevCoefficients(completion, (t0, t1), tol)
-            rhs, jac, built = coefficients.rhs, coefficients.jac, f"; {coefficients.describe()}"
-        except EvaluationFailed as exc:
-            # The forcing or a rank check failed at a Chebyshev point: integrate pointwise, so a
-            # failure is reported where the integration itself breaks (the earliest such time).
-            built = f"; no interpolation (evaluating the completion failed at t={exc.t!r})"
-
-    def fun(t, x):
-        try:
-            return rhs(t, x)
-        except Exception as exc:  # noqa: BLE001 - anything from the coefficients ends the run with what it has
-            raise _ForcingFailed(t, exc) from exc
+        coefficients, built, stop = _interpolant(completion, t0, t1, tol)
+    t_end = t1 if stop is None else stop.t_clear
+    if t_end == t0:  # the completion cannot be evaluated clearly beyond t0
+        return _stopped(completion, stop, np.array([t0]), x0[:, None].copy(), 0, None, built)
+    # With an interpolant the integrator runs in the offset s = t - origin (the interpolant's own coordinate,
+    # `ChebyshevCoefficients.matrices_local`): its stage times are then exact to the rounding of s, not of t.
+    origin = 0.0 if coefficients is None else coefficients.origin
+    if coefficients is None:
+        rhs, jac = completion.rhs, completion.jac
+    else:
+        rhs, jac = coefficients.rhs_local, coefficients.jac_local
+    span = (t0 - origin, t_end - origin)
+    t_eval_run = None if t_eval is None else t_eval[np.sign(t1 - t0) * (t_eval - t_end) <= 0] - origin
 
     if method == "CVODE":
-        return _solve_cvode(completion, _as_value_error(rhs), jac, (t0, t1), x0, t_eval, rtol, atol, options, built)
+        res = _solve_cvode(completion, _as_value_error(rhs), jac, span, x0, t_eval_run, rtol, atol, options, built,
+                           origin)
+        return res if stop is None else _stopped(completion, stop, res.t, res.x, res.nfev, None, built, res)
     if _is_implicit(method) and "jac" not in options:
         options["jac"] = completion.jac(t0, x0) if completion.dae.is_constant else jac
     if not _is_implicit(method):
         _warn_if_costly(method, stiffness, completion, t0, x0)
-    solvers = []
-    try:
-        sol = solve_ivp(fun, (t0, t1), x0, method=_recording(method, solvers), t_eval=t_eval, rtol=rtol, atol=atol,
-                        **options)
-    except _ForcingFailed as exc:
-        t_ok = getattr(solvers[-1], "t", t0) if solvers else t0
-        partial = _partial_run(fun, t0, t_ok, x0, method, t_eval, dict(options, rtol=rtol, atol=atol))
-        return _failed(completion, exc.t, exc.exc, partial)
-    x = sol.y
+    if "events" in options and origin != 0.0:
+        options["events"] = shifted_events(options["events"], origin)
+    result = run(rhs, (t0, t_end), x0, method, t_eval_run, rtol, atol, options, origin,
+                 None if t_eval is None else t_eval[: t_eval_run.size])
+    if result.failure is not None:
+        return _failed(completion, result.failure, result.t, result.x, result.nfev, t_end, built)
+    sol = result.sol
+    dense = None if sol.sol is None else BoundedSolution(sol.sol, origin, t0, t_end)
+    if stop is not None:
+        return _stopped(completion, stop, result.t, result.x, sol.nfev, dense, built, sol)
     message = sol.message + built
     if not _is_implicit(method) and stiffness > _STIFF:
         message += (f" (the completion is stiff on this interval: |rate| x length = {stiffness:.3g}; "
                     "method='Radau' or 'auto' takes far fewer steps)")
     elif not sol.success and not _is_implicit(method):
-        message += (f" (the step size collapsed after t={float(sol.t[-1]):g}, but the completion is not stiff: its known "
+        message += (f" (the step size collapsed after t={float(result.t[-1]):g}, but the completion is not stiff: its known "
                     f"rates (lam, and the eigenvalues of G for constant coefficients) x length = {stiffness:.3g}; look "
                     "for a singularity of the coefficients or the forcing just after it)")
     return CompletionResult(
-        t=sol.t, x=x, success=bool(sol.success), status=sol.status, message=message,
-        nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=sol.sol, completion=completion,
+        t=result.t, x=result.x, success=bool(sol.success), status=sol.status, message=message,
+        nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=dense, completion=completion,
+    )
+
+
+def _interpolant(completion, t0, t1, tol):
+    """``(ChebyshevCoefficients or None, note, Stop or None)`` for a run from t0 to t1.
+
+    Where evaluating the completion fails at a Chebyshev point, or a piece stays unresolved (a
+    singular time need not fail at any point sampled), `lsc._singular.find_stop` looks for the first
+    time the completion cannot be evaluated clearly; the interpolant is then built up to the last clear
+    time before it, and the run ends there.
+    """
+    failed_at, coefficients = None, None
+    try:
+        coefficients = ChebyshevCoefficients(completion, (t0, t1), tol)
+    except EvaluationFailed as exc:
+        failed_at = exc.t
+    unresolved = () if coefficients is None else coefficients.unresolved
+    stop = find_stop(completion, t0, t1, failed_at, unresolved) if failed_at is not None or unresolved else None
+    if stop is not None and coefficients is None and stop.t_clear != t0:
+        # (an interpolant built on the whole interval is kept: its pieces before the stop are resolved, and
+        # one built up to a singular time spends its budget on pieces far from it)
+        try:
+            coefficients = ChebyshevCoefficients(completion, (t0, stop.t_clear), tol)
+        except EvaluationFailed as exc:
+            failed_at = exc.t
+    if coefficients is not None:
+        return coefficients, f"; {coefficients.describe()}", stop
+    # The forcing or a rank check failed at a Chebyshev point: integrate pointwise, so a
+    # failure is reported where the integration itself breaks (the earliest such time).
+    return None, f"; no interpolation (evaluating the completion failed at t={failed_at!r})", stop
+
+
+def _stopped(completion, stop, t, x, nfev, dense, built, sol=None):
+    """The result of a run that ended where the completion cannot be evaluated (`lsc._singular.Stop`)."""
+    how = "" if sol is None or sol.success else f"; the integrator stopped before it: {sol.message}"
+    kept = (f"; the result holds the {t.size} point(s) computed before it, up to t={float(t[-1])!r}" if t.size
+            else "; no point was computed")
+    return CompletionResult(
+        t=t, x=x, success=False, status=-2, message=f"{stop.message}{kept}{how}{built}",
+        nfev=nfev, njev=getattr(sol, "njev", 0), nlu=getattr(sol, "nlu", 0), sol=dense, completion=completion,
     )
 
 
@@ -318,17 +371,18 @@ def _backward_refusal(completion, t0, t1):
     )
 
 
-def _solve_cvode(completion, rhs, jac, t_span, x0, t_eval, rtol, atol, options, built):
+def _solve_cvode(completion, rhs, jac, t_span, x0, t_eval, rtol, atol, options, built, origin=0.0):
+    """CVODE on `t_span` (offsets from `origin`, as `rhs` and `jac` take them)."""
     constant_jac = completion.jac(t_span[0], x0) if completion.dae.is_constant else None
     out = _cvode.solve(rhs, jac, *t_span, x0, t_eval, rtol, atol, options, constant_jac=constant_jac)
     message = out["message"] + built
     status = out["status"]
     if "failure" in out:
         t_fail, exc = out["failure"]
-        message, status = f"evaluating the right-hand side failed at t={float(t_fail)!r}: {exc}", -2
+        message, status = f"evaluating the right-hand side failed at t={float(origin + t_fail)!r}: {exc}", -2
     return CompletionResult(
-        t=out["t"], x=out["x"], success=out["success"], status=status, message=message,
-        nfev=out["nfev"], njev=out["njev"], nlu=0, sol=None, completion=completion,
+        t=out["t"] if origin == 0.0 else origin + out["t"], x=out["x"], success=out["success"], status=status,
+        message=message, nfev=out["nfev"], njev=out["njev"], nlu=0, sol=None, completion=completion,
     )
 
 
@@ -343,13 +397,20 @@ def _interpolation_tol(interpolate, rtol):
     raise ValueError(f"`interpolate` must be None, True, False or a relative accuracy in (0, 1); found {interpolate!r}.")
 
 
-def _failed(completion, t, exc, partial=None):
-    """A failed run's result: the trajectory computed before the failure (like solve_ivp), and why."""
-    ts, xs, nfev = partial if partial is not None else (np.zeros(0), np.zeros((completion.n, 0)), 0)
+def _failed(completion, failure, ts, xs, nfev, t_end, built):
+    """A run whose right-hand side failed mid-run (`failure`, a ForcingFailed): the trajectory computed
+    before it, and why; where the derivative array loses rank near the failure, the time it does."""
+    t, exc = failure.t, failure.exc
     kept = f"; the result holds the {ts.size} point(s) computed before it, up to t={float(ts[-1])!r}" if ts.size else ""
+    singular = ""
+    if isinstance(exc, (IndexDeterminationError, RankDecisionWarning)) and ts.size:
+        t_s = _singular_time(completion, float(t), float(t), abs(t_end - float(ts[0])), 1.0 if t_end >= ts[0] else -1.0)
+        if t_s is not None:
+            singular = (f"; the DAE is not uniquely solvable at t={t_s!r} (the derivative array (k={completion.k}) "
+                        "loses rank there)")
     return CompletionResult(
         t=ts, x=xs, success=False, status=-2,
-        message=f"evaluating the right-hand side failed at t={float(t)!r}: {exc}{kept}",
+        message=f"evaluating the right-hand side failed at t={float(t)!r}: {exc}{singular}{kept}{built}",
         nfev=nfev, njev=0, nlu=0, sol=None, completion=completion,
     )
 
@@ -379,39 +440,6 @@ def _warn_if_costly(method, stiffness, completion, t0, x0):
         "constant coefficients, or a smaller lam.",
         StiffnessWarning, stacklevel=3,
     )
-
-
-def _recording(method, solvers):
-    """`method` as an OdeSolver class that appends each instance to `solvers` (to know how far a failed run got)."""
-    import scipy.integrate
-
-    base = getattr(scipy.integrate, method, None) if method in ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA") \
-        else method
-    if not (isinstance(base, type) and issubclass(base, OdeSolver)):
-        return method  # solve_ivp reports an unknown name
-
-    def __init__(self, *args, **kwargs):
-        solvers.append(self)
-        base.__init__(self, *args, **kwargs)
-
-    return type(base.__name__, (base,), {"__init__": __init__})
-
-
-def _partial_run(fun, t0, t_ok, x0, method, t_eval, options):
-    """``(t, x, nfev)`` of the run up to the last accepted step `t_ok` before a failed evaluation."""
-    if t_eval is not None:
-        t_eval = np.asarray(t_eval, dtype=float)
-        t_eval = t_eval[np.sign(t_ok - t0) * (t_eval - t_ok) <= 0] if t_ok != t0 else t_eval[t_eval == t0]
-    if t_ok == t0:
-        keep = t_eval is None or t_eval.size > 0
-        return (np.array([t0]), x0[:, None].copy(), 0) if keep else (np.zeros(0), np.zeros((x0.size, 0)), 0)
-    options.pop("dense_output", None)
-    options.pop("events", None)
-    try:
-        sol = solve_ivp(fun, (t0, t_ok), x0, method=method, t_eval=t_eval, **options)
-    except (_ForcingFailed, ValueError):  # fails again (a solver probing past its bound, a first_step too long)
-        return np.array([t0]), x0[:, None].copy(), 0
-    return sol.t, sol.y, sol.nfev
 
 
 def solve_dae(dae, t_span, x0, *, completion="alternative", lam=None, k=None, rcond=None, **options):

@@ -128,3 +128,25 @@ def test_expm_callable_forcing_vectorized_and_not():
         assert c._forcing._callable_vectorizes is (f is f_numpy)
     np.testing.assert_allclose(results[0], results[1], rtol=0, atol=1e-13)
     np.testing.assert_allclose(results[0], exact(ts), rtol=0, atol=1e-8)
+
+
+@pytest.mark.parametrize("grid", ["default", "uniform", "irregular"])
+def test_expm_dense_output_is_the_propagator_from_the_last_step_point(grid):
+    """``sol(t)`` steps exactly from the step point before t: as accurate as the output points."""
+    dae, exact = _manufactured(SMOOTH)
+    c = complete(dae, "alternative", lam=1.0)
+    t_eval = {"default": None, "uniform": np.linspace(0.0, 4.0, 9), "irregular": [0.0, 0.3, 2.9, 3.0]}[grid]
+    res = solve_completion(c, (0.0, 4.0), exact(0.0), method="expm", t_eval=t_eval, dense_output=True,
+                           rtol=1e-10, atol=1e-10)
+    ts = np.sort(np.random.default_rng(1).uniform(0.0, 4.0, 25))
+    np.testing.assert_allclose(res.sol(ts), exact(ts), rtol=0, atol=1e-8)
+    np.testing.assert_allclose(res.sol(res.t), res.x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(res.sol(4.0), exact(4.0), rtol=0, atol=1e-8)
+    assert res.sol(1.5).shape == (dae.n,)
+
+
+def test_expm_dense_output_backward():
+    p = gallery.prescribed_path()
+    c = complete(p.dae, "standard")
+    res = solve_completion(c, (2.0, 0.0), p.exact(2.0), method="expm", dense_output=True, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(res.sol([1.7, 0.2]), p.exact(np.array([1.7, 0.2])), rtol=0, atol=1e-7)

@@ -362,3 +362,44 @@ def test_near_singular_point_the_library_accepts_is_as_accurate_as_the_library(t
                                atol=tol / 100)
     err_lib = np.abs(res.x - exact).max()
     assert err_fmu <= 2 * err_lib + tol, (err_fmu, err_lib)
+
+
+def _rot2_in(eps, start):
+    """Rot2 in the time unit `eps` from t = `start`: ``(eps A(t/eps), B(t/eps), f(t/eps))``, exact ``x(t/eps)``."""
+    src = PROBLEMS_SOURCES["Rot2"]
+    sub = {T: T / eps}
+    xe = sp.Matrix(src["xe"]).subs(sub)
+    name = f"Rot2_{'micro' if eps < 1 else 'unit'}_{int(start)}"
+    d, _ = _spec(name, (eps * sp.Matrix(src["A"])).subs(sub), sp.Matrix(src["B"]).subs(sub), xe, lam=2.0 / eps,
+                 stop=start + STOP * eps)
+    d["experiment"].update(start=start, step=DT * eps)
+    for i, state in enumerate(d["states"].values()):
+        state["start"] = float(xe[i].subs(T, start))
+    return name, d
+
+
+@pytest.mark.parametrize("eps, start", [(1e-6, 0.0), (1.0, 1e5), (1.0, 1e6)], ids=["microseconds", "1e5", "1e6"])
+def test_a_time_scaled_or_late_horizon_is_tabulated_like_the_unit_one(built, tmp_path, eps, start):
+    """Rot2 on [0, 2e-6] (in microseconds) was refused as 'not solvable'; from t = 1e5 its tables took 8x the
+    pieces and lost the margin past the stop time that Model Exchange hosts use, from t = 1e6 it was refused
+    naming '[1e+06, 1e+06]'. Each is Rot2 on [0, 2]: the same tables, and the exact solution in CS and ME."""
+    def pieces(description):
+        return int(description.split("piecewise Chebyshev, ")[1].split(" piece")[0])
+
+    from fmpy import read_model_description
+
+    base = read_model_description(str(built["Rot2"])).description
+    name, d = _rot2_in(eps, start)
+    fmu = build_fmu(d, tmp_path, target="native")
+    description = read_model_description(str(fmu)).description
+    assert pieces(description) == pieces(base), description
+    assert "margin past the stop time shortened" not in description
+    assert f"tabulated on [{start:.12g}, {start + STOP * eps * 1.1:.12g}]" in description
+    steps = int(round(STOP / DT))
+    for interface, tol in (("cs", 1e-8), ("me", 1e-6)):
+        r = run({"fmu": str(fmu), "interface": interface, "dt": DT * eps, "steps": steps, "t0": start,
+                 "outputs": _names(d), "rtol": 1e-10, "block": BLOCK})
+        got = np.array(r["values"]).T
+        exact = np.array(sp.lambdify(T, sp.Matrix(PROBLEMS_SOURCES["Rot2"]["xe"]), "numpy")(
+            (np.array(r["time"]) - 0.0) / eps), dtype=float).reshape(3, -1)
+        assert rel_err(got, exact) < tol, (interface, rel_err(got, exact))

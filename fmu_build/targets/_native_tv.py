@@ -43,7 +43,7 @@ import re
 import numpy as np
 
 import lsc
-from lsc._chebyshev import _coefficients, _extreme_points as _points  # the library's Chebyshev points and DCT
+from lsc._chebyshev import _coefficients, _coefficients_at, _extreme_points as _points, _positions  # the library's
 
 __all__ = []
 
@@ -158,16 +158,9 @@ def _maps_at(comp, t):
     """``(G, W, C, cmap)`` of a time-varying completion at t: ``x' = G x + W [f; ...; f^(p)]``, ``c = C x -
     cmap [f; ...; f^(p)]``, in the given unknowns and f (the library's own maps, as for constant coefficients)."""
     from lsc._completion import _Factors
-    from lsc._problem import unscale_columns
 
     fac = _Factors(comp._eq, comp.k, t, comp.extra_order, comp.rcond, expected_rank=comp._rank)
-    G, W = comp._maps(fac, t)
-    if comp._col_scales is not None:
-        G, W = unscale_columns(fac, G, W, comp._col_scales)
-    cmap = fac.cg
-    if comp._row_scales is not None:
-        columns = np.tile(comp._row_scales, comp._order + 1)
-        W, cmap = W * columns, cmap * columns
+    G, W, cmap = comp._unscaled(fac, *comp._maps(fac, t))  # rows, unknowns and unit of time mapped back
     return G, W, fac.C, cmap
 
 
@@ -190,7 +183,7 @@ def fit_tables(dae, method, lam, k, t_span, error, inputs=None, counter=None):
     `counter` (a one-element list) counts the evaluations of the completion, also of a fit that fails."""
     a, b = map(float, t_span)
     sampler = _Sampler(dae, method, lam, k, error, inputs)
-    sampler.where = f"[{a:g}, {b:g}]"
+    sampler.where = f"[{a:.12g}, {b:.12g}]"
     sampler.check_affine(np.linspace(a, b, 5))
     values, scale = {}, np.zeros(len(sampler.groups))
 
@@ -201,7 +194,7 @@ def fit_tables(dae, method, lam, k, t_span, error, inputs=None, counter=None):
                 counter[0] += 1
             v = values[t] = sampler(t)
             if not np.all(np.isfinite(v)):
-                raise error(f"the completion is not finite at t = {t!r} on [{a:g}, {b:g}]")
+                raise error(f"the completion is not finite at t = {t!r} on [{a:.12g}, {b:.12g}]")
             for i, (lo, hi) in enumerate(sampler.groups):
                 scale[i] = max(scale[i], np.abs(v[lo:hi]).max(initial=0.0))
         return v
@@ -215,7 +208,8 @@ def fit_tables(dae, method, lam, k, t_span, error, inputs=None, counter=None):
         for m in degrees:
             ts = 0.5 * (hi + lo) + 0.5 * (hi - lo) * _points(m)
             ts[0], ts[-1] = hi, lo
-            coef = _coefficients(np.array([sample(float(t)) for t in ts]))
+            # the polynomial through the times actually sampled (rounded to doubles: 1e-11 of a piece at t = 1e5)
+            coef = _coefficients_at(np.array([sample(float(t)) for t in ts]), _positions(ts, lo, hi))
             if tail_ok(coef):
                 return coef
         return None
@@ -230,7 +224,7 @@ def fit_tables(dae, method, lam, k, t_span, error, inputs=None, counter=None):
         if hi - lo <= MIN_PIECE * (b - a) or len(done) + len(todo) + 2 > MAX_PIECES:
             raise error(f"the completion is not resolved to {TOL:g} by piecewise Chebyshev expansions of degree "
                         f"<= {DEGREES[-1]} within the limit of {MAX_PIECES} pieces (minimum piece {MIN_PIECE:g} of "
-                        f"the horizon) on [{a:g}, {b:g}]: shorten the horizon (experiment stop) or build with "
+                        f"the horizon) on [{a:.12g}, {b:.12g}]: shorten the horizon (experiment stop) or build with "
                         "target='pythonfmu'")
         _check_size(len(done) + len(todo) + 2, sampler)  # every piece has at least the lowest degree
         mid = 0.5 * (lo + hi)
@@ -278,10 +272,8 @@ def _lowest_degree(pieces, limit, tail_ok, refit):
 
 def _expansion_at_points(coef, lo, hi, l, h, m):
     """The piece's expansion (`coef` on [lo, hi]) at the m + 1 Chebyshev extreme points of [l, h], in the order
-    `fit_tables` samples them."""
-    ts = 0.5 * (h + l) + 0.5 * (h - l) * _points(m)
-    ts[0], ts[-1] = h, l
-    x = np.clip((2.0 * ts - lo - hi) / (hi - lo), -1.0, 1.0)
+    `fit_tables` samples them (placed by their offsets from lo: no rounding of |t| itself)."""
+    x = np.clip((2.0 * (l - lo) + (h - l) * (1.0 + _points(m))) / (hi - lo) - 1.0, -1.0, 1.0)
     return np.polynomial.chebyshev.chebval(x, coef).T
 
 
@@ -442,7 +434,7 @@ def finish_header(header, tab):
 
 def note(spec, tab, lam_note):
     degs = [c.shape[0] - 1 for _, _, c in tab["pieces"]]
-    return (f"native C, time-varying A and B tabulated on [{tab['t0']:g}, {tab['t1']:g}] (piecewise Chebyshev, "
+    return (f"native C, time-varying A and B tabulated on [{tab['t0']:.12g}, {tab['t1']:.12g}] (piecewise Chebyshev, "
             f"{len(degs)} piece(s) of degree {min(degs)}-{max(degs)}, coefficient tail <= {TOL:g} relative; "
             f"sixth-order Magnus steps, fourth-order where a bound of their difference is below the tolerance, "
             f"sub-steps until the error estimate is); {spec.method} completion, {lam_note}; all parameters fixed at "
