@@ -332,6 +332,21 @@ def test_factor_and_offset_through_connector_units(base, plain, tmp_path):
     scaled(out, plain, 5 / 9, -32 * 5 / 9)
 
 
+def test_an_fmu_whose_units_break_the_fmi_schema_is_refused(base, tmp_path):
+    """The FMU side of the attacks on SSP definitions (an exponent typed M, 1.5 or 1_0, a factor 1_000, two
+    BaseUnits, a unit no Unit defines, relativeQuantity="yes"): fmpy checks the model description against the
+    FMI 2.0 schema, and the master refuses the FMU naming its model description."""
+    cases = [{"units": '<Unit name="u"><BaseUnit M="1"/></Unit>'},
+             {"units": '<Unit name="u"><BaseUnit m="1.5"/></Unit>'},
+             {"units": '<Unit name="u"><BaseUnit m="1_0"/></Unit>'},
+             {"units": '<Unit name="u"><BaseUnit m="1" factor="1_000"/></Unit>'},
+             {"units": '<Unit name="u"><BaseUnit m="1"/><BaseUnit s="1"/></Unit>'}, {"reals": {"y1": {"unit": "zz"}}},
+             {"units": K, "reals": {"y1": {"unit": "K", "relativeQuantity": "yes"}}}]
+    fmus = [variant(base["osc"], tmp_path / f"{i}.fmu", **case) for i, case in enumerate(cases)]
+    for out in attempts(*[pair(f, base["follow"]) for f in fmus]):
+        refused(out, "component 'a'", "invalid modelDescription.xml")
+
+
 def test_a_unit_an_fmu_defines_twice_is_refused(base, tmp_path):
     """Two Units named cm (0.01 m and 0.1 m): which one the FMU means cannot be told; refused, not the last."""
     twice = CM + fmi_unit("cm", m=1, factor=0.1) + M
@@ -440,6 +455,20 @@ def test_bound_values_are_read_in_the_xml_schema_syntax_only(base, tmp_path):
                       for i, (item, _) in enumerate(cases)])
     for out, (_, name) in zip(outs, cases):
         refused(out, name, "xs:double")
+
+
+def test_two_units_elements_are_refused(tmp_path):
+    """An SSD (or a ParameterSet) holds at most one Units element: a second one's definitions were ignored, so
+    an FMU's other definition of the same name went unchallenged."""
+    document = ssd(comp("a"), units=unit("cm", m=1, factor=0.01)).replace(
+        "</ssd:SystemStructureDescription>", f"<ssd:Units>{unit('cm', m=1, factor=0.1)}</ssd:Units>"
+                                             "</ssd:SystemStructureDescription>")
+    with pytest.raises(ValueError, match="Units"):
+        read_ssd(tmp_path, document)
+    bindings = parameters(("k", "Real", 1, "cm"), units=unit("cm", m=1, factor=0.01)).replace(
+        "</ssv:ParameterSet>", f"<ssv:Units>{unit('cm', m=1, factor=0.1)}</ssv:Units></ssv:ParameterSet>")
+    with pytest.raises(ValueError, match="Units"):
+        read_ssd(tmp_path, ssd(comp("a", bindings)))
 
 
 def test_nested_systems_are_refused(tmp_path):
