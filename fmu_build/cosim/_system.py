@@ -289,7 +289,7 @@ def _from_ssd(data, where, locate):
         connections.append((a, y, b, u))
     system = System(components, _check_connections(connections, where), None, where)
     system.connectors, system.parameters = connectors, parameters
-    system.units = parse_units(_child(root, "Units"), where)
+    system.units = parse_units(_one(root, "Units", where), where)
     system.connector_units, system.unconverted = connector_units, unconverted
     system.transformations = transformations
     return system
@@ -337,7 +337,7 @@ def _bindings(element, name, where):
                              f"{[_local(e.tag) for e in sets]}; refused (a run without its values would be another "
                              "model).")
         for ps in sets:
-            units = parse_units(_child(ps, "Units"), f"{what}'s ParameterSet")
+            units = parse_units(_one(ps, "Units", f"{what}'s ParameterSet"), f"{what}'s ParameterSet")
             parameters = _child(ps, "Parameters")
             for parameter in list(parameters) if parameters is not None else []:
                 kinds = [e for e in parameter if _local(e.tag) in ("Real", "Integer", "Boolean", "String")]
@@ -380,6 +380,15 @@ def _local(tag):
 
 def _child(element, name):
     return next((e for e in element if _local(e.tag) == name), None)
+
+
+def _one(element, name, where):
+    """The child ``name`` of ``element`` (None: none); two are refused (the second would be ignored)."""
+    found = [e for e in element if _local(e.tag) == name]
+    if len(found) > 1:
+        raise ValueError(f"{where}: {len(found)} {name} elements where the SSP allows one; refused (the second "
+                         "would be ignored).")
+    return found[0] if found else None
 
 
 def _check_name(name, where):
