@@ -366,9 +366,12 @@ def test_an_fmu_whose_time_is_not_in_seconds_is_refused(base, plain, tmp_path):
     hours = timed("h", "h", fmi_unit("h", s=1, factor=3600))
     ms = timed("ms", "ms", fmi_unit("ms", s=1, factor=0.001))
     seconds = timed("s", "s", fmi_unit("s", s=1))
-    h, milli, s = attempts(pair(hours, base["follow"]), pair(ms, base["follow"]), pair(seconds, base["follow"]))
+    odd = timed("odd", "s", fmi_unit("s", s=1, factor=0.001))  # a unit named s that is a millisecond
+    h, milli, s, s_ms = attempts(pair(hours, base["follow"]), pair(ms, base["follow"]), pair(seconds, base["follow"]),
+                                 pair(odd, base["follow"]))
     refused(h, "'h'", "time", "seconds")
     refused(milli, "'ms'", "time", "seconds")
+    refused(s_ms, "'s'", "0.001 s", "seconds")
     assert ran(s)["b.y1"] == plain["b.y1"]
 
 
@@ -413,6 +416,24 @@ def test_linear_transformation_is_applied_after_the_unit_conversion(base, plain,
         with pytest.raises(ValueError, match="LinearTransformation's"):
             read_ssd(tmp_path, ssd(elements, link("a", "y1", "b", "u", f'<ssc:LinearTransformation factor="{factor}" '
                                                                        f'offset="{offset}"/>')))
+
+
+def test_suppressed_conversion_with_a_connector_unit_other_than_its_variables_is_refused(base, plain, tmp_path):
+    """suppressUnitConversion: "the environment will not perform any automatic unit conversions". A connector
+    in mm on an output in m would need one (m -> mm) that the same file suppresses: which it means cannot be
+    told; refused. Connectors that only give units to variables without one pass the numbers (no conversion)."""
+    src = variant(base["osc"], tmp_path / "s.fmu", M + fmi_unit("mm", m=1, factor=0.001), reals={"y1": {"unit": "m"}})
+    dst = variant(base["follow"], tmp_path / "d.fmu", CM, reals={"u": {"unit": "cm"}})
+    units = unit("mm", m=1, factor=0.001) + unit("cm", m=1, factor=0.01)
+    document = ssd(comp("a", connectors(("y1", "output", "Real", "mm"))) +
+                   comp("b", connectors(("u", "input", "Real", "cm"))), link("a", "y1", "b", "u", suppress="true"),
+                   units=units)
+    clash = write_ssp(tmp_path / "x.ssp", document, {"a": src, "b": dst})
+    given = write_ssp(tmp_path / "g.ssp", document, {"a": base["osc"], "b": base["follow"]})
+    outputs = ["a.y1", "b.y1", "b.y2"]
+    wrong, passed = attempts((clash, outputs, {"extrapolation": 1}), (given, outputs, {"extrapolation": 1}))
+    refused(wrong, "suppressUnitConversion", "a.y1", "'mm'", "'m'")
+    scaled(ran(passed), plain, 1.0, rows=slice(None))
 
 
 @pytest.mark.parametrize("mapping", ["BooleanMappingTransformation", "IntegerMappingTransformation",
