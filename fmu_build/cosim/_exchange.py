@@ -325,6 +325,14 @@ def _check_units(comps, connections, where, system):
         steps = [(unit_src, at_src), (at_dst, unit_dst)]
         if (b, u) not in unconverted:
             steps.insert(1, (at_src, at_dst))
+        else:
+            # "the environment will not perform any automatic unit conversions": a connector in another unit than
+            # its variable's would need one; which the file means cannot be told
+            for (c, v), unit, own in (((a, y), at_src, unit_src), ((b, u), at_dst, unit_dst)):
+                if unit is not None and own is not None and unit != own:
+                    raise ValueError(f"{what}: suppressUnitConversion, but connector {c}.{v} is in unit {unit!r} and "
+                                     f"its variable in unit {own!r}: that conversion would be done although the file "
+                                     "suppresses conversions; refused.")
         transformation = transformations.get((b, u), _units.IDENTITY)
 
         def through(relative):
