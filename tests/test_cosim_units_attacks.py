@@ -492,6 +492,29 @@ def test_two_units_elements_are_refused(tmp_path):
         read_ssd(tmp_path, ssd(comp("a", bindings)))
 
 
+def test_integer_and_boolean_bindings_are_read_in_the_xml_schema_syntax(tmp_path):
+    """xs:int and xs:boolean: ``3.0`` is no Integer and ``True`` no Boolean of an SSP file (Python's readings
+    took them); `` 3 ``, ``true`` and ``1`` are. Checked on the master's reading of the bindings alone."""
+    from types import SimpleNamespace
+
+    from fmu_build.cosim._master import _bound
+
+    def variable(kind):
+        return SimpleNamespace(type=kind, causality="parameter", unit=None, declaredType=None, relativeQuantity=None)
+
+    comps = {"a": SimpleNamespace(variables={"n": variable("Integer"), "on": variable("Boolean")}, units={})}
+
+    def bound(kind, name, text):
+        return _bound(comps, read_ssd(tmp_path, ssd(comp("a", parameters((name, kind, text, None))))))[f"a.{name}"]
+
+    assert bound("Integer", "n", " 3 ") == 3 and bound("Boolean", "on", "true") is True
+    assert bound("Boolean", "on", "1") is True and bound("Boolean", "on", "0") is False
+    for kind, name, text in (("Integer", "n", "3.0"), ("Integer", "n", "1_0"), ("Integer", "n", "3e0"),
+                             ("Boolean", "on", "True"), ("Boolean", "on", "yes")):
+        with pytest.raises(ValueError, match=f"a.{name} must be"):
+            bound(kind, name, text)
+
+
 def test_nested_systems_are_refused(tmp_path):
     for element in ('<ssd:System name="sub"><ssd:Elements/></ssd:System>',
                     '<ssd:Component name="c" type="application/x-ssp-definition" source="c.ssd"/>'):
