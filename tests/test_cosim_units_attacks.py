@@ -347,6 +347,18 @@ def test_an_fmu_whose_units_break_the_fmi_schema_is_refused(base, tmp_path):
         refused(out, "component 'a'", "invalid modelDescription.xml")
 
 
+def test_converted_inputs_under_iteration_step_control_and_second_derivatives(base, tmp_path):
+    """Rolled-back and repeated steps (iterations=2), a controlled step and extrapolation=2 set their inputs
+    through the same map: m into cm gives 100 times the follower's values and derivatives of the run without
+    units, step for step."""
+    src = variant(base["osc"], tmp_path / "s.fmu", M, reals={"y1": {"unit": "m"}})
+    dst = variant(base["follow"], tmp_path / "d.fmu", CM, reals={"u": {"unit": "cm"}})
+    options = [{"iterations": 2}, {"step_control": True, "rtol": 1e-3}, {"extrapolation": 2}]
+    outs = attempts(*[pair(a, b, **o) for o in options for a, b in ((base["osc"], base["follow"]), (src, dst))])
+    for reference, converted in zip(outs[::2], outs[1::2]):
+        scaled(ran(converted), ran(reference), 100.0, rows=slice(None))
+
+
 def test_a_unit_an_fmu_defines_twice_is_refused(base, tmp_path):
     """Two Units named cm (0.01 m and 0.1 m): which one the FMU means cannot be told; refused, not the last."""
     twice = CM + fmi_unit("cm", m=1, factor=0.1) + M
