@@ -107,24 +107,45 @@ def _check_python_model(name, path, unzipdir):
 
 def _slave_class():
     """fmpy's FMI 2.0 Co-Simulation slave whose connected Real inputs take values in the source's unit."""
+    import math
+
+    from fmpy.fmi1 import FMICallException
     from fmpy.fmi2 import FMU2Slave
+
+    class ConversionOverflow(FMICallException):
+        """A finite value that a connection's unit map takes beyond the range of a double (the master stops
+        there, as on a failed call, rather than set inf)."""
+
+        def __init__(self, function, text):
+            Exception.__init__(self, text)
+            self.function, self.status = function, 3
 
     class FMU2SlaveWithUnits(FMU2Slave):  # (fmpy picks the FMI version's functions by the name's prefix)
         """Values and input derivatives set on a value reference of ``wire`` (an input -> `_units.Affine` from
         its connection's source unit) are converted: a value by the map, a derivative by its scale."""
 
-        wire = {}
+        wire, wire_names = {}, {}
+
+        def _converted(self, function, vr, value, derivative):
+            wire, out = self.wire, []
+            for r, v in zip(vr, value):
+                m = wire.get(r)
+                x = v if m is None else m.scale * v if derivative else m(v)
+                if m is not None and math.isfinite(v) and not math.isfinite(x):
+                    raise ConversionOverflow(function, f"the {'derivative' if derivative else 'value'} {v!r} "
+                                             f"converted to the unit of the input {self.wire_names.get(r, r)} is "
+                                             f"{x!r}, beyond the range of a double")
+                out.append(x)
+            return out
 
         def setReal(self, vr, value):
-            wire = self.wire
-            if wire:
-                value = [wire[r](v) if r in wire else v for r, v in zip(vr, value)]
+            if self.wire:
+                value = self._converted("fmi2SetReal", vr, value, False)
             return super().setReal(vr, value)
 
         def setRealInputDerivatives(self, vr, order, value):
-            wire = self.wire
-            if wire:
-                value = [wire[r].scale * v if r in wire else v for r, v in zip(vr, value)]
+            if self.wire:
+                value = self._converted("fmi2SetRealInputDerivatives", vr, value, True)
             return super().setRealInputDerivatives(vr, order, value)
 
         def set_own(self, vr, value):
@@ -251,14 +272,33 @@ def check_types(comps, connections, connectors=None, where="`system`", system=No
     _check_units(comps, connections, where, system)
 
 
+def _check_time(c, definitions, where):
+    """The master steps in seconds and input derivatives are per second: an FMU whose independent variable is
+    in another unit (FMI 2.0 allows one) is refused."""
+    for v in c.md.modelVariables:
+        name = _units.variable_unit(v) if v.causality == "independent" else None
+        if name is None:
+            continue
+        unit = definitions.lookup(name)
+        if (unit is None and name != "s") or (unit is not None and not unit.same(_units.SECOND)):
+            found = "no file defines it" if unit is None else unit.describe()
+            raise ValueError(f"{where}: component {c.name!r}: its time {v.name!r} is in unit {name!r} ({found}); "
+                             "the master steps in seconds (s); refused.")
+
+
 def _check_units(comps, connections, where, system):
-    """Connector units against their variables', and the map of every connection (see `check_types`)."""
+    """Connector units against their variables', the time of every FMU, and the map of every connection (see
+    `check_types`)."""
     ssp_units = getattr(system, "units", {}) or {}
     connector_units = getattr(system, "connector_units", {}) or {}
     unconverted = getattr(system, "unconverted", set()) or set()
+    transformations = getattr(system, "transformations", {}) or {}
 
     def definitions(*names):
         return _units.Definitions((where, ssp_units), *((f"the FMU of {n}", comps[n].units) for n in names))
+
+    for n, c in comps.items():
+        _check_time(c, definitions(n), where)
 
     for (c, name), unit in connector_units.items():
         v = comps[c].variables.get(name)
@@ -266,27 +306,38 @@ def _check_units(comps, connections, where, system):
             _units.conversion(unit, _units.variable_unit(v), definitions(c),
                               f"{where}: connector {c}.{name}", _units.is_relative(v))
     for c in comps.values():
-        c.fmu.wire = {}
+        c.fmu.wire, c.fmu.wire_names = {}, {}
     for a, y, b, u in connections:
         src, dst = comps[a].variable(y, "output"), comps[b].variable(u, "input")
-        if src.type != "Real":
-            continue
         what = f"{where}: connection {a}.{y} -> {b}.{u}"
+        if src.type != "Real":
+            if (b, u) in transformations:
+                raise ValueError(f"{what}: a LinearTransformation applies to Real values; this connection is "
+                                 f"{src.type}; refused.")
+            continue
         defs = definitions(a, b)
         unit_src, unit_dst = _units.variable_unit(src), _units.variable_unit(dst)
         at_src, at_dst = connector_units.get((a, y), unit_src), connector_units.get((b, u), unit_dst)
         # the value leaves the output in its unit, is presented in the start connector's, arrives in the end
-        # connector's (unconverted with suppressUnitConversion: the numbers pass as they are) and is set in the
-        # input's unit
+        # connector's (unconverted with suppressUnitConversion: the numbers pass as they are), is transformed
+        # there by the connection's LinearTransformation (SSP 1.0: after the conversion, in the end connector's
+        # unit) and is set in the input's unit
         steps = [(unit_src, at_src), (at_dst, unit_dst)]
         if (b, u) not in unconverted:
             steps.insert(1, (at_src, at_dst))
+        else:
+            # "the environment will not perform any automatic unit conversions": a connector in another unit than
+            # its variable's would need one; which the file means cannot be told
+            for (c, v), unit, own in (((a, y), at_src, unit_src), ((b, u), at_dst, unit_dst)):
+                if unit is not None and own is not None and unit != own:
+                    raise ValueError(f"{what}: suppressUnitConversion, but connector {c}.{v} is in unit {unit!r} and "
+                                     f"its variable in unit {own!r}: that conversion would be done although the file "
+                                     "suppresses conversions; refused.")
+        transformation = transformations.get((b, u), _units.IDENTITY)
 
         def through(relative):
-            total = _units.IDENTITY
-            for frm, to in steps:
-                total = total.then(_units.conversion(frm, to, defs, what, relative))
-            return total
+            maps = [_units.conversion(frm, to, defs, what, relative) for frm, to in steps]
+            return _units.compose(maps[:-1] + [transformation] + maps[-1:], what)
 
         rel_src, rel_dst = _units.is_relative(src), _units.is_relative(dst)
         total = through(rel_src and rel_dst)
@@ -294,4 +345,5 @@ def _check_units(comps, connections, where, system):
             raise ValueError(f"{what}: one side is a relative quantity (a difference), the other not, and their "
                              f"units {unit_src!r} and {unit_dst!r} differ by an offset; refused.")
         if not total.is_identity:
-            comps[b].fmu.wire[comps[b].variables[u].valueReference] = total
+            ref = comps[b].variables[u].valueReference
+            comps[b].fmu.wire[ref], comps[b].fmu.wire_names[ref] = total, f"{b}.{u}"

@@ -1,6 +1,7 @@
 """``cosimulate``: argument checks, loading the components, and the run's life cycle."""
 
 import logging
+import math
 import os
 import shutil
 import sys
@@ -221,7 +222,9 @@ def _bound(comps, system):
             found = "no such variable" if v is None else f"a {v.causality} {v.type}"
             raise ValueError(f"{system.origin}: the ParameterBinding of {key} is a {kind}; the FMU has {found}.")
         what = f"{system.origin}: the ParameterBinding of {key}"
-        value = convert(text, kind, what)
+        # the text of an SSP file, in the XML Schema's syntax (Python's float() would read 1_000 as 1000)
+        parse = {"Real": _units.xs_double, "Integer": _units.xs_int, "Boolean": _units.xs_boolean}.get(kind)
+        value = convert(parse(text, what) if parse else text, kind, what)
         if binding.unit is not None:
             # the variable's unit: the FMU's, else the one its connector in the SSD gives
             target = _units.variable_unit(v) or system.connector_units.get((cname, var))
@@ -230,7 +233,11 @@ def _bound(comps, system):
                                  "convert it to; refused (give the value without a unit to apply it as it is).")
             defs = _units.Definitions((f"{system.origin} (its ParameterSet)", binding.units),
                                       (system.origin, system.units), (f"the FMU of {cname}", comps[cname].units))
+            given = value
             value = _units.conversion(binding.unit, target, defs, what, _units.is_relative(v))(value)
+            if math.isfinite(given) and not math.isfinite(value):
+                raise ValueError(f"{what}: {given!r} in unit {binding.unit!r} is {value!r} in unit {target!r}, "
+                                 "beyond the range of a double; refused.")
         values[key] = value
     return values
 

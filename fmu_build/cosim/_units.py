@@ -11,9 +11,14 @@ defined only when the exponents agree; a derivative (or a difference, a relative
 ``ssv:Units``) and the FMUs' ``UnitDefinitions``; a name is looked up in all the sources of a conversion,
 and one defined differently by two of them is refused, as is a unit no source defines: a unit is never
 guessed. Two variables with the same unit name need no definition (the identity).
+
+Numbers in an SSP file are read in the XML Schema's syntax (``xs:int``, ``xs:double``), not Python's:
+``1_0`` or an Arabic-Indic digit is no number there. A map whose factor or offset leaves the range of a
+double (``1e300 m`` into ``1e-300 m``) is refused rather than set as inf or 0.
 """
 
 import math
+import re
 from typing import NamedTuple
 
 BASE_UNITS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
@@ -71,6 +76,67 @@ class Affine(NamedTuple):
 
 
 IDENTITY = Affine()
+SECOND = Unit((0, 0, 1, 0, 0, 0, 0, 0))  # the unit of time the master steps in
+
+_SPACE = r"[ \t\r\n]*"  # the XML whitespace around an xs:int or xs:double (collapsed by the schema)
+_XS_INT = re.compile(_SPACE + r"[+-]?[0-9]+" + _SPACE + r"\Z")
+_XS_DOUBLE = re.compile(_SPACE + r"([+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?|[+-]?INF|NaN)" + _SPACE + r"\Z")
+_XS_BOOLEAN = {"true": True, "false": False, "1": True, "0": False}
+
+
+def xs_int(text, what):
+    """The integer an ``xs:int`` text spells, or ValueError naming ``what``.
+
+    Examples
+    --------
+    >>> xs_int(" +2 ", "x")
+    2
+    >>> xs_int("1_0", "x")
+    Traceback (most recent call last):
+    ...
+    ValueError: x must be an integer (xs:int); found '1_0'.
+    """
+    if not isinstance(text, str) or not _XS_INT.match(text) or not -2 ** 31 <= int(text) < 2 ** 31:
+        raise ValueError(f"{what} must be an integer (xs:int); found {text!r}.")
+    return int(text)
+
+
+def xs_double(text, what):
+    """The number an ``xs:double`` text spells (``INF``, ``-INF``, ``NaN`` included), or ValueError naming
+    ``what``.
+
+    Examples
+    --------
+    >>> xs_double(" 1e-2 ", "x"), xs_double("-INF", "x")
+    (0.01, -inf)
+    >>> xs_double("1_000", "x")
+    Traceback (most recent call last):
+    ...
+    ValueError: x must be a number (xs:double); found '1_000'.
+    """
+    if not isinstance(text, str) or not _XS_DOUBLE.match(text):
+        raise ValueError(f"{what} must be a number (xs:double); found {text!r}.")
+    return float(text.strip().replace("INF", "inf"))
+
+
+def xs_boolean(text, what):
+    """The truth value an ``xs:boolean`` text spells (``true``, ``false``, ``1``, ``0``), or ValueError."""
+    value = _XS_BOOLEAN.get(text.strip(" \t\r\n")) if isinstance(text, str) else None
+    if value is None:
+        raise ValueError(f"{what} must be true, false, 1 or 0 (xs:boolean); found {text!r}.")
+    return value
+
+
+def compose(maps, what):
+    """The `Affine` maps one after the other, refused if its factor or offset is no finite number other than 0
+    (a factor beyond the range of a double would set inf, or 0, on the input)."""
+    total = IDENTITY
+    for m in maps:
+        total = total.then(m)
+    if not (math.isfinite(total.scale) and total.scale != 0.0 and math.isfinite(total.offset)):
+        raise ValueError(f"{what}: the map value -> {total.scale!r} value + {total.offset!r} has a factor or offset "
+                         "beyond the range of a double (or a factor 0); refused.")
+    return total
 
 
 def parse_units(element, where):
@@ -93,43 +159,49 @@ def parse_units(element, where):
             raise ValueError(f"{where}: a Unit has no name.")
         if name in units:
             raise ValueError(f"{what} is defined twice; a unit's name is unique in its file.")
-        base = next((e for e in unit if _local(e.tag) == "BaseUnit"), None)
-        if base is None:
-            raise ValueError(f"{what} has no BaseUnit; an SSP unit is defined by its SI base units.")
-        units[name] = _definition({k: base.get(k) for k in (*BASE_UNITS, "factor", "offset")}, what)
+        bases = [e for e in unit if _local(e.tag) == "BaseUnit"]
+        if len(bases) != 1:
+            raise ValueError(f"{what} has {'no' if not bases else len(bases)} BaseUnit elements; an SSP unit is "
+                             "defined by one BaseUnit (its SI base units).")
+        unknown = sorted(set(bases[0].attrib) - {*BASE_UNITS, "factor", "offset"})
+        if unknown:
+            # a typo of an exponent (M for m, k for K) read as absent would make a dimensionless unit
+            raise ValueError(f"{what}: its BaseUnit has the attribute(s) {unknown}, which no standard defines "
+                             f"(exponents {', '.join(BASE_UNITS)}; factor, offset); refused.")
+        units[name] = _definition(bases[0].attrib, what)
     return units
 
 
 def _definition(attributes, what):
-    exponents = []
-    for b in BASE_UNITS:
-        text = attributes.get(b)
-        try:
-            exponents.append(0 if text is None else int(str(text).strip()))
-        except ValueError:
-            raise ValueError(f"{what}: the exponent of {b} must be an integer; found {text!r}.") from None
-    numbers = []
-    for key, default in (("factor", 1.0), ("offset", 0.0)):
-        text = attributes.get(key)
-        try:
-            number = default if text is None else float(text)
-        except (TypeError, ValueError):
-            number = math.nan
-        if not math.isfinite(number) or (key == "factor" and number == 0.0):
+    """The `Unit` of a BaseUnit's attributes: texts in the XML Schema's syntax, or numbers (fmpy's)."""
+    def number(key, default, parse, name):
+        value = attributes.get(key)
+        if value is None:
+            return default
+        return parse(value, f"{what}: {name}") if isinstance(value, str) else value
+
+    exponents = tuple(int(number(b, 0, xs_int, f"the exponent of {b}")) for b in BASE_UNITS)
+    factor, offset = number("factor", 1.0, xs_double, "factor"), number("offset", 0.0, xs_double, "offset")
+    for key, value in (("factor", factor), ("offset", offset)):
+        if not math.isfinite(value) or (key == "factor" and value == 0.0):
             raise ValueError(f"{what}: {key} must be a finite number{' other than 0' if key == 'factor' else ''}; "
-                             f"found {text!r}.")
-        numbers.append(number)
-    return Unit(tuple(exponents), *numbers)
+                             f"found {attributes.get(key)!r}.")
+    return Unit(exponents, float(factor), float(offset))
 
 
 def fmu_units(md):
-    """``{name: Unit or None}`` of an FMU's ``UnitDefinitions`` (fmpy's model description); None where a unit
-    is named without a ``BaseUnit`` (FMI allows it: the name alone, no definition)."""
+    """``{name: Unit or None}`` of an FMU's ``UnitDefinitions`` (fmpy's model description, checked against the
+    FMI schema); None where a unit is named without a ``BaseUnit`` (FMI allows it: the name alone, no
+    definition). A name defined twice is refused: which of the two the FMU means cannot be told."""
     units = {}
     for u in md.unitDefinitions or []:
+        what = f"unit {u.name!r} of the FMU"
+        if u.name in units:
+            raise ValueError(f"{what} is defined twice in its UnitDefinitions; a unit's name is unique there (FMI "
+                             "2.0); refused.")
         b = u.baseUnit
         units[u.name] = None if b is None else _definition(
-            {k: getattr(b, k) for k in (*BASE_UNITS, "factor", "offset")}, f"unit {u.name!r} of the FMU")
+            {k: getattr(b, k) for k in (*BASE_UNITS, "factor", "offset")}, what)
     return units
 
 
@@ -197,7 +269,8 @@ def conversion(source, target, definitions, what, relative=False):
         raise ValueError(f"{what}: unit {source!r} ({a.describe()}) cannot be converted to unit {target!r} "
                          f"({b.describe()}): their SI base units differ; refused.")
     scale = a.factor / b.factor
-    return Affine(scale, 0.0 if relative else (a.offset - b.offset) / b.factor)
+    return compose([Affine(scale, 0.0 if relative else (a.offset - b.offset) / b.factor)],
+                   f"{what}: unit {source!r} ({a.describe()}) into unit {target!r} ({b.describe()})")
 
 
 def _local(tag):
