@@ -343,11 +343,12 @@ def _run_sweep(args):
     """``lsc-fmu sweep``: run a study, write it, optionally plot and recommend."""
     from .study import plot_study, recommend, sweep
 
-    from ._cli_sweep import check_files, check_names, grid_names, grid_of, typed_grid
+    from ._cli_sweep import check_files, check_names, check_plot, grid_names, grid_of, typed_grid
 
     try:
         grid = grid_of(args)
         check_files(args)
+        check_plot(args, grid)
         target = _gallery(args.target) if args.target.startswith("gallery:") else args.target
         reference = args.reference
         if reference is not None and reference.startswith("gallery:"):
@@ -362,12 +363,22 @@ def _run_sweep(args):
     except (ValueError, TypeError, OSError, ImportError) as exc:
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # the rows written so far stay; the study's files say how to go on
+        print(f"lsc-fmu: interrupted; the finished runs are in {args.output}: run the same command again to "
+              "compute only the missing ones.", file=sys.stderr)
+        return 130
     failed = df[~df["success"]]
     print(f"{len(df)} runs ({len(failed)} failed) written to {args.output}")
     if args.plot:
         print(plot_study(df, args.plot, cost=args.cost))
+    status = 0
     if args.recommend is not None:
-        print(recommend(df, args.recommend, cost=args.cost, on=args.on))
+        choice = recommend(df, args.recommend, cost=args.cost, on=args.on)
+        print(choice)
+        if choice.row is None:  # the command was asked for a point and has none
+            print(f"lsc-fmu: error: no run reaches {args.on} <= {args.recommend:g}; widen the grid (larger lam, "
+                  "smaller step or tolerances).", file=sys.stderr)
+            status = 1
     if len(failed) and (len(failed) == len(df) or not args.allow_failures):
         run = failed.index[0]
         point = ", ".join(f"{k}={v}" for k, v in failed.iloc[0].items() if k in grid_names(grid))
@@ -378,7 +389,7 @@ def _run_sweep(args):
             print(f"lsc-fmu: error: {len(failed)} of {len(df)} runs failed (the rows say why; --allow-failures "
                   f"when some may fail); the first: {first}", file=sys.stderr)
         return 1
-    return 0
+    return status
 
 
 def _gallery(text):
