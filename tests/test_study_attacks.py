@@ -403,3 +403,28 @@ def test_cli_ctrl_c_stops_with_one_line_and_the_rows_kept(tmp_path):
     assert "Traceback" not in err and "interrupted" in err and "run the same command again" in err, err[-2000:]
     assert not (tmp_path / "s.csv.lock").exists()
     assert len(pd.read_csv(output)) >= 2
+
+
+# -- 10. more arguments that mean nothing for the target -----------------------------------------
+def test_an_fmu_without_a_stop_time_needs_t_span(tmp_path):
+    # the runs silently went over [0, 1]
+    source = _reference_fmu("Dahlquist")
+    with zipfile.ZipFile(source) as zf:
+        experiment = re.search(r"<DefaultExperiment[^>]*/>", zf.read("modelDescription.xml").decode()).group(0)
+    fmu = _edited_fmu(source, tmp_path / "NoExperiment.fmu", (experiment, ""))
+    with pytest.raises(ValueError, match="no default experiment with a stop time: give `t_span`"):
+        _serial(fmu, {"k": [1.0]})
+    df = _serial(fmu, {"k": [1.0], "step": [0.1]}, t_span=(0.0, 0.5))
+    assert df["success"].all() and df["steps"].tolist() == [5]
+
+
+def test_a_gallery_problem_takes_no_model_parameters_up_front():
+    # every row failed with the same reason; now the study is refused before running
+    with pytest.raises(ValueError, match=r"takes no model parameters; found \['c'\]"):
+        _serial(gallery.prescribed_path(t_span=(0.0, 1.0)), {"lam": [1.0], "c": [0.5]})
+
+
+def test_the_fmu_s_own_lambda_may_vary_against_an_exact_reference(native):
+    df = _serial(native, {"lambda": [2.0, 4.0], "step": [0.1]}, reference=gallery.prescribed_path(),
+                 t_span=(0.0, 1.0))
+    assert df["success"].all() and (df["error"] < 1e-9).all(), df[["error", "message"]]
