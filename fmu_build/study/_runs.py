@@ -16,6 +16,8 @@ from ..cosim._callbacks import attach, callbacks as process_callbacks
 
 # Names of the grid that set how a run is computed rather than the model.
 NUMERICAL = ("lam", "step", "rtol", "atol", "method")
+# The other names a LinearDAE target takes (it has no model parameters).
+DAE_OWN = ("offset", "completion", "k")
 
 _EXTRACTED = {}  # sha256 of an FMU's bytes -> its extraction folder, per worker process
 _DESCRIPTIONS = {}  # extraction folder -> model description, per worker process
@@ -113,7 +115,7 @@ def _run_dae(problem, point, settings, start):
     import lsc
 
     dae, t_span, x0 = problem["dae"], settings["t_span"], np.asarray(problem["x0"], dtype=float)
-    model = {k: v for k, v in point.items() if k not in NUMERICAL + ("offset", "completion", "k")}
+    model = {k: v for k, v in point.items() if k not in NUMERICAL + DAE_OWN}
     if model:
         raise ValueError(f"a LinearDAE target takes no model parameters; found {sorted(model)}")
     completion = lsc.complete(dae, point.get("completion", "alternative"), lam=point.get("lam", 1.0),
@@ -192,9 +194,8 @@ def _run_fmu(fmu, point, settings, start):
     states = compared_outputs(md)
     residual_var = var.get("constraint_residual")
 
-    t0, t1 = settings["t_span"] if settings.get("t_span") else (
-        float(md.defaultExperiment.startTime or 0.0), float(md.defaultExperiment.stopTime or 1.0))
-    h = float(point.get("step", settings.get("step") or (md.defaultExperiment.stepSize or (t1 - t0) / 100)))
+    t0, t1 = (float(t) for t in settings["t_span"])  # `sweep` refuses an FMU without a horizon or a step
+    h = float(point["step"] if "step" in point else md.defaultExperiment.stepSize)
     n_steps = steps_over(t0, t1, h)
     values = _fmu_values(point, var, states)
 

@@ -9,7 +9,7 @@ import numpy as np
 from ._execute import _execute, _Progress
 from ._grid import METRICS, _group_key, _points, _tightest, _valid, value_lists
 from ._output import _read_finished, _rewrite, _stream_path, check_identity, check_output, one_line
-from ._runs import NUMERICAL, SSP_OPTIONS, ReferencePoint, compared_outputs, run_dae, run_fmu, run_ssp, start_name
+from ._runs import DAE_OWN, NUMERICAL, SSP_OPTIONS, ReferencePoint, compared_outputs, run_dae, run_fmu, run_ssp, start_name
 
 # -- the target ----------------------------------------------------------------
 def _target(target, t_span, x0):
@@ -202,10 +202,17 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
             from fmpy import read_model_description
 
             md = read_model_description(payload)
-            _check_fmu_names(md, names, os.path.basename(os.fspath(target)) if not isinstance(target, dict) else "")
+            label = os.path.basename(os.fspath(target)) if not isinstance(target, dict) else "the spec's FMU"
+            _check_fmu_names(md, names, label)
             _check_inputs(payload, names)
+            if "step" not in names and (md.defaultExperiment is None or md.defaultExperiment.stepSize is None):
+                raise ValueError(f"the FMU {label!r} has no default step size: give `step` in the grid.")
             states = len(compared_outputs(md))
         elif kind == "dae":
+            model = [name for name in names if name not in NUMERICAL + DAE_OWN]
+            if model:
+                raise ValueError(f"a LinearDAE target takes no model parameters; found {model}: it takes "
+                                 f"{', '.join(NUMERICAL + DAE_OWN)}.")
             states = int(np.size(payload["x0"]))
         if callable(reference):
             _check_one_model(kind, grid, names)
@@ -369,7 +376,8 @@ def _check_fmu_names(md, names, label):
 
 def _check_one_model(kind, grid, names):
     """Refuse a reference that is one trajectory for a grid of several models."""
-    own = NUMERICAL + ("offset",) + {"dae": ("completion", "k"), "ssp": SSP_OPTIONS}.get(kind, ())
+    # the rate, the integrator and its settings, the offset leave the exact solution as it is
+    own = NUMERICAL + ("offset",) + {"dae": DAE_OWN, "ssp": SSP_OPTIONS, "fmu": ("lambda", "solver")}.get(kind, ())
     if isinstance(grid, dict):
         varied = [n for n in names if n not in own and len({repr(v) for v in grid[n]}) > 1]
     else:
