@@ -428,3 +428,19 @@ def test_the_fmu_s_own_lambda_may_vary_against_an_exact_reference(native):
     df = _serial(native, {"lambda": [2.0, 4.0], "step": [0.1]}, reference=gallery.prescribed_path(),
                  t_span=(0.0, 1.0))
     assert df["success"].all() and (df["error"] < 1e-9).all(), df[["error", "message"]]
+
+
+# -- 11. the recommendation ---------------------------------------------------------------------
+@pytest.mark.parametrize("target, cost, needle", [
+    (True, "run_time", "`error_target` must be a positive finite number"),  # was read as 1.0
+    ("1e-5", "run_time", "`error_target` must be a positive finite number"),  # a bare TypeError of '>'
+    (math.inf, "run_time", "`error_target` must be a positive finite number"),
+    (1e-5, "message", "`cost` must be a numeric column"),  # the "cheapest" run in alphabetical order
+])
+def test_recommend_refuses_targets_and_costs_that_mean_nothing(target, cost, needle):
+    from fmu_build import recommend
+
+    df = pd.DataFrame({"lam": [1.0, 2.0], "success": True, "message": ["b", "a"], "error": [1e-3, 1e-6],
+                       "residual_final": 0.0, "residual_peak": 0.0, "run_time": 0.1, "steps": [50, 52]})
+    with pytest.raises((ValueError, TypeError), match=needle):
+        recommend(df, target, cost=cost)
