@@ -83,10 +83,16 @@ def recommend(df, error_target, *, cost="run_time", on="error", horizon=None, ei
     >>> float(recommend(df, 1e-5, cost="steps").row["lam"])
     4.0
     """
+    import pandas as pd
+
     if cost not in df.columns:
         raise ValueError(f"`cost` must be a column of `df`; found {cost!r}.")
-    if not error_target > 0:
-        raise ValueError(f"`error_target` must be positive; found {error_target!r}.")
+    if not pd.api.types.is_numeric_dtype(df[cost]) or pd.api.types.is_bool_dtype(df[cost]):
+        raise ValueError(f"`cost` must be a numeric column ('run_time', 'steps'); found {cost!r} "
+                         f"({df[cost].dtype}).")
+    if isinstance(error_target, (bool, np.bool_)) or not isinstance(error_target, (int, float, np.integer, np.floating)) \
+            or not (math.isfinite(error_target) and error_target > 0):
+        raise ValueError(f"`error_target` must be a positive finite number; found {error_target!r}.")
     if on not in ("error", "residual_final"):
         raise ValueError(f"`on` must be 'error' or 'residual_final'; found {on!r}.")
     ok = df[df["success"] & (df[on] <= error_target)]
