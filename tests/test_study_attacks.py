@@ -444,3 +444,18 @@ def test_recommend_refuses_targets_and_costs_that_mean_nothing(target, cost, nee
                        "residual_final": 0.0, "residual_peak": 0.0, "run_time": 0.1, "steps": [50, 52]})
     with pytest.raises((ValueError, TypeError), match=needle):
         recommend(df, target, cost=cost)
+
+
+# -- 12. the plot -------------------------------------------------------------------------------
+def test_the_plot_uses_a_log_lam_axis_only_over_decades_and_names_each_residual_curve():
+    # lam = 1, 2 was drawn on a log axis ("2 x 10^0"), and two residual curves were both labelled "lam=1"
+    from fmu_build.study._recommend import study_figure
+
+    problem = gallery.prescribed_path(t_span=(0.0, 1.0))
+    df = _serial(problem, {"lam": [1.0, 2.0], "method": ["RK45", "Radau"]})
+    fig = study_figure(df, cost="steps")
+    assert [ax.get_xscale() for ax in fig.axes[:2]] == ["linear", "linear"]
+    labels = [line.get_label() for line in fig.axes[2].get_lines()]
+    assert len(set(labels)) == 4 and "lam=1, method=Radau" in labels, labels
+    df = _serial(problem, {"lam": [0.5, 5.0, 50.0]})
+    assert study_figure(df).axes[0].get_xscale() == "log"
