@@ -307,7 +307,9 @@ def _add_sweep(sub):
                     "reference, residuals, run time, steps. Needs the sweep extra (pip install -e \".[sweep]\"). "
                     "An existing output of the same study is resumed; the study's identity is kept in "
                     "OUTPUT.study.json and a file of another study is refused. Exits 1 when any run failed "
-                    "(with --allow-failures: when every run failed), 2 when the study is refused before running.",
+                    "(with --allow-failures: when every run failed) or no run reaches the --recommend target, "
+                    "2 when the study is refused before running, 130 on Ctrl-C (the finished rows stay; the same "
+                    "command resumes).",
         epilog="example: lsc-fmu sweep out/PrescribedPath.fmu --grid lam=0.5,1,2,4,8 --grid offset=0.01 --t-span 0 4 "
                "--error-from 4 --reference gallery:prescribed_path -o out/study.csv --plot out/study.png "
                "--recommend 1e-5")

@@ -457,5 +457,5 @@ def test_the_plot_uses_a_log_lam_axis_only_over_decades_and_names_each_residual_
     assert [ax.get_xscale() for ax in fig.axes[:2]] == ["linear", "linear"]
     labels = [line.get_label() for line in fig.axes[2].get_lines()]
     assert len(set(labels)) == 4 and "lam=1, method=Radau" in labels, labels
-    df = _serial(problem, {"lam": [0.5, 5.0, 50.0]})
+    df = _serial(problem, {"lam": [0.5, 5.0, 500.0]})
     assert study_figure(df).axes[0].get_xscale() == "log"
