@@ -31,7 +31,8 @@ from fmu_build.study import _runs, _sweep  # noqa: E402
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SPECS = os.path.join(ROOT, "examples", "specs")
 FEEDTHROUGH_INPUTS = {"Float64_continuous_input": [0.5], "Float64_discrete_input": [1.5], "Int32_input": [3],
-                      "Boolean_input": [True], "Enumeration_input": [1], "String_input": ["a"]}
+                      "Boolean_input": [True], "Enumeration_input": [1], "String_input": ["a"],
+                      "step": [0.01]}  # Feedthrough's default experiment has no step size
 
 
 def _serial(target, grid, **kwargs):

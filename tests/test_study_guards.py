@@ -406,7 +406,7 @@ def _feedthrough():
 
 
 FEEDTHROUGH_INPUTS = {"Float64_continuous_input": [0.5], "Float64_discrete_input": [1.5], "Int32_input": [3],
-                      "Boolean_input": [True]}
+                      "Boolean_input": [True], "step": [0.01]}  # its default experiment has no step size
 
 
 def test_a_study_sets_enumeration_and_string_variables():
@@ -426,6 +426,7 @@ def test_cli_sweep_converts_grid_values_by_the_variables_type(tmp_path, capsys):
     from fmu_build.__main__ import main
 
     args = ["sweep", _feedthrough(), "--t-span", "0", "0.1", "--scheduler", "serial", "--no-progress",
+            "--grid", "step=0.01",
             "--grid", "Float64_continuous_input=0.5", "--grid", "Float64_discrete_input=1", "--grid", "Boolean_input=true",
             "--grid", "Enumeration_input=Option 2,1"]
     # a String "42" stays a text (it was made the number 42 and refused)

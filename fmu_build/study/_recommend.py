@@ -90,8 +90,8 @@ def recommend(df, error_target, *, cost="run_time", on="error", horizon=None, ei
     if not pd.api.types.is_numeric_dtype(df[cost]) or pd.api.types.is_bool_dtype(df[cost]):
         raise ValueError(f"`cost` must be a numeric column ('run_time', 'steps'); found {cost!r} "
                          f"({df[cost].dtype}).")
-    if isinstance(error_target, (bool, np.bool_)) or not isinstance(error_target, (int, float, np.integer, np.floating)) \
-            or not (math.isfinite(error_target) and error_target > 0):
+    real = isinstance(error_target, (int, float, np.integer, np.floating)) and not isinstance(error_target, bool)
+    if not (real and math.isfinite(error_target) and error_target > 0):
         raise ValueError(f"`error_target` must be a positive finite number; found {error_target!r}.")
     if on not in ("error", "residual_final"):
         raise ValueError(f"`on` must be 'error' or 'residual_final'; found {on!r}.")

@@ -9,7 +9,8 @@ import numpy as np
 from ._execute import _execute, _Progress
 from ._grid import METRICS, _group_key, _points, _tightest, _valid, value_lists
 from ._output import _read_finished, _rewrite, _stream_path, check_identity, check_output, one_line
-from ._runs import DAE_OWN, NUMERICAL, SSP_OPTIONS, ReferencePoint, compared_outputs, run_dae, run_fmu, run_ssp, start_name
+from ._runs import (DAE_OWN, NUMERICAL, SSP_OPTIONS, ReferencePoint, compared_outputs, run_dae, run_fmu, run_ssp,
+                    start_name)
 
 # -- the target ----------------------------------------------------------------
 def _target(target, t_span, x0):
@@ -367,7 +368,8 @@ def _check_fmu_names(md, names, label):
         elif v.variability == "constant":
             what = "a constant (variability='constant')"
         elif v.causality != "input" and initial not in ("exact", "approx"):
-            what = f"{'an' if v.causality[0] in 'aeiou' else 'a'} {v.causality} computed by the FMU (initial='{initial}')"
+            article = "an" if v.causality[0] in "aeiou" else "a"
+            what = f"{article} {v.causality} computed by the FMU (initial='{initial}')"
         else:
             continue
         raise ValueError(f"{called} is {what} in {label!r}: FMI lets a master set only inputs, parameters "
