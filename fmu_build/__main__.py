@@ -307,7 +307,9 @@ def _add_sweep(sub):
                     "reference, residuals, run time, steps. Needs the sweep extra (pip install -e \".[sweep]\"). "
                     "An existing output of the same study is resumed; the study's identity is kept in "
                     "OUTPUT.study.json and a file of another study is refused. Exits 1 when any run failed "
-                    "(with --allow-failures: when every run failed), 2 when the study is refused before running.",
+                    "(with --allow-failures: when every run failed) or no run reaches the --recommend target, "
+                    "2 when the study is refused before running, 130 on Ctrl-C (the finished rows stay; the same "
+                    "command resumes).",
         epilog="example: lsc-fmu sweep out/PrescribedPath.fmu --grid lam=0.5,1,2,4,8 --grid offset=0.01 --t-span 0 4 "
                "--error-from 4 --reference gallery:prescribed_path -o out/study.csv --plot out/study.png "
                "--recommend 1e-5")
@@ -343,11 +345,12 @@ def _run_sweep(args):
     """``lsc-fmu sweep``: run a study, write it, optionally plot and recommend."""
     from .study import plot_study, recommend, sweep
 
-    from ._cli_sweep import check_files, check_names, grid_names, grid_of, typed_grid
+    from ._cli_sweep import check_files, check_names, check_plot, grid_names, grid_of, typed_grid
 
     try:
         grid = grid_of(args)
         check_files(args)
+        check_plot(args, grid)
         target = _gallery(args.target) if args.target.startswith("gallery:") else args.target
         reference = args.reference
         if reference is not None and reference.startswith("gallery:"):
@@ -362,12 +365,22 @@ def _run_sweep(args):
     except (ValueError, TypeError, OSError, ImportError) as exc:
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # the rows written so far stay; the study's files say how to go on
+        print(f"lsc-fmu: interrupted; the finished runs are in {args.output}: run the same command again to "
+              "compute only the missing ones.", file=sys.stderr)
+        return 130
     failed = df[~df["success"]]
     print(f"{len(df)} runs ({len(failed)} failed) written to {args.output}")
     if args.plot:
         print(plot_study(df, args.plot, cost=args.cost))
+    status = 0
     if args.recommend is not None:
-        print(recommend(df, args.recommend, cost=args.cost, on=args.on))
+        choice = recommend(df, args.recommend, cost=args.cost, on=args.on)
+        print(choice)
+        if choice.row is None:  # the command was asked for a point and has none
+            print(f"lsc-fmu: error: no run reaches {args.on} <= {args.recommend:g}; widen the grid (larger lam, "
+                  "smaller step or tolerances).", file=sys.stderr)
+            status = 1
     if len(failed) and (len(failed) == len(df) or not args.allow_failures):
         run = failed.index[0]
         point = ", ".join(f"{k}={v}" for k, v in failed.iloc[0].items() if k in grid_names(grid))
@@ -378,7 +391,7 @@ def _run_sweep(args):
             print(f"lsc-fmu: error: {len(failed)} of {len(df)} runs failed (the rows say why; --allow-failures "
                   f"when some may fail); the first: {first}", file=sys.stderr)
         return 1
-    return 0
+    return status
 
 
 def _gallery(text):

@@ -7,8 +7,9 @@ import os
 
 from ._cli_checks import assignments, check_parent, decimal
 
-# Names a Latin hypercube cannot sample: categories, not numbers.
-_CATEGORICAL = ("method", "completion", "extrapolation", "iterations", "k")
+# Names a Latin hypercube cannot sample: categories, not numbers (and `k`, the number of
+# differentiations of a gallery problem; an FMU's `k` is its own, e.g. a stiffness).
+_CATEGORICAL = ("method", "completion", "extrapolation", "iterations")
 # Names a LinearDAE (gallery) target takes; it has no model parameters.
 _DAE_NAMES = ("lam", "step", "rtol", "atol", "method", "offset", "completion", "k")
 _NUMBERS = ("lam", "step", "rtol", "atol", "offset", "k", "extrapolation", "iterations")
@@ -76,6 +77,9 @@ def check_names(grid, target):
         if unknown:
             raise ValueError(f"`--grid` names {unknown} are not inputs of a gallery problem; it takes "
                              f"{', '.join(_DAE_NAMES)}.")
+        if isinstance(grid, tuple) and "k" in names:
+            raise ValueError("`--range` k: `k` (the number of differentiations) takes categories, which a Latin "
+                             "hypercube cannot sample; use --grid.")
         return
     if target.lower().endswith(".fmu") and os.path.isfile(target):
         from fmpy import read_model_description
@@ -125,6 +129,13 @@ def check_files(args):
             raise ValueError(f"`--plot` {plot!r}: the folder {folder!r} does not exist.")
     if args.recommend is not None and not (math.isfinite(args.recommend) and args.recommend > 0):
         raise ValueError(f"`--recommend` must be a positive finite error; found {args.recommend!r}.")
+
+
+def check_plot(args, grid):
+    """Refuse --plot for a study without lam before it runs (the plots are against lam)."""
+    if args.plot and "lam" not in grid_names(grid):
+        raise ValueError("`--plot` draws error and cost against lam: give lam in --grid (or --range), or leave "
+                         "out --plot.")
 
 
 def typed_grid(grid, target):

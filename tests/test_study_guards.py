@@ -406,18 +406,17 @@ def _feedthrough():
 
 
 FEEDTHROUGH_INPUTS = {"Float64_continuous_input": [0.5], "Float64_discrete_input": [1.5], "Int32_input": [3],
-                      "Boolean_input": [True]}
+                      "Boolean_input": [True], "step": [0.01]}  # its default experiment has no step size
 
 
 def test_a_study_sets_enumeration_and_string_variables():
     # an Enumeration failed every row with KeyError: 'Enumeration'
     grid = {**FEEDTHROUGH_INPUTS, "Enumeration_input": ["Option 2", 1], "String_input": ["a text"]}
-    df = sweep(_feedthrough(), grid, reference=lambda t: np.zeros((0, len(t))), t_span=(0.0, 0.1),
-               scheduler="serial", progress=False)
+    # the default reference ('tightest'): one trajectory cannot be the reference of two Enumeration values
+    df = sweep(_feedthrough(), grid, t_span=(0.0, 0.1), scheduler="serial", progress=False)
     assert df["success"].tolist() == [True, True], df["message"].tolist()
     grid["Enumeration_input"] = ["Option 3"]
-    df = sweep(_feedthrough(), grid, reference=lambda t: np.zeros((0, len(t))), t_span=(0.0, 0.1),
-               scheduler="serial", progress=False)
+    df = sweep(_feedthrough(), grid, t_span=(0.0, 0.1), scheduler="serial", progress=False)
     assert not df["success"][0]
     assert "`Enumeration_input` sets an Enumeration variable (items 'Option 1' = 1, 'Option 2' = 2); " \
            "found 'Option 3'" in df["message"][0]
@@ -427,6 +426,7 @@ def test_cli_sweep_converts_grid_values_by_the_variables_type(tmp_path, capsys):
     from fmu_build.__main__ import main
 
     args = ["sweep", _feedthrough(), "--t-span", "0", "0.1", "--scheduler", "serial", "--no-progress",
+            "--grid", "step=0.01",
             "--grid", "Float64_continuous_input=0.5", "--grid", "Float64_discrete_input=1", "--grid", "Boolean_input=true",
             "--grid", "Enumeration_input=Option 2,1"]
     # a String "42" stays a text (it was made the number 42 and refused)
