@@ -16,7 +16,6 @@ from ._stepper import MAX_STEPS, StepControl
 from ._system import MAX_UNPACKED, read_system
 
 ALGORITHMS = ("jacobi", "gauss-seidel")
-MAX_GROWTH = 1e6
 
 logger = logging.getLogger("fmu_build.cosim")
 
@@ -24,7 +23,7 @@ logger = logging.getLogger("fmu_build.cosim")
 def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrapolation=0, iterations=0,
                start_values=None, output=None, start_time=0.0, rtol=1e-10, progress=None, exchange="ordered",
                step_control=False, atol=None, min_step=None, max_step=None, lambda_per_step=None,
-               max_growth=MAX_GROWTH, max_input_order=None, allow_external=False, max_unpacked=MAX_UNPACKED):
+               max_growth=None, max_input_order=None, allow_external=False, max_unpacked=MAX_UNPACKED):
     """Co-simulate connected FMI 2.0 Co-Simulation FMUs, at a fixed or controlled macro step.
 
     Parameters
@@ -145,8 +144,8 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
             start_values = {**_bound(comps, system), **(start_values or {})}  # given values take precedence
             _check_start_values(comps, start_values)
             run = Run(comps, system.connections, sink, algorithm=algorithm, p=extrapolation, iterations=iterations,
-                      output=output, rtol=rtol, exchange=exchange, control=control, max_growth=max_growth,
-                      lambda_per_step=lambda_per_step, max_input_order=max_input_order)
+                      output=output, rtol=rtol, atol=atol, exchange=exchange, control=control,
+                      max_growth=max_growth, lambda_per_step=lambda_per_step, max_input_order=max_input_order)
             progress = _Progress(1, sys.stderr.isatty() if progress is None else progress)
             return _execute(run, dict(start_values or {}), start_time, stop_time, step_size, progress)
     finally:
@@ -172,15 +171,16 @@ def _check_arguments(algorithm, extrapolation, exchange, iterations, step_size, 
         raise ValueError(f"`start_time` must be finite; found {start_time!r}.")
     if not (np.isfinite(stop_time) and stop_time > start_time):
         raise ValueError(f"`stop_time` must be finite and after `start_time` ({start_time!r}); found {stop_time!r}.")
-    if not max_growth > 1:
-        raise ValueError(f"`max_growth` must be > 1 (math.inf disables the check); found {max_growth!r}.")
+    if max_growth is not None and not max_growth > 1:
+        raise ValueError(f"`max_growth` must be > 1 or None (math.inf disables the divergence checks); found "
+                         f"{max_growth!r}.")
     if lambda_per_step is not None and not (np.isfinite(lambda_per_step) and lambda_per_step > 0):
         raise ValueError(f"`lambda_per_step` must be positive and finite or None; found {lambda_per_step!r}.")
 
 
 def _check_numbers(**values):
     """Each option that is a number is a real number (not a str, not a bool), or None where allowed."""
-    optional = {"atol", "min_step", "max_step", "lambda_per_step"}
+    optional = {"atol", "min_step", "max_step", "lambda_per_step", "max_growth"}
     for name, value in values.items():
         if value is None and name in optional:
             continue
@@ -259,11 +259,14 @@ def _execute(run, start_values, t0, stop_time, H, progress):
         logger.error("co-simulation stopped: %s", stop)
     finally:
         progress.close()
-    result = np.array(run.rows, dtype=run.result_fields).view(CosimResult)
+    result = np.array(run.rows, dtype=run.layout.result_fields).view(CosimResult)
     result.success, result.message = status["success"], status["message"]
-    result.loops, result.order = run.loop_names, list(run.gs_order)
+    result.loops, result.order = run.layout.loop_names, list(run.layout.gs_order)
     result.steps, result.rejected = run.accepted, run.rejected
     result.error_estimates = list(run.estimates)
+    result.loop_gains = list(run.loops.gains)
+    result.jumps = list(run.jumps)
+    result.dropped_derivatives = dict(run.derivs.dropped)
     return result
 
 
