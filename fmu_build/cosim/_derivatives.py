@@ -7,11 +7,12 @@ import warnings
 import numpy as np
 
 from ._layout import MAX_INPUT_ORDER
-from ._loops import MAX_SWEEPS, anderson
+from ._loops import MAX_SWEEPS, anderson, jacobian
 from ._result import _Stop
 
 logger = logging.getLogger("fmu_build.cosim")
 TAYLOR_MARGIN = 4.0  # how much worse than the values' own extrapolation a derivative's Taylor polynomial may be
+STRIKES = 3  # consecutive steps of such a mismatch that drop the derivatives of a value on a cycle
 
 
 class OutputDerivatives:
@@ -27,7 +28,8 @@ class OutputDerivatives:
         comps = layout.comps
         self.loop = [n for n in layout.names if comps[n].max_derivative and comps[n].can_interpolate
                      and layout.inputs_of[n]]
-        self.derivable, self.fallback = {}, None
+        self.derivable, self.fallback, self.gain = {}, None, None
+        self.strikes = np.zeros(len(layout.sources), dtype=int)
         self.trusted = np.ones(len(layout.sources), dtype=bool)
         self.dropped = {}
 
@@ -110,9 +112,26 @@ class OutputDerivatives:
             fp = anderson(sweep, d[known], tolerance, MAX_SWEEPS)
             if not fp.converged:
                 self._not_converged(fp, known, t)
+            if self.gain is None and known.any():  # measured once, at the start
+                self.gain = float(np.max(np.abs(np.linalg.eigvals(jacobian(sweep, fp.x, fp.gx)))))
+                sweep(fp.x)  # the FMUs back at the fixed point
+                self._check_gain(known, t)
             d[known] = fp.gx
         d[:, ~self.trusted] = np.nan
         return d
+
+    def _check_gain(self, known, t):
+        """The derivatives are consistent at ``t``, but the values they belong to are still exchanged once per
+        macro step: the coupled recursion has a root of the size of the derivative loop's gain (the spectral
+        radius of one sweep's Jacobian; ``g`` for the loop of docs/cosimulation.md) and is stable only for a
+        gain below 1."""
+        if self.gain < 1.0 - 1e-9:
+            return
+        names = sorted({self.layout.name(s) for s in np.nonzero(known)[1]})
+        raise _Stop(f"the output derivatives of {', '.join(names)} form a loop through the input derivatives of "
+                    f"{', '.join(self.loop)} whose gain is {self.gain:.6g} (measured at t = {t!r}): a loop through a "
+                    "differentiated input is zero-stable only for gains below 1 (docs/cosimulation.md); "
+                    "extrapolation=1 with max_input_order=1 exchanges no derivatives around it")
 
     def _not_converged(self, fp, known, t):
         rows, slots = np.nonzero(known)
@@ -122,8 +141,7 @@ class OutputDerivatives:
         raise _Stop(f"the output derivatives of {', '.join(names)} form a loop through the input derivatives of "
                     f"{', '.join(self.loop)} that did not converge at t = {t!r}: after {fp.evaluations} sweeps the "
                     f"order-{rows[i] + 1} derivative of {self.layout.name(slots[i])} changes by {change[i]:.3g} "
-                    f"times the tolerance; its gain is about {fp.gains[i]:.6g} (plain sweeps: contraction "
-                    f"{fp.contraction:.3g})")
+                    f"times the tolerance")
 
     def _sweep(self, d, t):
         for n in self.layout.names:
@@ -169,7 +187,8 @@ class OutputDerivatives:
         connection graph derivatives also carry the loop's stability (without them a loop through a
         differentiated input is unstable for gains above about 0.1, docs/cosimulation.md): there the
         reference is the larger of that extrapolation and the value held over the step, so that only
-        derivatives that predict worse than no derivative at all are dropped. Under step control only a step
+        derivatives that predict worse than no derivative at all, ``STRIKES`` steps in a row, are dropped. Under
+        step control only a step
         small enough for the values alone (their extrapolation within the tolerance) judges them: a step too
         large for any polynomial is rejected, not blamed on the derivatives. Returns the names dropped now
         (each warned once)."""
@@ -179,10 +198,14 @@ class OutputDerivatives:
         with_derivatives = band.defects(produced)
         values_only = band.defects(produced, band.values_jet)
         hold = np.abs(produced - band.jet[0])
-        reference = np.where(self.layout.cycle_slot, np.maximum(values_only, hold), values_only)
+        cycle = self.layout.cycle_slot
+        reference = np.where(cycle, np.maximum(values_only, hold), values_only)
         bad = used & (with_derivatives > TAYLOR_MARGIN * reference + 0.1 * scale)
         if controlled:
             bad &= values_only <= scale
+        # on a cycle only a persistent mismatch counts (a start that is not consistent relaxes in a few steps)
+        self.strikes = np.where(bad, self.strikes + 1, 0)
+        bad &= ~cycle | (self.strikes >= STRIKES)
         names = []
         for s in np.flatnonzero(bad):
             name = self.layout.name(s)

@@ -1,16 +1,16 @@
 """Divergence of the coupling, told apart from growth (docs/cosimulation.md, 'Divergence').
 
 A coupled recursion that is unstable has a root ``r`` with ``|r| > 1`` that the system itself does not
-have; once its mode ``r^n`` dominates a coupling value, the value is no longer predicted by the
-extrapolation of its own past: for a root below -1 the defect of a degree-``q`` extrapolation is
-``|r - 1|^(q + 1) / |r|`` times the value, above 1, while any smooth signal the step resolves -- an
-exponential, a large ramp -- keeps its defect a small fraction of the value. The monitor therefore
-compares, on the Real coupling values that run along a cycle of the connection graph (a feed-forward
-coupling cannot diverge: each FMU only integrates what it receives), the step's defect with the largest
-magnitude the value ever had, and calls a value divergent when that ratio exceeds 1 over ``WINDOW``
-consecutive steps while the value grows. A root above +1 is an exponential like any physical one and
-cannot be told from the values; the loops that make one (an algebraic loop cut with gain above 1) are
-checked at the start (``LoopSolver.start``).
+have; once its mode dominates a coupling value, the value is no longer predicted by the extrapolation of
+its own past: for a root below -1 the defect of a degree-``q`` extrapolation is ``|r - 1|^(q + 1) / |r|``
+times the value, and for a pair of complex roots the value swings through zero with a growing amplitude.
+Any smooth signal the step resolves -- an exponential, a large ramp -- keeps its defect a fraction of
+its size and its sign. The monitor therefore watches the Real coupling values that run along a cycle of
+the connection graph (a feed-forward coupling cannot diverge: each FMU only integrates what it receives)
+and calls a value divergent when, over the last ``WINDOW`` steps, its defect exceeded the largest
+magnitude it had before in all but two of them, it changed sign, and it grew ``GROWTH``-fold. A root above
++1 makes an exponential like any physical one and cannot be told from the values; the loops that make one
+(an algebraic loop cut with gain above 1) are checked at the start (``LoopSolver.start``).
 """
 
 import math
@@ -34,13 +34,15 @@ class DivergenceMonitor:
         self.layout, self.max_growth = layout, max_growth
         self.watch = layout.cycle_slot & layout.real & (max_growth is None or not math.isinf(max_growth))
         n = len(layout.sources)
-        self.peak, self.streak, self.before = np.zeros(n), np.zeros(n, dtype=int), np.zeros(n)
+        self.peak = np.zeros(n)
+        self.off, self.values = np.zeros((0, n), dtype=bool), np.zeros((0, n))
         self.scale = 1.0
 
     def start(self, value):
         real = self.layout.real
         self.scale = max(1.0, float(np.abs(value[real]).max(initial=0.0)))
         self.peak = np.where(real, np.abs(value), 0.0)
+        self.values = value[None, :].copy()
 
     def check(self, value, defect, t):
         """After the step to ``t``: ``value`` the coupling values, ``defect`` their distance from the band."""
@@ -52,18 +54,20 @@ class DivergenceMonitor:
             s = int(np.argmax(mag))
             raise _Stop(f"|{self.layout.name(s)}| = {mag[s]:.3g} exceeds max_growth ({self.max_growth:.3g}) times "
                         f"the start scale ({self.scale:.3g}) at t = {t!r}")
+        off = self.watch & (defect > self.peak) & (self.peak > 0)
         self.peak = np.maximum(self.peak, mag)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            off = self.watch & (defect > self.peak) & (self.peak > 0)
-        self.before = np.where(off & (self.streak == 0), mag, self.before)
-        self.streak = np.where(off, self.streak + 1, 0)
-        bad = np.flatnonzero((self.streak >= WINDOW) & (mag > GROWTH * self.before))
+        self.off = np.vstack([self.off, off])[-WINDOW:]
+        self.values = np.vstack([self.values, value])[-(WINDOW + 1):]
+        if len(self.off) < WINDOW:
+            return
+        first = np.abs(self.values[0])
+        swings = np.any(np.sign(self.values[1:]) != np.sign(self.values[:-1]), axis=0)
+        bad = np.flatnonzero((self.off.sum(axis=0) >= WINDOW - 2) & swings & (mag > GROWTH * first))
         if bad.size:
             s = int(bad[0])
-            growth = mag[s] / self.before[s]
             self._diverged(s, t, f"{self.layout.name(s)} left its extrapolation by more than the largest magnitude "
-                                 f"it ever had over {WINDOW} consecutive steps while growing {growth:.3g}-fold (to "
-                                 f"{value[s]:.3g})")
+                                 f"it had before in {int(self.off[:, s].sum())} of the last {WINDOW} steps, swinging "
+                                 f"through zero and growing {mag[s] / first[s]:.3g}-fold (to {value[s]:.3g})")
 
     def _diverged(self, s, t, what):
         name = self.layout.name(s)

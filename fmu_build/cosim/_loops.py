@@ -22,45 +22,37 @@ MEMORY = 8  # differences Anderson keeps
 
 
 class FixedPoint:
-    """Outcome of :func:`anderson`: the last iterate ``x``, ``gx = G(x)``, ``converged``, ``evaluations``,
-    per-component secant slopes ``gains`` (NaN where the iterates did not move) and the ratio of the first
-    two residuals (``contraction``, the rate plain repetition would have)."""
+    """Outcome of :func:`anderson`: the last iterate ``x``, ``gx = G(x)``, ``converged``, ``evaluations``."""
 
-    def __init__(self, x, gx, converged, evaluations, gains, contraction):
+    def __init__(self, x, gx, converged, evaluations):
         self.x, self.gx, self.converged, self.evaluations = x, gx, converged, evaluations
-        self.gains, self.contraction = gains, contraction
 
 
-def anderson(G, x0, tol, max_evaluations, memory=MEMORY, probe=False, plain=None):
+def anderson(G, x0, tol, max_evaluations, gains=None, memory=MEMORY, plain=None):
     """Solve ``x = G(x)`` from ``x0`` by Anderson acceleration (type II, Walker & Ni 2011).
 
-    ``tol(x)``: the tolerance of each component; converged when ``|G(x) - x| <= tol(x) * min(1, |1 - g|)``
-    with ``g`` the secant slope per component. ``probe``: if ``x0`` is already a fixed point, evaluate once
-    more at a perturbed point (and back) to learn the gains. ``plain``: components iterated without
-    acceleration (Integer and Boolean values, which only take what their type holds).
+    ``tol(x)``: the tolerance of each component; converged when ``|G(x) - x| <= tol(x) * min(1, |1 - g|)``,
+    the distance to the fixed point of a component whose gain ``g`` (``gains``, NaN: unknown) is known.
+    ``plain``: components iterated without acceleration (Integer and Boolean values, which only take what
+    their type holds).
 
     Examples
     --------
     >>> fp = anderson(lambda x: 0.999 * x + 1.0, np.zeros(1), lambda x: 1e-12 * (1 + abs(x)), 10)
-    >>> fp.converged, fp.evaluations, round(float(fp.x[0]), 6), round(float(fp.gains[0]), 6)
-    (True, 3, 1000.0, 0.999)
+    >>> fp.converged, fp.evaluations, round(float(fp.x[0]), 6)
+    (True, 3, 1000.0)
     """
     x = np.asarray(x0, dtype=float).copy()
     gx = G(x)
     f = gx - x
-    gains = np.full(len(x), np.nan)
-    contraction, evaluations = np.nan, 1
-    dX, dG = [], []
+    slope = np.ones(len(x)) if gains is None else np.where(np.isfinite(gains), np.abs(1.0 - gains), 1.0)
+    evaluations, dX, dG = 1, [], []
     while True:
-        slope = np.where(np.isfinite(gains), np.abs(1.0 - gains), 1.0)
         if np.all(np.abs(f) <= tol(x) * np.minimum(1.0, slope)):
-            if not (probe and np.isnan(gains).any() and evaluations == 1):
-                return FixedPoint(x, gx, True, evaluations, gains, contraction)
-            step = 1e-6 * np.maximum(1.0, np.abs(x))  # learn the gains: one pass off the fixed point
-            x_new = x + np.where(np.isnan(gains), step, 0.0)
-        elif evaluations >= max_evaluations or not np.all(np.isfinite(gx)):
-            return FixedPoint(x, gx, False, evaluations, gains, contraction)
-        elif not dX:
+            return FixedPoint(x, gx, True, evaluations)
+        if evaluations >= max_evaluations or not np.all(np.isfinite(gx)):
+            return FixedPoint(x, gx, False, evaluations)
+        if not dX:
             x_new = gx
         else:
             F = np.column_stack([g - xx for g, xx in zip(dG[-memory:], dX[-memory:])])
@@ -70,15 +62,19 @@ def anderson(G, x0, tol, max_evaluations, memory=MEMORY, probe=False, plain=None
             x_new = np.where(plain, gx, x_new)
         g_new = G(x_new)
         evaluations += 1
-        f_new = g_new - x_new
-        moved = x_new != x
-        with np.errstate(divide="ignore", invalid="ignore"):
-            gains = np.where(moved, (g_new - gx) / (x_new - x), gains)
-        if evaluations == 2 and np.linalg.norm(f) > 0:
-            contraction = float(np.linalg.norm(f_new) / np.linalg.norm(f))
         dX.append(x_new - x)
         dG.append(g_new - gx)
-        x, gx, f = x_new, g_new, f_new
+        x, gx, f = x_new, g_new, g_new - x_new
+
+
+def jacobian(G, x, gx, scale=1e-6):
+    """``dG/dx`` at the fixed point ``x`` (``gx = G(x)``) by one evaluation per component moved off it
+    (exact for a linear map, up to rounding); the caller evaluates ``G(x)`` again to return there."""
+    J = np.zeros((len(gx), len(x)))
+    for k in range(len(x)):
+        step = scale * max(1.0, abs(x[k]))
+        J[:, k] = (G(x + step * (np.arange(len(x)) == k)) - gx) / step
+    return J
 
 
 class LoopSolver:
@@ -107,15 +103,24 @@ class LoopSolver:
         self.solve(t, self.iterations)
 
     def start(self, t):
-        """The exchange at the start: every loop solved (and, when cut, its gain checked)."""
+        """The exchange at the start: every loop solved and its gain measured (and, when cut, checked)."""
         if not len(self.slots):
             self.coupling.run_plan(None, t)
             return
-        fp = self.solve(t, self.iterations or MAX_SWEEPS, probe=not self.iterations)
+        fp = self.solve(t, self.iterations or MAX_SWEEPS)
+        one_pass = self._pass(t)
+        if self.layout.real[self.slots].all():
+            # a cut per loop and the loops in topological order: the Jacobian is triangular, its diagonal
+            # holds each loop's gain
+            for (loop, _), g in zip(self.layout.cuts, np.diag(jacobian(one_pass, fp.x, fp.gx))):
+                self.gains[loop] = float(g)
+            one_pass(fp.x)  # the FMUs back at the solution
+            if any(abs(1.0 - g) < 0.1 for g in self.gains):  # within the tolerance of the distance, not of the step
+                self.solve(t, self.iterations or MAX_SWEEPS)
         if self.iterations:
             return
-        for i, (loop, _) in enumerate(self.layout.cuts):
-            g = fp.gains[i]
+        for loop, _ in self.layout.cuts:
+            g = self.gains[loop]
             if np.isfinite(g) and abs(g) >= 1.0 - 1e-9:
                 raise _Stop(f"the algebraic loop through {', '.join(self.layout.loop_names[loop])} has the gain "
                             f"{g:.6g} (measured at t = {t!r}): cut (iterations=0), one connection takes the "
@@ -123,7 +128,7 @@ class LoopSolver:
                             "macro step, which does not decay for |gain| >= 1; use iterations > 0 (the loop is "
                             "then solved at every exchange)")
 
-    def solve(self, t, max_passes, probe=False):
+    def _pass(self, t):
         value, slots = self.coupling.value, self.slots
 
         def one_pass(x):
@@ -131,19 +136,21 @@ class LoopSolver:
             self.coupling.run_plan(None, t)
             return value[slots].copy()
 
-        plain = ~self.layout.real[slots]
-        fp = anderson(one_pass, value[slots].copy(), self.tolerance, max_passes, probe=probe and not plain.any(),
-                      plain=plain)
-        for i, (loop, _) in enumerate(self.layout.cuts):
-            if np.isfinite(fp.gains[i]):
-                self.gains[loop] = float(fp.gains[i])
+        return one_pass
+
+    def solve(self, t, max_passes):
+        """The loops at ``t`` solved to the tolerance in at most ``max_passes`` passes (else the run ends)."""
+        slots = self.slots
+        gains = np.array([self.gains[loop] for loop, _ in self.layout.cuts])
+        fp = anderson(self._pass(t), self.coupling.value[slots].copy(), self.tolerance, max_passes, gains=gains,
+                      plain=~self.layout.real[slots])
         if not fp.converged:
             residual = np.abs(fp.gx - fp.x) / self.tolerance(fp.x) * 0.1
             i = int(np.nanargmax(residual)) if np.isfinite(residual).any() else 0
-            loop = self.layout.cuts[i][0]
-            g = fp.gains[i]
+            loop, g = self.layout.cuts[i][0], gains[i]
+            known = f"; its gain is {g:.6g}" if np.isfinite(g) else ""
             singular = " (gain 1: the loop's equations are singular there)" if abs(g - 1.0) < 1e-9 else ""
             raise _Stop(f"the algebraic loop through {', '.join(self.layout.loop_names[loop])} did not converge at "
                         f"t = {t!r}: after {fp.evaluations} passes the change of {self.layout.name(slots[i])} is "
-                        f"{residual[i]:.3g} times the tolerance; its gain is about {g:.6g}{singular}")
-        return fp  # the last pass was at fp.x: the FMUs are at the fixed point, not at a probe
+                        f"{residual[i]:.3g} times the tolerance{known}{singular}")
+        return fp  # the last pass was at fp.x: the FMUs are at the fixed point
