@@ -38,10 +38,14 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
     extrapolation : {0, 1, 2}
         Degree of the input polynomial over a step (0: zero-order hold).
     iterations : int
-        0: explicit coupling (algebraic loops cut and reported). ``> 0``: each
-        macro step is repeated up to this many times with rollback through
-        the FMU state (every FMU must declare ``canGetAndSetFMUstate``), and
-        algebraic loops are iterated at each exchange.
+        0: explicit coupling: an algebraic loop is solved at the start, its
+        gain measured, and then cut (one connection takes the previous
+        exchange's value); a gain of magnitude 1 or more ends the run there.
+        ``> 0``: each macro step is repeated with rollback through the FMU
+        state (every FMU must declare ``canGetAndSetFMUstate``) until its
+        values settle within the tolerance, and algebraic loops are solved at
+        every exchange; at most this many repetitions and passes, else the
+        run ends with ``success=False`` naming what did not converge.
     start_values : dict, optional
         ``{"component.variable": value}`` set before initialization, converted
         to the variable's type (a Boolean takes True/False, 1/0, "true"/"false").
@@ -51,25 +55,30 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
     start_time : float
         Start of the run.
     rtol : float
-        Relative tolerance: of the step iteration's change, and of the step
-        control's error estimate.
+        Relative tolerance: of the algebraic and derivative loops solved at an
+        exchange, of the step iteration's change, and of the step control's
+        error estimate.
     exchange : {"ordered", "simultaneous"}
         ``"ordered"``: at a communication point, inputs are set before the
         outputs that depend on them directly are read (consistent values).
         ``"simultaneous"``: every connected output is read, then every input
         set (libcosim's and ecos's fixed-step algorithms).
     step_control : bool
-        Vary the macro step to keep the local coupling error estimate within
-        ``atol + rtol |value|`` (see docs/cosimulation.md for the estimate);
-        a rejected step is repeated smaller after rollback, or, if some FMU
-        cannot roll back, kept with a warning (the estimate is then an
-        indicator only).
+        Vary the macro step to keep the defect of what each step produced
+        (every Real coupling value against the polynomial its consumers
+        received, every recorded continuous output against its own
+        extrapolation) within ``atol + rtol |value|``, jumps located and
+        crossed (docs/cosimulation.md, 'Step control'); a rejected step is
+        repeated smaller after rollback, or, if some FMU cannot roll back,
+        kept with a warning (the estimate is then an indicator, and a step
+        kept beyond 10 times the tolerance ends the run).
     atol : float, optional
-        Absolute tolerance of the step control (default ``rtol``).
+        Absolute tolerance (default ``rtol``).
     min_step, max_step : float, optional
-        Bounds of the controlled step (default ``1e-6 * step_size`` and the
+        Bounds of the controlled step (default ``1e-12 * step_size`` and the
         whole interval); a step the control would make smaller than
-        ``min_step`` ends the run with ``success=False``.
+        ``min_step``, or a pace that would take more than 1e7 steps, ends the
+        run with ``success=False``.
     max_input_order : int, optional
         Highest input-derivative order sent to an FMU that interpolates
         (default: every order the master has, the sources' exact derivatives
@@ -81,12 +90,13 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         ``generationTool`` or ``author`` is "lsc fmu_build"; a parameter named
         ``lambda`` of another FMU means something else) to ``lambda_per_step / H`` before the run and after each step change
         (λH fixed: the configuration of our DAE FMUs' theory).
-    max_growth : float
-        Divergence criterion: a Real coupling value whose magnitude exceeds
-        ``max_growth * max(1, largest |coupling value| at the start)``, or
-        one that oscillates from step to step with a growing amplitude beyond
-        every value it had before, ends the run with ``success=False``.
-        ``math.inf`` disables it.
+    max_growth : float, optional
+        A bound the user knows: a Real coupling value whose magnitude exceeds
+        ``max_growth * max(1, largest |coupling value| at the start)`` ends
+        the run with ``success=False`` (default None: no bound; growth is
+        not divergence). Divergence is checked anyway: a value on a cycle of
+        the connection graph that leaves its extrapolation by more than its
+        size, swinging and growing, ends the run. ``math.inf`` disables both.
     allow_external : bool
         Let a packed ``.ssp`` use FMUs outside the archive (True or False only).
     max_unpacked : int
@@ -102,7 +112,9 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         Structured array with ``time`` and one field per output (one row per
         communication point); ``success`` and ``message`` tell how the run
         ended; the rows computed before a failure are kept; ``steps`` and
-        ``rejected`` count the macro steps.
+        ``rejected`` count the macro steps; ``error_estimates``, ``jumps``,
+        ``dropped_derivatives`` and ``loop_gains`` tell what the master
+        measured (see :class:`CosimResult`).
 
     Examples
     --------
