@@ -47,15 +47,17 @@ class Coupling:
             return 0
         return min(self.nder, self.max_input_order, max(self.accepts.get(n, self.p), self.p))
 
-    def set_inputs(self, n, t_start, jet, has, hold):
+    def set_inputs(self, n, t_start, jet, has, hold, higher=None):
         """Inputs of ``n`` for the step from ``t_start``: values, and every derivative order the master has
         (up to ``top(n)``) if it interpolates. Integer and Boolean inputs hold their value ``hold``.
 
-        To an FMU in ``zero_fill`` the orders the master does not have are sent as 0: on a cycle an FMU's
-        own estimate from the values it received differentiates the loop's lagged values, amplified by
-        ``1 / H^order``, and feeds them back (the loop of docs/cosimulation.md diverges that way); under step
-        control steps vary and are repeated after rollback, so such an estimate differentiates points at
-        uneven, sometimes tiny spacing. Elsewhere the FMU's estimate is the better guess and is kept."""
+        To an FMU in ``zero_fill`` the orders beyond are sent too: on a cycle as 0, since an FMU's own
+        estimate from the values it received differentiates the loop's lagged values, amplified by
+        ``1 / H^order``, and feeds them back (the loop of docs/cosimulation.md diverges that way); off a
+        cycle (under step control, where steps vary and are repeated after rollback, so that the FMU's
+        estimate would differentiate points at uneven, sometimes tiny spacing) as the master's estimate
+        ``higher[j]`` from the history of the source's own highest derivative (``History.higher_orders``),
+        0 where it has none. Elsewhere the FMU's estimate is the better guess and is kept."""
         pairs = self.layout.inputs_of[n]
         if not pairs:
             return
@@ -69,10 +71,17 @@ class Coupling:
         self.calls.set_values(n, pairs, source, t_start)
         top = self.top(n)
         reals = [(s, v) for s, v, w in pairs if w == "Real"]
-        last = max(top, self.accepts.get(n, 0)) if n in self.zero_fill and top else top
+        fill = n in self.zero_fill
+        last = max(top, self.accepts.get(n, 0)) if fill and top else top
+        estimate = higher if fill and n not in self.layout.in_cycle and higher is not None else None
         for j in range(1, last + 1):
-            sent = [(v, float(jet[j, s]) if j <= top and has[j, s] else 0.0) for s, v in reals
-                    if (j <= top and has[j, s]) or n in self.zero_fill]
+            sent = []
+            for s, v in reals:
+                if j <= top and has[j, s]:
+                    sent.append((v, float(jet[j, s])))
+                elif fill:
+                    known = estimate is not None and j < len(estimate) and math.isfinite(estimate[j, s])
+                    sent.append((v, float(estimate[j, s]) if known else 0.0))
             if sent:
                 self.calls.set_input_derivatives(n, [v for v, _ in sent], j, [x for _, x in sent], t_start)
 

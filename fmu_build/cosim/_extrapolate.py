@@ -84,6 +84,22 @@ class History:
                 exact[j] = known
         return jet, has, exact
 
+    def higher_orders(self, t_start, trusted, upto):
+        """Derivative orders beyond the sources' own, where a source's highest order ``m`` is trusted at every
+        point of the history: the derivatives of the polynomial through those values of ``y^(m)`` at
+        ``t_start`` (orders ``m + 1 .. m + degree``, exact for a polynomial ``y^(m)`` of that degree); NaN
+        elsewhere. Rows ``0..upto``."""
+        out = np.full((upto + 1, len(self.v[-1])), np.nan)
+        if len(self.t) < 2 or any(d is None for d in self.d):
+            return out
+        D = np.array(self.d)  # points x orders x slots
+        known = np.isfinite(D).all(axis=0) & trusted
+        for s in np.flatnonzero(known.any(axis=0)):
+            m = int(np.flatnonzero(known[:, s]).max()) + 1
+            for j in range(m + 1, min(upto, m + len(self.t) - 1) + 1):
+                out[j, s] = _weights(self.t, t_start, j - m) @ D[:, m - 1, s]
+        return out
+
     def extrapolate_extras(self, t_end):
         """The watched recorded values extrapolated to ``t_end`` by the polynomial through their history."""
         q = self.degree

@@ -127,9 +127,10 @@ class Run:
             # the step iteration (iterations > 0) converges all of them
             hold[slice(None) if self.iterations else real] = end_values[slice(None) if self.iterations else real]
             jet, has, _ = history.jet(t, self.derivs.trusted, (t + H, end_values, None))
+        higher = self._higher(t)
         if self.algorithm == "jacobi":
             for n in names:
-                coupling.set_inputs(n, t, jet, has, hold)
+                coupling.set_inputs(n, t, jet, has, hold, higher)
             for n in names:
                 self.calls.do_step(n, t, H)
             self.loops.exchange(None if self.exchange_needed else set(names), t + H)
@@ -142,13 +143,22 @@ class Run:
                 end = (t + H, value.copy(), self.read_derivatives(t + H))
                 new, new_has, _ = history.jet(t, self.derivs.trusted, end)
                 jet_n, has_n = np.where(done, new, jet), np.where(done, new_has, has)
-            coupling.set_inputs(n, t, jet_n, has_n, np.where(done, value, hold))
+            coupling.set_inputs(n, t, jet_n, has_n, np.where(done, value, hold), higher)
             self.calls.do_step(n, t, H)
             self.loops.exchange({n}, t + H)
             done |= np.array([a == n for a, _ in self.layout.sources], dtype=bool)
         if self.exchange_needed:
             self.loops.exchange(None, t + H)
         return band
+
+    def _higher(self, t):
+        """The master's estimates of the derivative orders beyond the sources' (``History.higher_orders``),
+        for the FMUs that get every order they accept off a cycle (under step control); None if none does."""
+        coupling, layout = self.coupling, self.layout
+        wanted = [coupling.accepts.get(n, 0) for n in coupling.zero_fill if n not in layout.in_cycle]
+        if not wanted or not coupling.nder:
+            return None
+        return self.history.higher_orders(t, self.derivs.trusted, max(wanted))
 
     def band(self, t, H):
         """The extrapolation from ``t`` over ``H`` as the consumers receive it (``_extrapolate.Band``)."""

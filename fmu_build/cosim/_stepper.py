@@ -193,7 +193,9 @@ class Controller:
         if m.err <= 1.0:
             if jump is not None:  # the jump lies beyond t + H: narrow the interval that holds it
                 rest = jump.t_hi - (t + H)
-                return "accept", (rest if rest <= jump.h_cross else 0.5 * rest)
+                if rest > control.min_step:
+                    return "accept", (rest if rest <= jump.h_cross else 0.5 * rest)
+                self.jump = None  # no jump where the defect was: it came from the step's start, now past
             H_next = control.next_step(H, m.err, m.order, self.err_prev, self.after_reject)
             self.err_prev, self.after_reject = m.err, False
             return "accept", H_next
@@ -259,8 +261,10 @@ class Controller:
 
     def _kept(self, t, t_new, err, name, late=False):
         """A step kept with the estimate ``err``: beyond ``BUDGET`` times the tolerance (or the steps kept so far
-        beyond ``BUDGET`` times it over the span) the run cannot claim its tolerance and ends."""
-        if err <= BUDGET and self.budget <= BUDGET * self.span:
+        beyond ``BUDGET`` times it over the span) the run cannot claim its tolerance and ends. An estimate found
+        ``late`` (a jump at the next step's start, e.g. an FMU relaxing a start that was not consistent at the
+        rate of the step, which no smaller step undoes) counts in the sum only."""
+        if (late or err <= BUDGET) and self.budget <= BUDGET * self.span:
             return
         if late:
             why = ("found one step late, when the step after it showed the jump its outputs made at the "
