@@ -28,6 +28,15 @@ class History:
     def __init__(self, p, nder):
         self.p, self.nder = p, nder
         self.t, self.v, self.d, self.x = [], [], [], []
+        self._weights = {}  # (nodes, at, order) -> interpolation weights, for the points of one step
+
+    def weights(self, nodes, at, order):
+        key = (tuple(nodes), at, order)
+        if key not in self._weights:
+            if len(self._weights) > 64:
+                self._weights.clear()
+            self._weights[key] = _weights(nodes, at, order)
+        return self._weights[key]
 
     def push(self, t, value, derivs, extras):
         self.t.append(t)
@@ -64,11 +73,11 @@ class History:
         has = np.zeros((nder + 1, nslots), dtype=bool)
         has[:p + 1] = True
         exact = np.zeros((nder + 1, nslots), dtype=bool)
-        jet[0] = V[-1] if len(ts) == 1 or t_start == ts[-1] else np.asarray(_weights(ts, t_start, 0)) @ V
+        jet[0] = V[-1] if len(ts) == 1 or t_start == ts[-1] else np.asarray(self.weights(ts, t_start, 0)) @ V
         at = next((i for i in range(len(ts) - 1, -1, -1) if ts[i] == t_start and ds[i] is not None), len(ts) - 1)
         last = ds[at]
         for j in range(1, nder + 1):
-            jet[j] = _weights(ts, t_start, j) @ V if len(ts) > j else 0.0
+            jet[j] = self.weights(ts, t_start, j) @ V if len(ts) > j else 0.0
             if last is None:
                 continue
             # exact derivatives where the source gives them: at the step start if known there,
@@ -97,13 +106,13 @@ class History:
         for s in np.flatnonzero(known.any(axis=0)):
             m = int(np.flatnonzero(known[:, s]).max()) + 1
             for j in range(m + 1, min(upto, m + len(self.t) - 1) + 1):
-                out[j, s] = _weights(self.t, t_start, j - m) @ D[:, m - 1, s]
+                out[j, s] = self.weights(self.t, t_start, j - m) @ D[:, m - 1, s]
         return out
 
     def extrapolate_extras(self, t_end):
         """The watched recorded values extrapolated to ``t_end`` by the polynomial through their history."""
         q = self.degree
-        return np.asarray(_weights(self.t[-(q + 1):], t_end, 0)) @ np.array(self.x[-(q + 1):])
+        return np.asarray(self.weights(self.t[-(q + 1):], t_end, 0)) @ np.array(self.x[-(q + 1):])
 
 
 class Band:

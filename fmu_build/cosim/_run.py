@@ -108,8 +108,11 @@ class Run:
         through the history and these values."""
         if not self.coupling.nder:
             return None
-        fallback = self.history.jet(t, np.zeros_like(self.derivs.trusted), (t, self.coupling.value.copy(), None))[0]
-        return self.derivs.read(t, fallback[1:])
+        fallback = None
+        if self.derivs.loop:  # only a loop of derivatives sends input derivatives while reading them
+            untrusted = np.zeros_like(self.derivs.trusted)
+            fallback = self.history.jet(t, untrusted, (t, self.coupling.value.copy(), None))[0][1:]
+        return self.derivs.read(t, fallback)
 
     # -- one macro step --------------------------------------------------------------------------------
 
@@ -164,7 +167,8 @@ class Run:
         """The extrapolation from ``t`` over ``H`` as the consumers receive it (``_extrapolate.Band``)."""
         history = self.history
         jet, has, exact = history.jet(t, self.derivs.trusted)
-        values_jet = history.jet(t, np.zeros_like(self.derivs.trusted))[0]
+        # the same from the values alone, for the check of the sources' derivatives (when any are used)
+        values_jet = history.jet(t, np.zeros_like(self.derivs.trusted))[0] if exact[1:].any() else jet
         return Band(self.tops, jet, has, exact, values_jet, history.degree, H)
 
     def measure(self, band, t, H, floor=None):
