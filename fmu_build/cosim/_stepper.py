@@ -188,7 +188,7 @@ class Controller:
             return H, H_next
 
     def _judge(self, t, H, m, can_roll, H_ref):
-        """``("accept" | "cross" | "reject", next H)`` for an attempt from ``t`` with ``H``."""
+        """``("accept" | "cross" | "reject" | "probe", next H)`` for an attempt from ``t`` with ``H``."""
         control, jump = self.control, self.jump
         if m.err <= 1.0:
             if jump is not None:  # the jump lies beyond t + H: narrow the interval that holds it
