@@ -1,4 +1,5 @@
-"""tests/conftest.py: with CI=true a skipped FMU-host test fails; other skips stay skips."""
+"""CI: .ci/run on a project of its own kind, and tests/conftest.py (with CI=true a skipped FMU-host or
+external-tool test fails; other skips stay skips)."""
 import os
 import shutil
 import subprocess
@@ -19,6 +20,15 @@ def test_host_missing():
 
 def test_ecos_missing():
     pytest.skip("native host ecos unavailable: ecos needs libtbb.so.12")
+
+def test_fmusim_missing():
+    pytest.skip("fmusim not found: set LSC_FMUSIM to the Reference FMUs' fmusim")
+
+def test_reference_fmus_missing():
+    pytest.skip("Reference FMUs not given: set LSC_REFERENCE_FMUS to a folder of built Modelica Reference FMUs")
+
+def test_fmucheck_missing():
+    pytest.skip("fmuCheck not found: set LSC_FMUCHECK to a built fmuCheck.linux64")
 
 def test_unrelated_skip():
     pytest.skip("needs a GPU")
@@ -56,13 +66,14 @@ def test_ci_is_read_from_the_environment(monkeypatch, value, expected):
 def test_outside_ci_a_missing_host_is_a_skip(tmp_path):
     code, out = run_cases(tmp_path, None)
     assert code == 0, out
-    assert "4 skipped, 1 xfailed" in out, out
+    assert "7 skipped, 1 xfailed" in out, out
 
 
 def test_in_ci_a_missing_host_fails(tmp_path):
     code, out = run_cases(tmp_path, "true")
     assert code == 1, out
-    assert "2 failed, 1 skipped, 1 xfailed, 1 error" in out, out
-    assert "FAILED test_cases.py::test_host_missing" in out and "FAILED test_cases.py::test_ecos_missing" in out
+    assert "5 failed, 1 skipped, 1 xfailed, 1 error" in out, out
+    for name in ("host", "ecos", "fmusim", "reference_fmus", "fmucheck"):
+        assert f"FAILED test_cases.py::test_{name}_missing" in out, (name, out)
     assert "ERROR test_module_skip.py" in out and "fmpy.absent_module" in out
     assert "needs a GPU" in out
