@@ -1,10 +1,16 @@
 import os
 import re
 
-import numpy as np
-import pytest
+# One BLAS thread per test process (the pytest workers and every subprocess they start, which inherit the
+# environment): the suite runs its processes side by side, and OpenBLAS threads that outnumber the cores
+# spin waiting for each other. Set before numpy loads OpenBLAS; a value given in the environment is kept.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from lsc import COMPLETIONS, gallery
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from lsc import COMPLETIONS, gallery  # noqa: E402
 
 # (method, lam) pairs that every completion test runs over.
 METHOD_LAMS = [("standard", None), ("stabilized", 2.0), ("alternative", 2.0)]
