@@ -166,6 +166,7 @@ def test_ci_run_on_a_stub_project(tmp_path):
     assert Path(prefix).parent == tmp and not Path(prefix).exists(), prefix  # a fresh venv, removed at the end
     assert f"README LINES RAN IN {prefix}" in out  # the install test ran with -s, in the same venv
     assert "1 passed, 1 deselected" in out  # the suite ran, not the install test
+    assert out.count("slowest 20 durations") == 1  # for the suite only
     assert re.search(r"^python 3\.\d+\.\d+ \(" + re.escape(prefix), out, re.M), out[-4000:]
     assert re.search(r"^pytest \d", out, re.M) and re.search(r"^numpy not installed$", out, re.M), out[-4000:]
     assert re.search(r"^suite: [\d.]+ s wall, [\d.]+ s user \+ [\d.]+ s system CPU$", out, re.M), out[-4000:]
