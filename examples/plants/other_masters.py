@@ -70,9 +70,13 @@ def ecos_binary():
     src = Path(ecospy.__file__).parent / "binaries" / "ecos"
     dest = Path(tempfile.gettempdir()) / f"lsc_ecos_{os.getuid()}" / "ecos"
     if not dest.exists():
+        # copied beside it and renamed: a process that finds `dest` never runs a half-written copy
         dest.parent.mkdir(exist_ok=True)
-        shutil.copy(src, dest)
-        dest.chmod(dest.stat().st_mode | stat.S_IXUSR)
+        fd, part = tempfile.mkstemp(prefix=".ecos-", dir=dest.parent)
+        os.close(fd)
+        shutil.copy(src, part)
+        os.chmod(part, os.stat(part).st_mode | stat.S_IXUSR)
+        os.replace(part, dest)
     return dest
 
 
