@@ -142,8 +142,7 @@ class SparseCompletion:
                 self._kkt.check()
                 self._H_solver = self._schur = None
                 self.factorizations["kkt"] = (K.shape[0], self._kkt.nnz)
-            self._T_solver = factorize(self._T, "T (the terminal constraint rows on the algebraic unknowns)")
-            self._T_solver.check()
+            self._T_solver = s.T_solver
             self.factorizations["terminal"] = (self._T.shape[0], self._T_solver.nnz)
         except np.linalg.LinAlgError as exc:
             raise IndexDeterminationError(

@@ -80,6 +80,8 @@ class HessenbergForm:
         ``cg(t) = sum_i Gamma[i] f^(i)(t)``.
     terminal : ndarray of bool, shape (a,)
         Rows whose part on the algebraic unknowns is nonzero (not differentiated further).
+    T_solver
+        Factorization of those rows' part on the algebraic unknowns (invertible).
     level_sizes : list of int
         Constraint rows per level.
     index : int
@@ -206,14 +208,18 @@ def hessenberg_form(A, B, max_levels=MAX_LEVELS):
     terminal = np.concatenate(terminals) if terminals else np.zeros(0, bool)
     Gamma = [scipy.sparse.vstack([g[i] if i < len(g) else scipy.sparse.csr_matrix((lv.shape[0], n))
                                   for g, lv in zip(gammas, levels)]).tocsr() for i in range(index)]
-    n_terminal = int(np.count_nonzero(terminal))
-    if n_terminal != alg_cols.size:
+    # each algebraic equation's chain ends in one terminal row: T = C[terminal][:, alg_cols] is square
+    T = cols(rows(C, np.flatnonzero(terminal)), alg_cols)
+    try:
+        T_solver = factorize(T, "T (the terminal constraint rows on the algebraic unknowns)")
+        T_solver.check()
+    except np.linalg.LinAlgError:
         raise SparseStructureError(
-            f"{n_terminal} constraint rows reach the {alg_cols.size} algebraic unknowns: the sparse set-up needs them "
-            "to determine the algebraic unknowns' derivatives one to one (Hessenberg form: B_aa invertible for "
-            "index 1, B_a E^-1 B_(d,a) invertible for index 2, ...); rows whose algebraic parts depend on each "
-            "other are not reduced here"
-        )
+            "the terminal constraint rows' parts on the algebraic unknowns (T) are singular: they depend on each "
+            "other, so a combination of them is a further hidden constraint. The sparse set-up needs T invertible "
+            "(Hessenberg form: B_aa invertible for index 1, B_a E^-1 B_(d,a) for index 2, "
+            "B_a E^-1 B_(d,d) E^-1 B_(d,a) for index 3)"
+        ) from None
     return HessenbergForm(n=n, diff_rows=diff_rows, diff_cols=diff_cols, alg_rows=alg_rows, alg_cols=alg_cols,
-                          E=E, E_diag=E_diag, E_solver=E_solver, B_d=B_d, C=C, Gamma=Gamma, terminal=terminal,
+                          E=E, E_diag=E_diag, E_solver=E_solver, B_d=B_d, C=C, Gamma=Gamma, terminal=terminal, T_solver=T_solver,
                           level_sizes=[lv.shape[0] for lv in levels], index=index)

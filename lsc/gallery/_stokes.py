@@ -134,13 +134,16 @@ def _projectors(A11, A12):
     lu = spla.splu(sp.csc_matrix(A12.T @ A12))
 
     def Pi(v):
+        v = np.ravel(v)
         return v - A12 @ lu.solve(A12.T @ v)
 
     def pr(x):
+        x = np.ravel(x)
         v = Pi(x[:nv])
         return np.concatenate([v, -lu.solve(A12.T @ (A11 @ v))])
 
     def pl(x):
+        x = np.ravel(x)
         v, p = x[:nv], x[nv:]
         return np.concatenate([Pi(v) - Pi(A11 @ (A12 @ lu.solve(p))), np.zeros(npr)])
 
