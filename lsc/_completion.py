@@ -36,6 +36,7 @@ from ._linalg import validate_rcond
 from ._problem import check_dae, column_equilibration, row_equilibration, row_scaled, unscale_columns, varying_view
 from ._rate import as_rate, lam_at
 from ._structured import StructuredFactors, StructuredFallback
+from ._threads import blas_threads
 from ._timefunc import TimeFunction, _shape_str
 from ._validate import check_k, check_t_span
 
@@ -583,6 +584,7 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None, setup="a
         cls = COMPLETIONS[method]
     else:
         raise ValueError(f"`method` must be one of {set(COMPLETIONS)} or a Completion subclass; found {method!r}.")
-    if setup == "sparse" or getattr(dae, "is_sparse", False):  # scipy.sparse coefficients: lsc._sparse decides
-        return SETUPS["sparse"](cls, dae, lam=lam, k=k, rcond=rcond, t_span=t_span, setup=setup)
-    return cls(dae, lam=lam, k=k, rcond=rcond, t_span=t_span, setup=setup)
+    with blas_threads():  # the set-up's BLAS threads are chosen (lsc._threads), not inherited
+        if setup == "sparse" or getattr(dae, "is_sparse", False):  # scipy.sparse coefficients: lsc._sparse decides
+            return SETUPS["sparse"](cls, dae, lam=lam, k=k, rcond=rcond, t_span=t_span, setup=setup)
+        return cls(dae, lam=lam, k=k, rcond=rcond, t_span=t_span, setup=setup)

@@ -113,6 +113,7 @@ class SparseCompletion:
         w = np.ones(s.diff_rows.size) if self.row_scales is None else self.row_scales[s.diff_rows] ** 2
         self._W = scipy.sparse.csr_matrix(s.E.T @ scipy.sparse.diags(w))  # E^T R_d^2
         self._w_diag = None if s.E_diag is None else s.E_diag * w  # W as a vector when E is diagonal
+        self._W_weights = w
         self._H = scipy.sparse.csr_matrix(self._W @ s.E)
         self._B_d = s.B_d
         nd = d.size
@@ -323,17 +324,23 @@ class SparseCompletion:
 
     # -- implicit steps ---------------------------------------------------------------------------------------
     def step_solver(self, c):
-        """A solver of ``(I - c G) k = r`` (``c > 0``): one sparse LU of a saddle-point matrix, cached by `c`.
+        """A solver of ``(I - c G) k = r`` (``c > 0``): the set-up's Schur factorization and one sparse LU of
+        the pencil ``A + c B`` (rows scaled), cached by `c`.
 
-        With ``v = (k - r) / c`` in the least-squares conditions, the unknowns
-        ``(k_d, k_a, c mu)`` solve::
+        With ``v = (k - r) / c`` in the least-squares conditions
+        ``H v_d + C_c^T mu = -W B_d k`` (``W = E^T R_d^2``, ``H = W E``) and
+        ``C v = -lam C k``: a row ``i`` of level >= 1 is ``C_i = -C_p^d E^-1 B_d``
+        (``p`` its parent), so ``C_i k = -lam C_p k + S_p mu`` with ``S = C_c H^-1 C_c^T``,
+        and every constraint row gives ``(1 + c lam) C_i k = C_i r``. Hence
 
-            [H + c W B_dd   c W B_da   C_c^T] [k_d ]   [H r_d                          ]
-            [C_t^d          T          0    ] [k_a ] = [(C_t^d r_d + T r_a) / (1 + c lam)]
-            [C_c            0          0    ] [c mu]   [C_c r_d / (1 + c lam)          ]
+            S mu = m,   m_p = (C_i r + lam C_p r) / (1 + c lam)      (one row per parent)
 
-        (``W = E^T R_d^2``); ``lam`` only scales the right side, so the matrix
-        serves every ``lam``.
+            [E + c B_dd   c B_da] [k_d]   [E r_d - c W^-1 C_c^T mu   ]
+            [B_ad         B_aa  ] [k_a] = [B_a r / (1 + c lam)       ]
+
+        The second matrix is ``A + c B`` with its algebraic rows divided by
+        ``c``: the DAE's own sparsity (for Stokes the implicit-Euler saddle
+        point ``[[I - c L, c A12], [A12^T, 0]]``).
         """
         c = float(c)
         hit = self._step_cache.get(c)
@@ -345,6 +352,19 @@ class SparseCompletion:
             self._step_cache.pop(next(iter(self._step_cache)))
         return solver
 
+    def _mu(self, m):
+        """``mu = S^-1 m`` (``S = C_c H^-1 C_c^T``), through the Schur factorization or the saddle-point one."""
+        if self._schur is not None:
+            return self._schur.solve(m)
+        sol = self._kkt.solve(np.concatenate([np.zeros(self.structure.diff_cols.size), m]))
+        return -sol[self.structure.diff_cols.size:]
+
+    def _times_W_inverse(self, v):
+        if self._w_diag is not None:
+            return v / self._w_diag
+        # W^-1 = R_d^-2 E^-T
+        return self.structure.E_solver.solve(v, trans="T") / self._W_weights
+
     def __repr__(self):
         return (f"SparseCompletion(n={self.n}, k={self.k}, lam={self.lam:g}, constraints={self.n_constraints}, "
                 f"{self.structure.describe()})")
@@ -354,34 +374,33 @@ _STEP_CACHE = 4
 
 
 class _StepSolver:
-    """``(I - c G)^-1`` through one factorization of the step matrix (see `SparseCompletion.step_solver`)."""
+    """``(I - c G)^-1`` through the Schur factorization and one LU of ``A + c B`` (see `SparseCompletion.step_solver`)."""
 
     def __init__(self, comp, c):
         s = comp.structure
         self.comp, self.c = comp, c
-        WB = scipy.sparse.csr_matrix(comp._W @ comp._B_d)
-        top = [comp._H + c * cols(WB, s.diff_cols), c * cols(WB, s.alg_cols)]
-        mid = [comp._C_td, comp._T]
-        blocks = [top, mid]
-        if comp._cont.size:
-            top.append(comp._C_c.T)
-            mid.append(None)
-            blocks.append([comp._C_c, None, None])
-        M = scipy.sparse.bmat(blocks, format="csc")
-        self.size = M.shape[0]
-        self.lu = factorize(M, f"the step matrix (I - {c:g} G)")
+        B_a = rows(comp.dae.B_sparse, s.alg_rows)
+        P = scipy.sparse.bmat([[s.E + c * cols(s.B_d, s.diff_cols), c * cols(s.B_d, s.alg_cols)],
+                               [cols(B_a, s.diff_cols), cols(B_a, s.alg_cols)]], format="csc")
+        self.size = P.shape[0]
+        self.lu = factorize(P, f"A + c B at c = {c:g} (the implicit step's matrix)")
         self.nnz = self.lu.nnz
+        child = np.flatnonzero(s.parent >= 0)
+        self._child, self._parent_pos = child, np.searchsorted(comp._cont, s.parent[child])
 
     def solve(self, r):
-        comp, s = self.comp, self.comp.structure
-        r_d, r_a = comp._split(r)
-        scale = 1.0 + self.c * comp.lam
-        parts = [comp._H @ r_d, (comp._C_td @ r_d + comp._T @ r_a) / scale]
+        comp, s, c = self.comp, self.comp.structure, self.c
+        scale = 1.0 + c * comp.lam
+        Cr = s.C @ r
+        r_d, _ = comp._split(r)
+        rhs_d = s.E @ r_d
         if comp._cont.size:
-            parts.append((comp._C_c @ r_d) / scale)
-        sol = self.lu.solve(np.concatenate(parts))
+            m = np.empty(comp._cont.size)
+            m[self._parent_pos] = (Cr[self._child] + comp.lam * Cr[s.parent[self._child]]) / scale
+            rhs_d = rhs_d - c * comp._times_W_inverse(comp._C_cT @ comp._mu(m))
+        sol = self.lu.solve(np.concatenate([rhs_d, Cr[: s.alg_rows.size] / scale]))
         nd = s.diff_cols.size
-        return comp._join(sol[:nd], sol[nd: nd + s.alg_cols.size])
+        return comp._join(sol[:nd], sol[nd:])
 
 
 class SparseMaps:

@@ -82,6 +82,8 @@ class HessenbergForm:
         Rows whose part on the algebraic unknowns is nonzero (not differentiated further).
     T_solver
         Factorization of those rows' part on the algebraic unknowns (invertible).
+    parent : ndarray of int, shape (a,)
+        For a row of level >= 1, the row of the level before whose derivative it is; -1 on level 0.
     level_sizes : list of int
         Constraint rows per level.
     index : int
@@ -169,7 +171,8 @@ def _levels(B, diff_rows, diff_cols, alg_rows, alg_cols, E_solver, E_diag, max_l
     B_d = rows(B, diff_rows).tocsr()
     C = rows(B, alg_rows).tocsr()  # level 0: the algebraic equations B_a x = f_a
     Gamma = [_scatter_columns(scipy.sparse.identity(alg_rows.size, format="csr"), alg_rows, n)]
-    levels, gammas, terminals = [], [], []
+    levels, gammas, terminals, parents = [], [], [], [np.full(C.shape[0], -1)]
+    offset = 0
     while C.shape[0]:
         if len(levels) == max_levels:
             raise SparseStructureError(
@@ -183,11 +186,13 @@ def _levels(B, diff_rows, diff_cols, alg_rows, alg_cols, E_solver, E_diag, max_l
         cont = np.flatnonzero(~terminal)
         if not cont.size:
             break
+        parents.append(offset + cont)  # the next level's row j is the derivative of this level's row cont[j]
+        offset += C.shape[0]
         Y = _e_inverse_rows(cols(rows(C, cont), diff_cols), E_solver, E_diag)
         Gamma = [-_scatter_columns(Y, diff_rows, n)] + [g[cont] for g in Gamma]
         C = scipy.sparse.csr_matrix(-(Y @ B_d))
         C.eliminate_zeros()
-    return B_d, levels, gammas, terminals
+    return B_d, levels, gammas, terminals, np.concatenate(parents[: len(levels)]) if levels else np.zeros(0, int)
 
 
 def hessenberg_form(A, B, max_levels=MAX_LEVELS):
@@ -201,7 +206,7 @@ def hessenberg_form(A, B, max_levels=MAX_LEVELS):
     in_d[:] = False
     in_d[diff_cols] = True
     alg_cols = np.flatnonzero(~in_d)
-    B_d, levels, gammas, terminals = _levels(B, diff_rows, diff_cols, alg_rows, alg_cols, E_solver, E_diag,
+    B_d, levels, gammas, terminals, parent = _levels(B, diff_rows, diff_cols, alg_rows, alg_cols, E_solver, E_diag,
                                              max_levels)
     index = len(levels)
     C = scipy.sparse.vstack(levels).tocsr() if levels else scipy.sparse.csr_matrix((0, n))
@@ -221,5 +226,5 @@ def hessenberg_form(A, B, max_levels=MAX_LEVELS):
             "B_a E^-1 B_(d,d) E^-1 B_(d,a) for index 3)"
         ) from None
     return HessenbergForm(n=n, diff_rows=diff_rows, diff_cols=diff_cols, alg_rows=alg_rows, alg_cols=alg_cols,
-                          E=E, E_diag=E_diag, E_solver=E_solver, B_d=B_d, C=C, Gamma=Gamma, terminal=terminal, T_solver=T_solver,
+                          E=E, E_diag=E_diag, E_solver=E_solver, B_d=B_d, C=C, Gamma=Gamma, terminal=terminal, T_solver=T_solver, parent=parent,
                           level_sizes=[lv.shape[0] for lv in levels], index=index)

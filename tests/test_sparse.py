@@ -166,6 +166,9 @@ def test_non_diagonal_E_takes_the_saddle_point_matrix():
     Gd = dense.jac(0.0, None)
     assert np.abs(c.operator() @ V - Gd @ V).max() / (np.abs(Gd).max() * np.abs(V).max()) < 1e-10
     np.testing.assert_allclose(c.forcing(0.5), dense.matrices(0.5)[1], atol=1e-10)
+    r = np.random.default_rng(7).standard_normal(dae.n)
+    k = c.step_solver(0.3).solve(r)
+    np.testing.assert_allclose(k - 0.3 * (Gd @ k), r, atol=1e-10 * np.abs(Gd).max())
 
 
 def _not_semi_explicit(n):
