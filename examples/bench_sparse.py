@@ -9,7 +9,8 @@ resident memory is its own):
   rtol 1e-6 from an inconsistent start (the constraint residual's decay over [0, 1] against
   exp(-lam), the issue's 2 % target) and from the exact start (the error against the manufactured
   solution); ``stokes_ind2`` over [0, 1] at rtol 1e-6 (error against the manufactured solution);
-  ``triple_chain`` and ``rcl_ladder`` over [0, 10] at rtol 1e-6;
+  ``triple_chain`` and ``rcl_ladder`` (``rcl``: voltage source, index 2; ``rcl1``: current source, index 1)
+  over [0, 10] at rtol 1e-6;
 - peak resident memory of the process;
 - the growth exponent p of time ~ n^p fitted on n >= 10^4.
 
@@ -27,7 +28,7 @@ the Schur complement of ``stokes_ind2`` at n ~ 10^5.
 Writes ``out/bench_sparse.md`` (and ``out/bench_sparse.png`` with matplotlib); with ``--docs`` both go
 to ``docs/_generated``. One BLAS thread (``OPENBLAS_NUM_THREADS=1``) unless ``--threads`` runs.
 
-Run:  python examples/bench_sparse.py [--docs] [--quick] [--only msd,stokes,triple,rcl] [--threads] [--solvers]
+Run:  python examples/bench_sparse.py [--docs] [--quick] [--only msd,stokes,triple,rcl,rcl1] [--threads] [--solvers]
 """
 
 import argparse
@@ -54,8 +55,9 @@ SIZES = {
     "stokes": [32, 57, 100, 183, 316],  # nx = ny: n ~ 3 nx^2, 3e3 .. 3e5
     "triple": [1_600, 5_000, 16_000, 50_000],  # n1: n = 6 n1 + 8
     "rcl": [5_000, 15_000, 50_000, 150_000, 500_000],  # sections: n = 2 N (voltage source, index 2)
+    "rcl1": [5_001, 15_001, 50_001, 150_001, 500_001],  # sections: n = 2 N - 1 (current source, index 1)
 }
-QUICK = {"msd": [5_000, 15_000], "stokes": [32, 57], "triple": [1_600], "rcl": [5_000]}
+QUICK = {"msd": [5_000, 15_000], "stokes": [32, 57], "triple": [1_600], "rcl": [5_000], "rcl1": [5_001]}
 LAM = 1.0
 
 
@@ -66,7 +68,7 @@ def make(family, size):
         return gallery.stokes_ind2(size, projectors=False)
     if family == "triple":
         return gallery.triple_chain(size, projectors=False)
-    return gallery.rcl_ladder(size, "voltage")
+    return gallery.rcl_ladder(size, "voltage" if family == "rcl" else "current")
 
 
 def rel_err(X, Y):
@@ -134,7 +136,7 @@ def run_ida(family, size):
     import scipy.sparse as sp
     from sksundae.ida import IDA
 
-    p = gallery.rcl_ladder(size, "current") if family == "rcl1" else make(family, size)
+    p = make(family, size)
     c = lsc.complete(p.dae, "alternative", lam=LAM)
     s = c.structure
     term = np.flatnonzero(s.terminal)
@@ -171,8 +173,12 @@ def run_ida(family, size):
     seconds = time.perf_counter() - t0
     X = sol.y.T
     drift = float(np.abs(c.constraint_residual(t_eval[-1], X[:, -1])).max()) if sol.success else float("nan")
+    t0 = time.perf_counter()
+    res = lsc.solve_completion(c, p.t_span, p.x0, rtol=rtol, atol=atol, t_eval=t_eval)
+    ours = time.perf_counter() - t0
     return dict(family=family, n=p.dae.n, ida=seconds, success=bool(sol.success), nfev=int(sol.nfev),
-                error=rel_err(X, p.exact(t_eval)) if sol.success else float("nan"), drift=drift)
+                error=rel_err(X, p.exact(t_eval)) if sol.success else float("nan"), drift=drift,
+                lsc=ours, lsc_method=res.method, lsc_error=rel_err(res.x, p.exact(t_eval)))
 
 
 def _on_pattern(M, pattern):
@@ -355,7 +361,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--docs", action="store_true", help="write to docs/_generated")
     parser.add_argument("--quick", action="store_true", help="the two smallest sizes only")
-    parser.add_argument("--only", default="msd,stokes,triple,rcl")
+    parser.add_argument("--only", default="msd,stokes,triple,rcl,rcl1")
     parser.add_argument("--threads", action="store_true", help="1 vs 2 BLAS threads for the dense structured set-up")
     parser.add_argument("--solvers", action="store_true", help="SuperLU against the other sparse direct solvers")
     parser.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
@@ -388,9 +394,11 @@ def main():
                 continue
             lines.append(f"| {r['n']:,} | {r['dense_setup']:.2f} ({r['dense_kind']}) | {r['sparse_setup']:.3f} | "
                          f"{1e3 * r['dense_apply']:.2f} | {1e3 * r['sparse_apply']:.2f} | {r['diff']:.1e} |")
-        lines += ["", "### SUNDIALS IDA (scikit-sundae, sparse SuperLU_MT) on index-1 forms, rtol 1e-6", "",
-                  "| problem | n | IDA s | success | nfev | error | constraint drift at t1 |", "|---|---:|---:|---|---:|---:|---:|"]
-        for fam, size in (("rcl1", 50_000), ("msd", 50_000), ("stokes", 100)):
+        lines += ["", "### SUNDIALS IDA (scikit-sundae, sparse SuperLU_MT) on index-1 forms and lsc side by side, "
+                  "rtol 1e-6", "",
+                  "| problem | n | IDA s | IDA nfev | IDA error | IDA constraint drift at t1 | lsc s (method) | "
+                  "lsc error | IDA / lsc |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+        for fam, size in (("rcl1", 50_001), ("msd", 50_000), ("stokes", 100)):
             r = spawn("ida", fam, size)
             print("ida", r, flush=True)
             if "failed" in r:
@@ -398,8 +406,9 @@ def main():
                 continue
             name = {"rcl1": "rcl_ladder (current source, index 1)", "msd": "msd_ind3, acceleration-level constraint",
                     "stokes": "stokes_ind2, pressure Poisson equation"}[fam]
-            lines.append(f"| {name} | {r['n']:,} | {r['ida']:.1f} | {r['success']} | {r['nfev']} | {r['error']:.1e} | "
-                         f"{r['drift']:.1e} |")
+            ida = f"{r['ida']:.1f}" if r["success"] else f"failed after {r['ida']:.1f}"
+            lines.append(f"| {name} | {r['n']:,} | {ida} | {r['nfev']} | {r['error']:.1e} | {r['drift']:.1e} | "
+                         f"{r['lsc']:.1f} ({r['lsc_method']}) | {r['lsc_error']:.1e} | {r['ida'] / r['lsc']:.1f} |")
     if args.threads:
         threads_section(lines)
     if args.solvers:

@@ -299,9 +299,10 @@ class SparseCompletion:
     def solve(self, t_span, x0, *, method="auto", t_eval=None, rtol=1e-3, atol=1e-6, project=False, **options):
         """Integrate ``x' = G x + g(t)``: `lsc.solve_completion` (which calls this) for a sparse completion.
 
-        ``method``: 'auto' (default) estimates the fastest rate of ``G``
-        (power iteration, 30 products) and takes 'Rodas4' when that rate
-        times the interval exceeds 100, 'DOP853' otherwise; 'Rodas4' (stiff:
+        ``method``: 'auto' (default) estimates the fastest decay rate of
+        ``G`` (ARPACK, the eigenvalues of largest magnitude) and takes
+        'Rodas4' when that rate times the interval exceeds 100, 'DOP853'
+        otherwise; 'Rodas4' (stiff:
         a Rosenbrock method whose solves are sparse saddle-point solves,
         factorizations reused); or an explicit solve_ivp method ('RK23',
         'RK45', 'DOP853') through the operator. ``t_eval``,
