@@ -184,17 +184,13 @@ def triple_chain(n1, constraints="truhar_veselic", alpha=0.01, beta=None, v=5.0,
     # stiffness (M-M.E.S.S. triplechain_MSD, positive semidefinite; the descriptor uses -K)
     K1 = sp.diags([-np.ones(n1 - 1), 2 * np.ones(n1), -np.ones(n1 - 1)], [-1, 0, 1])
     ks = (10.0, 20.0, 1.0)
-    K = sp.lil_matrix((nv, nv))
-    for i, k in enumerate(ks):
-        K[i * n1:(i + 1) * n1, i * n1:(i + 1) * n1] = k * K1
-        K[(i + 1) * n1 - 1, nv - 1] = -k
-        K[nv - 1, (i + 1) * n1 - 1] = -k
-    K[nv - 1, nv - 1] = sum(ks) + 50.0
-    K = K.tocsr()
-    Dm = (alpha * M + beta * K).tolil()
-    for i in (0, n1 - 1, 2 * n1):
-        Dm[i, i] += v
-    Dm = Dm.tocsr()
+    ends = [(i + 1) * n1 - 1 for i in range(3)]  # the last mass of each chain, tied to the joint mass
+    ties = sp.csr_matrix((np.r_[[-k for k in ks], [-k for k in ks], sum(ks) + 50.0],
+                          (np.r_[ends, [nv - 1] * 3, nv - 1], np.r_[[nv - 1] * 3, ends, nv - 1])), shape=(nv, nv))
+    K = (sp.block_diag([k * K1 for k in ks] + [sp.csr_matrix((1, 1))]) + ties).tocsr()
+    dampers = np.zeros(nv)
+    dampers[[0, n1 - 1, 2 * n1]] = v
+    Dm = (alpha * M + beta * K + sp.diags(dampers)).tocsr()
     G = _triple_constraints(constraints, n1, nv)
     B2 = sp.csr_matrix(np.ones((nv, 1)))
     C1 = sp.csr_matrix(np.ones((1, nv)))
