@@ -208,6 +208,8 @@ def spawn(kind, family, size, timeout=3600):
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
         return {"family": family, "size": size, "failed": f"timeout after {timeout} s"}
+    if done.returncode < 0:
+        return {"family": family, "size": size, "failed": f"stopped by signal {-done.returncode}"}
     if done.returncode:
         return {"family": family, "size": size, "failed": done.stderr.strip().splitlines()[-1:] or "crashed"}
     return json.loads(done.stdout.strip().splitlines()[-1])

@@ -1,12 +1,13 @@
 """BLAS threads for the set-ups: chosen here, not inherited from the environment.
 
 The dense and structured set-ups are LAPACK-bound (LU, QR, SVD of n-sized
-blocks and derivative arrays). OpenBLAS's threads busy-wait: with two
-threads on a machine where another process holds a core, the structured
-set-up of an index-3 pencil at n = 1,000 took 52 s instead of 9 s with one
-thread (498 constraints) and 16-19 s instead of 3.3 s (5 constraints),
-measured side by side (examples/bench_sparse.py ``--threads``,
-docs/reference/benchmarks.md). One thread is therefore the default;
+blocks and derivative arrays). OpenBLAS's threads busy-wait: on a 2-core
+machine shared with other processes, the structured set-up of an index-3
+pencil at n = 1,000 took 2.5 to 3.6 times longer with two threads than with
+one (498 constraints) and 1.6 to 3.8 times (5 constraints) at a load average
+of 4 to 5, and 5 to 6 times at 9, measured side by side
+(examples/bench_sparse.py ``--threads``, docs/reference/benchmarks.md).
+One thread is therefore the default;
 ``LSC_BLAS_THREADS`` (a positive int) overrides it for machines whose cores
 are the set-up's alone. `threadpoolctl` changes the count for the duration
 of a set-up only, so the caller's own setting is restored after it.
