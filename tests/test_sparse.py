@@ -18,19 +18,24 @@ def _dense_twin(dae):
     return lsc.LinearDAE(dae.A_sparse.toarray(), dae.B_sparse.toarray(), dae.f.fn if dae.f is not None else None)
 
 
-def _balanced_dense(dae, lam, setup):
-    """The dense completion's G, computed on the time-rescaled twin ``(s A) y' + B y = f`` with ``lam / s``.
+def _balanced_dense(dae, lam, setup, t=None):
+    """The dense completion's G (and g(t) when `t` is given), computed on the time-rescaled twin.
 
-    ``s`` (a power of two) brings ``||A||`` to ``||B||``: the dense arrays' rank decisions and rounding depend on
-    that ratio (Stokes: ``||B|| / ||A|| ~ 1 / h^2``), the completion does not (``x' = s y'``, the same ``Z1``
-    and constraint manifold; the row equilibration is checked to be the same).
+    ``s`` (a power of two) brings ``||A||`` to ``||B||``: the twin ``(s A) y' + B y = f(tau / s)``
+    has ``y(tau) = x(tau / s)``, and its alternative completion with ``lam / s`` gives ``x' = s G_y x + s g_y(s t)``.
+    The dense arrays' rank decisions and rounding depend on ``||B|| / ||A||`` (Stokes: ``1 / h^2``), the completion
+    does not (the same ``Z1`` and constraint manifold; the row equilibration is checked to be the same).
     """
     A, B = dae.A_sparse.toarray(), dae.B_sparse.toarray()
     s = 2.0 ** np.round(np.log2(np.linalg.norm(B, 2) / np.linalg.norm(A, 2)))
-    twin = lsc.LinearDAE(s * A, B)
+    f = dae.f
+    forcing = None if (t is None or f is None) else (lambda tau, d: f.jet(tau / s, d)[d] / s**d)
+    twin = lsc.LinearDAE(s * A, B, forcing)
     r0, r1 = equilibration(lsc.LinearDAE(A, B))[0], equilibration(twin)[0]
     assert (r0 is None and r1 is None) or np.array_equal(r0, r1)
-    return s * lsc.complete(twin, "alternative", lam=lam / s, setup=setup).jac(0.0, None)
+    comp = lsc.complete(twin, "alternative", lam=lam / s, setup=setup)
+    G = s * comp.jac(0.0, None)
+    return G if t is None else (G, s * comp.matrices(s * t)[1])
 
 
 FAMILIES = {
