@@ -9,12 +9,17 @@ from ._derivative_array import DerivativeArray, derivative_array
 from ._exceptions import DimensionError, IndexDeterminationError, RankDecisionWarning, StiffnessWarning
 from ._index import SolvabilityReport, check_solvability, differentiation_index
 from ._problem import LinearDAE
+from ._sparse_problem import InputForcing
+from ._sparse import SparseCompletion, SparseStructureError
 from ._analysis import Eigenanalysis, eigenanalysis
 from ._integrate import CompletionResult, solve_completion, solve_dae, stiffness_ratio
 from . import gallery
 
 __all__ = [
     "LinearDAE",
+    "InputForcing",
+    "SparseCompletion",
+    "SparseStructureError",
     "derivative_array",
     "DerivativeArray",
     "differentiation_index",

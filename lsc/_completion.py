@@ -36,6 +36,7 @@ from ._linalg import validate_rcond
 from ._problem import balance, check_dae, unscale_columns, varying_view
 from ._rate import as_rate, lam_at
 from ._structured import StructuredFactors, StructuredFallback
+from ._threads import blas_threads
 from ._timefunc import TimeFunction, _shape_str
 from ._validate import check_k, check_t_span
 
@@ -509,6 +510,9 @@ class AlternativeCompletion(Completion):
         return alternative_maps(st, [self._lam_jet(t)[0] for t in times], self.rcond, times)
 
 
+# Set-ups for DAEs the classes above do not take whole: lsc._sparse registers 'sparse' (scipy.sparse DAEs) on import.
+SETUPS = {}
+
 COMPLETIONS = {
     "standard": StandardCompletion,
     "stabilized": StabilizedCompletion,
@@ -545,7 +549,7 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None, setup="a
         Without it ``k`` is decided at t = 0. Either way, every evaluation
         checks that the array keeps its rank and stays 1-full, and raises
         `IndexDeterminationError` naming the time otherwise.
-    setup : {'auto', 'dense'}, optional
+    setup : {'auto', 'dense', 'sparse'}, optional
         For constant coefficients, 'auto' computes the index, the ranks and
         the completion from n-sized blocks of the pencil (a shift, a
         staircase of null spaces, bordered LU solves; `lsc._structured`)
@@ -553,7 +557,11 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None, setup="a
         the dense path when a rank decision there is a close call or no
         shift makes ``B + mu A`` well conditioned (`Completion.setup_note`
         says why). 'dense' always uses the SVDs. Time-varying completions
-        are always dense.
+        are always dense. For a DAE with scipy.sparse ``A``, ``B``, 'auto'
+        uses the sparse set-up (`lsc.SparseCompletion`, 'alternative' only,
+        semi-explicit DAEs of Hessenberg form; docs/guide/sparse.md) and the
+        dense path only up to n = 2,000; 'sparse' asks for the sparse
+        set-up (a dense constant DAE is converted) and never falls back.
 
     Returns
     -------
@@ -595,4 +603,7 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None, setup="a
         cls = COMPLETIONS[method]
     else:
         raise ValueError(f"`method` must be one of {set(COMPLETIONS)} or a Completion subclass; found {method!r}.")
-    return cls(dae, lam=lam, k=k, rcond=rcond, t_span=t_span, setup=setup)
+    with blas_threads():  # the set-up's BLAS threads are chosen (lsc._threads), not inherited
+        if setup == "sparse" or getattr(dae, "is_sparse", False):  # scipy.sparse coefficients: lsc._sparse decides
+            return SETUPS["sparse"](cls, dae, lam=lam, k=k, rcond=rcond, t_span=t_span, setup=setup)
+        return cls(dae, lam=lam, k=k, rcond=rcond, t_span=t_span, setup=setup)

@@ -124,7 +124,7 @@ def stiffness_ratio(completion, t_span):
 
 
 def solve_completion(
-    completion, t_span, x0, *, method="RK45", t_eval=None, rtol=1e-3, atol=1e-6, project=False, interpolate=None,
+    completion, t_span, x0, *, method=None, t_eval=None, rtol=1e-3, atol=1e-6, project=False, interpolate=None,
     **options
 ):
     """Integrate a completion ``x' = G x + g(t)`` with `scipy.integrate.solve_ivp`.
@@ -143,7 +143,7 @@ def solve_completion(
         Initial state; it need not be consistent (the completion's added
         dynamics then decide what happens to the error).
     method : str or OdeSolver subclass, optional
-        Any solve_ivp method. For the implicit ones ('Radau', 'BDF',
+        Any solve_ivp method (default 'RK45'; 'auto' for a sparse completion). For the implicit ones ('Radau', 'BDF',
         'LSODA') the constant Jacobian ``G`` is passed. Large ``lam`` makes
         the completion stiff: prefer 'Radau' or 'BDF' when ``lam`` times the
         interval length is large. ``'expm'`` (constant coefficients only)
@@ -161,6 +161,9 @@ def solve_completion(
         ``max_step``, ``max_order``, ``max_num_steps``, ``max_nonlin_iters``,
         ``max_conv_fails``, ``linsolver``): stiff completions at compiled
         speed.
+        A sparse completion (`lsc.SparseCompletion`) takes 'auto',
+        'Rodas4' (stiff: a Rosenbrock method whose solves are sparse
+        saddle-point solves) or an explicit method (docs/guide/sparse.md).
         ``'auto'`` picks 'Radau' when the completion is stiff on `t_span`
         (``stiffness_ratio`` > 100, see below) and 'DOP853' otherwise. An
         explicit method on a stiff completion runs as asked, and the
@@ -231,8 +234,12 @@ def solve_completion(
     >>> res.success, bool(np.max(np.abs(res.x - p.exact(res.t))) < 1e-6)
     (True, True)
     """
+    if getattr(completion, "setup", None) == "sparse":  # an operator, not a matrix: it integrates itself
+        return completion.solve(t_span, x0, method="auto" if method is None else method, t_eval=t_eval, rtol=rtol,
+                                atol=atol, project=project, interpolate=interpolate, **options)
     if not isinstance(completion, Completion):
         raise TypeError(f"`completion` must be an lsc Completion (see lsc.complete); found {type(completion).__name__}.")
+    method = "RK45" if method is None else method
     t0, t1 = check_t_span(t_span)
     x0 = check_state("x0", x0, completion.n)
     t_eval = check_t_eval(t_eval, (t0, t1))

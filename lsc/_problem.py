@@ -27,7 +27,11 @@ class LinearDAE:
         matrices in the symbol ``t`` (differentiated symbolically and
         compiled once); or callables ``A(t, d)`` returning the d-th time
         derivative, shape (n, n). When both are callables, ``n`` is read
-        from ``A(0.0, 0)``.
+        from ``A(0.0, 0)``. A scipy.sparse ``A`` or ``B`` (constant; an
+        array given with it is made sparse) makes a sparse DAE
+        (`lsc._sparse_problem.SparseLinearDAE`, docs/guide/sparse.md): kept
+        sparse, completed by the sparse set-up, and handed to the dense path
+        only up to n = 2,000.
     f : None, array_like, sympy expression or callable, optional
         The forcing. ``None`` means zero; a constant vector of length ``n``;
         a sympy column/row vector (or list of expressions) in the symbol
@@ -60,6 +64,15 @@ class LinearDAE:
     >>> np.allclose(dae.residual(1.0, x, xdot), 0)
     True
     """
+
+    # scipy.sparse coefficients make this subclass (lsc._sparse_problem registers SparseLinearDAE here on import):
+    # kept sparse, never densified
+    _sparse_class = None
+
+    def __new__(cls, A=None, B=None, f=None):
+        if cls is LinearDAE and (_is_scipy_sparse(A) or _is_scipy_sparse(B)):
+            return super().__new__(LinearDAE._sparse_class)
+        return super().__new__(cls)
 
     def __init__(self, A, B, f=None):
         n = None
@@ -118,6 +131,11 @@ class LinearDAE:
         if self.f is not None:
             r = r - self.f(t)
         return r
+
+
+def _is_scipy_sparse(value):
+    """Whether `value` is a scipy.sparse matrix or array (without importing scipy.sparse for dense input)."""
+    return (type(value).__module__ or "").startswith("scipy.sparse")
 
 
 def check_dae(dae):
