@@ -187,22 +187,36 @@ class Forcing:
         fn = getattr(f, "fn", None)
         if top >= 1 and ts.size and not getattr(f, "_d_checked", True):
             f.jet(float(ts[0]), 1)  # the set-up check that the callable honours d (lsc._timefunc)
-        if self._callable_vectorizes is not False and fn is not None and not hasattr(fn, "jet") and ts.size > 1:
-            # A callable written with numpy ufuncs accepts an array t: one call per order.
-            try:
-                raw = [fn(ts, d) for d in range(top + 1)]
-            except Exception:  # noqa: BLE001 - any failure means: not vectorized; the loop below reports errors
-                raw = None
-            if raw is not None and any(np.iscomplexobj(r) for r in raw):
-                raise TypeError(f"`{f.name}(t, d)` must return real numbers of shape {shape}; got complex values "
-                                "for an array of times (their imaginary part would be lost).")
-            try:
-                rows = None if raw is None else [np.asarray(r, dtype=float) for r in raw]
-            except (TypeError, ValueError):
-                rows = None
-            if rows is not None and all(r.shape == shape + (ts.size,) for r in rows):
+        if self._callable_vectorizes is not False and fn is not None and ts.size > 1:
+            rows = self._vectorized(fn, ts, top)
+            if rows is not None:
                 self._callable_vectorizes = True
-                return np.concatenate([r.reshape(self.n_f, ts.size) for r in rows], axis=0)
+                return rows
             self._callable_vectorizes = False
         return np.column_stack([f.jet(float(t), top).reshape(-1) for t in ts]) if ts.size else \
             np.zeros(((top + 1) * self.n_f, 0))
+
+    def _vectorized(self, fn, ts, top):
+        """The stacked jets from one call with the array `ts`, or None when the callable does not take one.
+
+        A callable written with numpy ufuncs accepts an array t: one call of ``fn.jet(ts, top)`` when it
+        offers all orders at once (shape ``(top + 1,) + shape + (m,)``), else one call of ``fn(ts, d)`` per
+        order (``shape + (m,)``). Anything else (an exception, another shape) means: not vectorized, and the
+        one-time calls report what is wrong.
+        """
+        m, n_f, shape = ts.size, self.n_f, self.f.shape
+        try:
+            raw = [fn.jet(ts, top)] if hasattr(fn, "jet") else [fn(ts, d) for d in range(top + 1)]
+        except Exception:  # noqa: BLE001 - any failure means: not vectorized; the loop reports errors
+            return None
+        if any(np.iscomplexobj(r) for r in raw):
+            raise TypeError(f"`{self.f.name}(t, d)` must return real numbers of shape {shape}; got complex values "
+                            "for an array of times (their imaginary part would be lost).")
+        try:
+            rows = [np.asarray(r, dtype=float) for r in raw]
+        except (TypeError, ValueError):
+            return None
+        want = ((top + 1,) if hasattr(fn, "jet") else ()) + shape + (m,)
+        if not all(r.shape == want for r in rows):
+            return None
+        return np.concatenate([r.reshape(-1, n_f, m).reshape(-1, m) for r in rows], axis=0)

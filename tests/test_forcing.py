@@ -57,10 +57,6 @@ def test_compiled_forcing_reports_non_finite_values():
         c._forcing.jets(np.array([0.0, 1.0]), 2)
 
 
-@pytest.mark.xfail(strict=True, reason="slow path: a forcing that offers jet(t, order) is evaluated one time at a "
-                   "time by method='expm' (lsc._forcing.Forcing._callable_stack never tries an array of times on it); "
-                   "the gallery's canonical problems run expm about 15x slower than with the same forcing as a plain "
-                   "array callable (examples/bench_peers.py)")
 def test_expm_evaluates_a_jet_forcing_over_arrays_of_times():
     from lsc import solve_completion
     from lsc._timefunc import JetCallable
