@@ -163,11 +163,16 @@ def test_c_is_warning_free(built, key, tmp_path):
     assert proc.returncode == 0, proc.stderr
 
 
-def test_build_is_atomic_and_says_what_is_fixed(tmp_path, capfd):
+def test_build_is_atomic_and_says_what_is_fixed(tmp_path, capfd, monkeypatch):
+    calls, complete = [], lsc.complete
+    monkeypatch.setattr(lsc, "complete", lambda *a, **kw: calls.append(a[1]) or complete(*a, **kw))
     path = build_fmu(ROOT / "examples" / "specs" / "prescribed_path.toml", tmp_path, target="native", fix_parameters=True)
     err = capfd.readouterr().err
     assert "fixed at their spec values: c, k, m" in err and "lambda tunable" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]  # no temporary file left
+    # one completion: lambda's affine parts come from its own factors (`Completion.lam_affine`), not from
+    # completions at other rates
+    assert calls == ["alternative"]
 
 
 def test_fmu_file_has_the_mode_of_an_ordinary_file(built, tmp_path):
