@@ -125,7 +125,7 @@ def test_expm_callable_forcing_vectorized_and_not():
     for f in (f_numpy, f_math):
         c = complete(LinearDAE(A, B, f), "alternative", lam=1.0)
         results.append(solve_completion(c, (0.0, 3.0), exact(0.0), method="expm", t_eval=ts, rtol=1e-9, atol=1e-9).x)
-        assert c._forcing._callable_vectorizes is (f is f_numpy)
+        assert c._g._callable_vectorizes is (f is f_numpy)
     np.testing.assert_allclose(results[0], results[1], rtol=0, atol=1e-13)
     np.testing.assert_allclose(results[0], exact(ts), rtol=0, atol=1e-8)
 

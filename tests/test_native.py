@@ -335,8 +335,8 @@ def test_output_derivatives_are_exact(built):
              "output_derivatives": states(spec)})
     t, x = r["time"][-1], np.array(r["values"][-1])
     _, c = library(spec, np.array([0.0, 1.0]))
-    G, W = c._G, c._W
-    p = c._order
+    maps = c.maps()
+    G, W, p = maps.G[0], maps.W[0], maps.order
     fj = c.dae.f.jet(t, p + 4).reshape(-1)
     n = c.n
     xd = [x]
