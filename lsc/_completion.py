@@ -136,10 +136,10 @@ class Completion:
             return None
         k = self.k if k is None else k
         jets = np.zeros((len(ts), k + 1))
-        if value is None:
+        if value is None and isinstance(self.lam, TimeFunction):
             jets[:] = [lam_at(self.lam, float(t), k) for t in ts]
-        else:
-            jets[:, 0] = value
+        else:  # a constant rate (checked positive when given)
+            jets[:, 0] = self.lam if value is None else value
         sigma = self._scaling.sigma
         return jets if sigma == 1.0 else jets * sigma ** np.arange(1.0, k + 2)
 

@@ -182,16 +182,18 @@ class Factors:
             ok &= ranks_many(s1, AT2.shape[1:], rcond) == AT2.shape[2]
         Z1t = swap(Z1)
         M = np.concatenate([Z1t @ A, self.C], axis=1)
-        lead = (max(G_c.shape[0], len(ok)),)  # one time, several rates (`Completion.lam_affine`): broadcast
         top_G, top_W = -(Z1t @ self.B0), Z1t @ self.f0
-        G_num = np.concatenate([np.broadcast_to(top_G, lead + top_G.shape[1:]), np.broadcast_to(G_c, lead + G_c.shape[1:])], axis=1)
-        W_num = np.concatenate([np.broadcast_to(top_W, lead + top_W.shape[1:]), np.broadcast_to(W_c, lead + W_c.shape[1:])], axis=1)
+        blocks = [top_G, G_c, top_W, W_c]
+        if G_c.shape[0] != top_G.shape[0]:  # one time, several rates (`Completion.lam_affine`): broadcast
+            lead = (max(G_c.shape[0], top_G.shape[0]),)
+            blocks = [np.broadcast_to(X, lead + X.shape[1:]) for X in blocks]
+            ok = np.broadcast_to(ok, lead)
         # one LU for both right-hand sides, at the times decided
-        rhs = np.concatenate([G_num, W_num], axis=2)
-        ok = np.broadcast_to(ok, lead)
-        sol = np.full(rhs.shape, np.nan)
+        rhs = np.concatenate([np.concatenate(blocks[:2], axis=1), np.concatenate(blocks[2:], axis=1)], axis=2)
         if np.all(ok):
             sol = np.linalg.solve(M, rhs)
-        elif np.any(ok):
-            sol[ok] = np.linalg.solve(M[ok], rhs[ok])
+        else:
+            sol = np.full(rhs.shape, np.nan)
+            if np.any(ok):
+                sol[ok] = np.linalg.solve(M[ok], rhs[ok])
         return sol[..., :n], sol[..., n:], ok
