@@ -162,20 +162,19 @@ class Completion:
             self._cache.popitem(last=False)
         return hit
 
-    def _at(self, ts, values):
-        """``[(G, W, C, Wc)]`` at every time of `ts`: stacked where `lsc._setup` may, one time at a time else."""
-        out = _setup.stacked(self, ts, values)
+    def _maps_at(self, ts):
+        """``(G, W, C, Wc)`` stacked over the times `ts` (time-varying): the stacked factors where `lsc._setup`
+        may use them, one time at a time elsewhere."""
+        out = _setup.stacked(self, ts, values=False)
         for i, t in enumerate(ts):
             if out[i] is None:
-                if values:
-                    fac, G, g = self._evaluate(t)
-                    out[i] = (G, g[:, None], fac.C[0], fac.cg[0])
-                else:
-                    fac = _setup.factors_at(self, float(t))
-                    G, W = self._given(*self._maps(fac, self._lam_jets(fac.t)), fac)
-                    given, Wc = self._given_factors(fac)
-                    out[i] = (G[0], W[0], given.C[0], Wc[0])
-        return out
+                fac = _setup.factors_at(self, float(t))
+                G, W = self._given(*self._maps(fac, self._lam_jets(fac.t)), fac)
+                given, Wc = self._given_factors(fac)
+                out[i] = (G[0], W[0], given.C[0], Wc[0])
+        n, w, a = self.n, self.n * (self.order + 1), self.n_constraints
+        empty = (np.zeros((0, n, n)), np.zeros((0, n, w)), np.zeros((0, a, n)), np.zeros((0, a, w)))
+        return [np.array(X) for X in zip(*out)] if out else empty
 
     # -- public evaluation ----------------------------------------------------------------------------------
     def maps(self, t=None):
@@ -208,8 +207,7 @@ class Completion:
         if self.dae.is_constant:
             parts = [np.broadcast_to(X, (ts.size,) + X.shape) for X in (self._G, self._W, self._std.C[0], self._Wc)]
         else:
-            parts = [np.array(X) for X in zip(*self._at(ts, values=False))] if ts.size else \
-                [np.zeros((0, 0, 0))] * 4
+            parts = self._maps_at(ts)
         return CompletionMaps(ts, *parts, self.order, self.k, lam, self.method)
 
     def lam_affine(self, t=None, rtol=1e-10):
