@@ -12,6 +12,8 @@ from a grid of ratio sqrt(2), so a factorization serves many steps: the
 completion caches the last four.
 """
 
+from types import SimpleNamespace
+
 import numpy as np
 import scipy.sparse.linalg
 from scipy.integrate import OdeSolver
@@ -257,7 +259,8 @@ def solve_sparse(completion, t_span, x0, *, method="auto", t_eval=None, rtol=1e-
         options["completion"] = completion
     result = run(fun, (t0, t1), x0, base, t_eval, rtol, atol, options, 0.0, t_eval)
     if result.failure is not None:
-        return _failed(completion, result.failure, result.t, result.x, result.nfev, t1, "")
+        return _failed(SimpleNamespace(completion=completion, t_end=t1, built=""), result.failure, result.t, result.x,
+                       result.nfev)
     sol = result.sol
     dense = None if sol.sol is None else BoundedSolution(sol.sol, 0.0, t0, t1)
     return CompletionResult(
