@@ -91,14 +91,14 @@ _WORK_PREFIX = ".lsc-build-"
 def _copy_runtime(dest):
     """Copy lsc (its solver parts only), scipy's solvers and the runtime package to the package `dest`."""
     shutil.copytree(Path(lsc.__file__).parent, dest, ignore=shutil.ignore_patterns("__pycache__", "gallery"))
-    # The runtime needs neither the gallery (sympy) nor solve_ivp: importing
-    # scipy.integrate in an embedded interpreter loads scipy._lib._uarray,
-    # whose finalization crashes native hosts at exit (see _vendor_ivp).
+    # The runtime needs neither the gallery (sympy) nor solve_ivp nor the sparse set-up: importing
+    # scipy.integrate in an embedded interpreter loads scipy._lib._uarray, whose finalization crashes
+    # native hosts at exit (see _vendor_ivp); the sparse modules import it and scipy.sparse.
     lines = (dest / "__init__.py").read_text().splitlines(keepends=True)
-    dropped = ("from . import gallery", "from ._integrate import")
+    dropped = ("from . import gallery", "from ._integrate import", "from ._sparse_problem import", "from ._sparse import")
     kept = [line for line in lines if not line.startswith(dropped)]
     if len(lines) - len(kept) != len(dropped):  # lsc's __init__ changed shape: fail at build, not in the FMU
-        raise RuntimeError("fmu_build could not strip the gallery and _integrate imports from lsc/__init__.py")
+        raise RuntimeError("fmu_build could not strip the gallery, _integrate and sparse imports from lsc/__init__.py")
     (dest / "__init__.py").write_text("".join(kept))
     # inside the FMU the runtime is a subpackage of the lsc copy (its `_lsc` imports lsc's public names from there),
     # with scipy's solvers in a subpackage of its own
@@ -134,7 +134,9 @@ def _requirements():
     """What the host's Python needs to run the FMU (the versions it was built with)."""
     import scipy
 
-    return f"numpy>={np.__version__}\nscipy>={scipy.__version__}\n"
+    import threadpoolctl
+
+    return f"numpy>={np.__version__}\nscipy>={scipy.__version__}\nthreadpoolctl>={threadpoolctl.__version__}\n"
 
 
 
