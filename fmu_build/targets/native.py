@@ -349,6 +349,8 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     # only the rank at their own times, not the consistency of [J, F] where the equations nearly degenerate)
     span = None if dae.is_constant else (float(spec.experiment["start"]), float(spec.experiment["stop"]))
     comp = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=spec.k, t_span=span)
+    if span is not None:  # a rank drop between the sampled times too: the FMU cannot stop before it mid-run
+        lsc.check_solvability(dae, span, k=comp.k, rcond=comp.rcond)
     if dae.is_constant:
         G0, G1, W0, W1, maps, lam_tunable = _affine_maps(comp)
         tv = None
