@@ -80,3 +80,63 @@ def test_simulate_sends_the_input_derivatives_from_the_start(native, tmp_path):
     late = t >= 2.0
     err = np.abs(X - exact(t))[:, late].max()
     assert err < 1e-5, err  # with u'(0) = u''(0) = 0 taken: 4.4e-4
+
+
+def test_linear_input_is_fmpys_values_only(native, tmp_path):
+    # the table interpolated linearly, values only: the FMU guesses u'(0) = u''(0) = 0 and that start stays
+    proc = _lsc_fmu("simulate", native, "--input", TABLE, "--linear-input", "-o", tmp_path / "run.csv", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    t, X = _states(tmp_path / "run.csv")
+    err = np.abs(X - exact(t))[:, t >= 2.0].max()
+    assert 1e-4 < err < 1e-3, err  # 4.4e-4
+
+
+def test_a_pythonfmu_fmu_gets_values_and_the_run_says_the_start_was_guessed(tmp_path):
+    pytest.importorskip("pythonfmu")
+    from fmu_build import build_fmu
+
+    fmu = build_fmu(SPEC, tmp_path / "py")
+    proc = _lsc_fmu("simulate", fmu, "--input", TABLE, "--stop-time", "3", "-o", tmp_path / "run.csv", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "u: values only (the FMU does not declare canInterpolateInputs)" in proc.stderr
+    assert "2 of the derivatives 1..2 at t = 0 guessed" in proc.stderr and "--native" in proc.stderr
+    t, X = _states(tmp_path / "run.csv")
+    assert np.abs(X - exact(t))[:, t >= 2.0].max() < 1e-3  # the guessed start, decaying like exp(-t)
+
+
+def test_the_native_start_report_says_guessed_or_given(native):
+    pytest.importorskip("fmpy")
+    from fmpy import simulate_fmu
+
+    from fmu_build import fit_inputs, simulate_with_inputs
+
+    fit = fit_inputs(TABLE)
+    messages = []
+
+    def logger(env, instance, status, category, message):
+        messages.append(message.decode())
+
+    simulate_fmu(str(native), stop_time=0.1, output_interval=0.01, input=fit.sample(np.linspace(0, 0.1, 11)),
+                 logger=logger, debug_logging=True)
+    assert any("input u: 2 of the derivatives 1..2 at t = 0 guessed, not given (fmi2SetRealInputDerivatives)" in m
+               for m in messages), messages
+    notes = []
+    simulate_with_inputs(native, fit, stop_time=0.1, notes=notes)
+    assert notes == ["u: derivatives 1..6 sent at every communication point, the start included"]
+
+
+def test_fit_and_run_refuse_what_they_cannot_use(native, tmp_path):
+    from fmu_build import fit_inputs, simulate_with_inputs
+
+    with pytest.raises(ValueError, match="strictly increasing"):
+        fit_inputs({"time": [0.0, 0.0], "u": [1.0, 2.0]})
+    with pytest.raises(ValueError, match="column `u` must hold 2 finite numbers"):
+        fit_inputs({"time": [0.0, 1.0], "u": [1.0, float("nan")]})
+    with pytest.raises(ValueError, match="no `time` column"):
+        fit_inputs({"t": [0.0, 1.0], "u": [1.0, 2.0]})
+    with pytest.raises(ValueError, match="the fit does not extrapolate"):
+        fit_inputs({"time": [0.0, 1.0], "u": [1.0, 2.0]}).sample([1.5])
+    with pytest.raises(ValueError, match="column `v` is not a Real input of the FMU"):
+        simulate_with_inputs(native, {"time": [0.0, 6.0], "v": [0.0, 1.0]})
+    with pytest.raises(ValueError, match="must lie in the table's times"):
+        simulate_with_inputs(native, {"time": [0.0, 1.0], "u": [0.0, 1.0]}, stop_time=2.0)

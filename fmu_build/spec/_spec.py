@@ -391,9 +391,7 @@ def parse_spec(data, source="spec"):
     method, lam, k = _completion(data, problems)
 
     start, stop, step = _experiment(data, problems)
-    for u in inputs:
-        if u["window"] is None and step is not None:
-            u["window"] = DEFAULT_WINDOW_STEPS * step
+    inputs = [dict(u, window=DEFAULT_WINDOW_STEPS * step) if u["window"] is None and step else u for u in inputs]
 
     if start is not None and all(M is not None for M in (A, B, f)):
         values = {t: start, **{symbols[p["name"]]: p["value"] for p in parameters},
