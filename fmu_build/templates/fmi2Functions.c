@@ -233,6 +233,7 @@ fmi2Status fmi2Reset(fmi2Component comp) {
     int i;
     if (!allowed(c, "fmi2Reset", ANY_ALIVE)) return fmi2Error;
     memset(&c->s, 0, sizeof c->s);
+    memset(c->fit_ok, 0, sizeof c->fit_ok);
     c->s.magic = STATE_MAGIC;
     c->s.size = (unsigned int)sizeof(State);
     c->s.token = token_hash();

@@ -115,6 +115,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate FMUstate) {
     s = checked_state(c, "fmi2SetFMUstate", FMUstate);
     if (s == NULL) return fmi2Error;
     memcpy(&c->s, s, sizeof(State));
+    memset(c->fit_ok, 0, sizeof c->fit_ok); /* the inputs' fits are remade from the restored bins */
     return fmi2OK;
 }
 

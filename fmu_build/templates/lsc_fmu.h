@@ -24,13 +24,15 @@
 #define MB (NX * (NQ + 4))       /* order of the block matrix: phi_0 .. phi_(NQ+3) */
 #define NUD (NF)                 /* length of an input jet: u, u', ..., u^(NF-1) */
 #define HN (UDEG + 1)            /* the newest input values, kept as received */
-#define NBINS 16                 /* bins per least-squares window of an input (lsc_model.c, the estimator) */
+#define NBINS 8                  /* complete bins per least-squares window of an input (lsc_model.c, the estimator) */
 #define NSLOTS (NBINS + 1)       /* the window's bins and the one being filled */
-#define NLEVELS 5                /* the windows tried: U_WINDOW[i] times 1/4, 1/2, 1, 2, 4 */
-#define MIDDLE_LEVEL 2           /* the window U_WINDOW[i] itself */
+#define NLEVELS 3                /* the windows tried: U_WINDOW[i] times 1/2, 1, 2 */
+#define MIDDLE_LEVEL 1           /* the window U_WINDOW[i] itself */
+#define UB (UDEG + 3)            /* the fits' basis: Chebyshev polynomials of degree <= UDEG + 2 */
 #define NTM (NU > 0 ? 2 * UDEG + 9 : 1) /* time moments of a bin: the fits of degree <= UDEG + 2, tapered */
 #define NVM (NU > 0 ? UDEG + 7 : 1)      /* value moments of a bin */
-#define INPUT_MARGIN 10.0        /* the interpolant is taken within this many times the fit's uncertainty */
+#define INPUT_MARGIN 3.0         /* the interpolant is taken within this many times the fit's uncertainty */
+#define INPUT_AGREE 1e-8         /* E_I and E_S this close (relative) agree whatever the fit's uncertainty */
 #define INPUT_SWITCH 3.0         /* another window than U_WINDOW[i] where its uncertainty is this many times less */
 #define STEP_RTOL 1e-10          /* step sizes this close share one set of step matrices */
 #define STATE_MAGIC 0x4c534332u  /* "LSC2" */
@@ -131,6 +133,12 @@ typedef struct {
     double tv_lam;
     double tv_coef[TV_NCOMB];    /* Chebyshev coefficients of G0 + lambda G1 and g0 + lambda g1, per piece */
 #endif
+    /* each input's least-squares fits, per window: a function of the complete bins, made once per bin
+     * (fit_key: the bin index and degree it was made for; fit_ok 1: fit_d holds it, -1: too few values) */
+    double fit_key[A1(NU)][NLEVELS][2];
+    int fit_ok[A1(NU)][NLEVELS];
+    double fit_t[A1(NU)][NLEVELS];            /* the window's end, where fit_d holds the fits' derivatives */
+    double fit_d[A1(NU)][NLEVELS][3][UB];     /* derivatives 0..q of the fits of degree q = e, e + 1, e + 2 */
 } Instance;
 
 /* ---- logging ------------------------------------------------------------ */

@@ -19,20 +19,20 @@ static void form_gw(Instance *c) {
  * (docs/guide/inputs.md; fmu_build/targets/_runtime/_inputs.py is the same estimator). Every value received is
  * kept twice: the newest UDEG + 1 as received (hist_*), and all of the last few windows as weighted moments in
  * bins (a value weighs the time since the one before it): for each of the NLEVELS windows U_WINDOW[i] times
- * 1/4 ... 4, NBINS + 1 bins of a NBINS-th of it. At the newest time the estimate is E_I, the polynomial of degree
- * e through the newest e + 1 values, where it agrees with E_S, a least-squares polynomial of degree e - 1 over a
- * window weighted by (1 - x^2)^2 (the window mapped to [-1, 1]), within INPUT_MARGIN times E_S's uncertainty
- * (the larger change of a derivative when the fit's degree goes up by one and by two), for every derivative the
- * completion uses; E_S otherwise. E_S is the fit over the window whose highest derivative used is the least
- * uncertain (another than U_WINDOW[i] only where INPUT_SWITCH times less uncertain). A host that interpolates a table linearly
- * and steps below its spacing sends points on straight segments: E_I would differentiate their kinks, E_S
- * averages them. e = U_DEGREE[i], but while the values span less than U_WINDOW[i] and three consecutive ones lie
- * on a straight line (such a host), floor((U_DEGREE[i] + 1) span / U_WINDOW[i]): derivatives the span cannot
- * support are zero, not differentiated kinks. */
+ * 1/2, 1, 2, NBINS + 1 bins of an NBINS-th of it. At the newest time the estimate is E_I, the polynomial of degree
+ * e through the newest e + 1 values, where it agrees with E_S, a least-squares polynomial of degree e - 1 over
+ * the complete bins of a window, weighted by (1 - x^2)^2 (the window mapped to [-1, 1]), within INPUT_MARGIN
+ * times E_S's uncertainty (the larger change of a derivative when the fit's degree goes up by one and by two),
+ * for every derivative the completion uses; otherwise E_I's derivatives up to the last order that agrees (with all
+ * below it), E_S's above. E_S is the fit over the window whose highest
+ * derivative used is the least uncertain (another than U_WINDOW[i] only where INPUT_SWITCH times less
+ * uncertain). A host that interpolates a table linearly and steps below its spacing sends points on straight
+ * segments: E_I would differentiate their kinks, E_S averages them. e = U_DEGREE[i], but while the values span
+ * less than the longest window and three consecutive ones lie on a straight line (such a host),
+ * floor((U_DEGREE[i] + 1) span / that window): derivatives the span cannot support are zero, not differentiated
+ * kinks. */
 
-#define UB (UDEG + 3) /* the fits' basis: Chebyshev polynomials of degree <= UDEG + 2 */
-
-static const double LEVEL_SCALE[NLEVELS] = {0.25, 0.5, 1.0, 2.0, 4.0};
+static const double LEVEL_SCALE[NLEVELS] = {0.5, 1.0, 2.0};
 
 /* derivatives 0..e at the newest time of the polynomial through the newest min(e + 1, hist_n) values of input i */
 static void input_interpolant(const Instance *c, int i, int e, double *out) {
@@ -110,6 +110,7 @@ static void push_inputs(Instance *c, double t, const double *u) {
 static void reset_inputs(Instance *c) {
     c->s.hist_n = 0;
     memset(c->s.bins, 0, sizeof c->s.bins);
+    memset(c->fit_ok, 0, sizeof c->fit_ok);
 }
 
 /* the inputs' current values as received at t. An earlier t (a master going back without restoring a state)
@@ -131,32 +132,35 @@ static void record_inputs(Instance *c, double t) {
     push_inputs(c, t, c->s.u);
 }
 
-/* E_S of input i at the newest time with degree e over the window of a level: derivatives 0..e into ds, their
- * uncertainties into du; -1 when the window holds too few values for the fit of degree e + 2, or the fits are
- * not finite */
-static int input_least_squares(const Instance *c, int i, int level, int e, double *ds, double *du) {
-    const double width = U_WINDOW[i] * LEVEL_SCALE[level] / NBINS, t_ref = c->s.hist_t[0];
-    const double k_ref = floor((t_ref - c->s.in_origin) / width);
+/* The fits of degree e, e + 1, e + 2 of input i over the complete bins of a level's window that ends at bin k_ref
+ * (the bin being filled is left out: the taper gives the newest values little weight anyway), into the cache:
+ * their derivatives at the window's end; fit_ok -1 when the bins hold too few values or a fit is not finite. */
+static void input_fit(Instance *c, int i, int level, int e, double k_ref) {
+    const double width = U_WINDOW[i] * LEVEL_SCALE[level] / NBINS, t_end = c->s.in_origin + k_ref * width;
     const int size = e + 3;
-    double N[UB * UB], y[UB], T[UB * UB], Y[UB * UB], mt[2 * UB], rt[UB], z[UB], coef[UB], fit[3][UB], one[UB];
+    double N[UB * UB], y[UB], T[UB * UB], Y[UB * UB], mt[2 * UB], rt[UB], z[UB], coef[UB], one[UB];
     double lo = INFINITY, span, top = 0.0, scale;
     int count = 0, slot, a, b, p, q, j, f;
+    c->fit_key[i][level][0] = k_ref;
+    c->fit_key[i][level][1] = (double)e;
+    c->fit_t[i][level] = t_end;
+    c->fit_ok[i][level] = -1;
     for (slot = 0; slot < NSLOTS; slot++) {
         const InputBin *bin = &c->s.bins[i][level][slot];
-        if (bin->n > 0 && bin->k >= k_ref - NBINS && bin->k <= k_ref) {
+        if (bin->n > 0 && bin->k >= k_ref - NBINS && bin->k < k_ref) {
             count += bin->n;
             if (bin->first < lo) lo = bin->first;
         }
     }
-    span = t_ref - lo;
-    if (count < e + 6 || !(span > 0.0)) return -1;
+    span = t_end - lo;
+    if (count < e + 6 || !(span > 0.0)) return;
     memset(N, 0, sizeof N);
     memset(y, 0, sizeof y);
     for (slot = 0; slot < NSLOTS; slot++) {
         const InputBin *bin = &c->s.bins[i][level][slot];
         double alpha, beta, o0, o1, o2, taper[5], power = 1.0;
-        if (!(bin->n > 0 && bin->k >= k_ref - NBINS && bin->k <= k_ref)) continue;
-        alpha = 2.0 * (c->s.in_origin + (bin->k + 0.5) * width - t_ref) / span + 1.0;
+        if (!(bin->n > 0 && bin->k >= k_ref - NBINS && bin->k < k_ref)) continue;
+        alpha = 2.0 * (c->s.in_origin + (bin->k + 0.5) * width - t_end) / span + 1.0;
         beta = 2.0 * width / span;
         /* (1 - x^2)^2 with x = alpha + beta s, in powers of the bin's time s */
         o0 = 1.0 - alpha * alpha, o1 = -2.0 * alpha * beta, o2 = -beta * beta;
@@ -193,12 +197,12 @@ static int input_least_squares(const Instance *c, int i, int level, int e, doubl
     for (j = 0; j < size; j++) { /* Cholesky, lower: the leading blocks are the factors of the lower degrees */
         double v = N[j * UB + j];
         for (p = 0; p < j; p++) v -= N[j * UB + p] * N[j * UB + p];
-        if (!(v > 1e-14 * top)) return -1;
+        if (!(v > 1e-14 * top)) return;
         N[j * UB + j] = sqrt(v);
         for (a = j + 1; a < size; a++) {
-            double s = N[a * UB + j];
-            for (p = 0; p < j; p++) s -= N[a * UB + p] * N[j * UB + p];
-            N[a * UB + j] = s / N[j * UB + j];
+            double t = N[a * UB + j];
+            for (p = 0; p < j; p++) t -= N[a * UB + p] * N[j * UB + p];
+            N[a * UB + j] = t / N[j * UB + j];
         }
     }
     for (a = 0; a < size; a++) {
@@ -206,23 +210,55 @@ static int input_least_squares(const Instance *c, int i, int level, int e, doubl
         for (p = 0; p < a; p++) z[a] -= N[a * UB + p] * z[p];
         z[a] /= N[a * UB + a];
     }
-    for (f = 0; f < 3; f++) { /* the fits of degree e, e + 1, e + 2: their derivatives 0..e at x = 1 */
+    for (f = 0; f < 3; f++) { /* the fit of degree q = e + f: its derivatives 0..q at x = 1, the window's end */
         const int m = e + 1 + f;
+        double *d = c->fit_d[i][level][f];
         for (a = m - 1; a >= 0; a--) {
             coef[a] = z[a];
             for (p = a + 1; p < m; p++) coef[a] -= N[p * UB + a] * coef[p];
             coef[a] /= N[a * UB + a];
         }
-        for (j = 0; j <= e; j++) fit[f][j] = 0.0;
+        for (j = 0; j < m; j++) d[j] = 0.0;
         for (a = 0; a < m; a++) { /* T_a^(j)(1) = prod_(l < j) (a^2 - l^2) / (2 l + 1) */
             one[0] = 1.0;
-            for (j = 0; j < e; j++) one[j + 1] = one[j] * (double)(a * a - j * j) / (double)(2 * j + 1);
-            for (j = 0; j <= e; j++) fit[f][j] += coef[a] * one[j];
+            for (j = 0; j + 1 < m; j++) one[j + 1] = one[j] * (double)(a * a - j * j) / (double)(2 * j + 1);
+            for (j = 0; j < m; j++) d[j] += coef[a] * one[j];
+        }
+        for (scale = 1.0, j = 0; j < m; j++, scale *= 2.0 / span) {
+            d[j] *= scale;
+            if (!isfinite(d[j])) return;
         }
     }
-    for (scale = 1.0, j = 0; j <= e; j++, scale *= 2.0 / span) {
-        ds[j] = fit[0][j] * scale;
-        du[j] = fmax(fabs(fit[1][j] - fit[0][j]), fabs(fit[2][j] - fit[1][j])) * scale;
+    c->fit_ok[i][level] = 1;
+}
+
+/* E_S of input i at the newest time with degree e over the window of a level: derivatives 0..e into ds, their
+ * uncertainties (the larger change of each when the degree goes up by one and by two) into du; -1 when the
+ * window's complete bins hold too few values for the fit of degree e + 2. The fits are made once per bin
+ * (input_fit) and read here at the newest time: each polynomial's Taylor shift, exact. */
+static int input_least_squares(Instance *c, int i, int level, int e, double *ds, double *du) {
+    const double width = U_WINDOW[i] * LEVEL_SCALE[level] / NBINS;
+    const double k_ref = floor((c->s.hist_t[0] - c->s.in_origin) / width);
+    double at[3][UB], dt;
+    int f, j, k;
+    if (c->fit_ok[i][level] == 0 || c->fit_key[i][level][0] != k_ref || c->fit_key[i][level][1] != (double)e)
+        input_fit(c, i, level, e, k_ref);
+    if (c->fit_ok[i][level] != 1) return -1;
+    dt = c->s.hist_t[0] - c->fit_t[i][level];
+    for (f = 0; f < 3; f++) {
+        const double *d = c->fit_d[i][level][f];
+        for (j = 0; j <= e; j++) {
+            double v = 0.0, term = 1.0;
+            for (k = j; k < e + 1 + f; k++) {
+                v += d[k] * term;
+                term *= dt / (double)(k - j + 1);
+            }
+            at[f][j] = v;
+        }
+    }
+    for (j = 0; j <= e; j++) {
+        ds[j] = at[0][j];
+        du[j] = fmax(fabs(at[1][j] - at[0][j]), fabs(at[2][j] - at[1][j]));
         if (!isfinite(ds[j]) || !isfinite(du[j])) return -1;
     }
     return 0;
@@ -243,13 +279,16 @@ static int input_straight(const Instance *c, int i) {
     return 0;
 }
 
-/* E_I (est) within INPUT_MARGIN times E_S's uncertainty (du) of E_S (ds), for every derivative of input i used */
+/* The number of orders 0, 1, ... of input i used where E_I (est) is within INPUT_MARGIN times E_S's uncertainty
+ * (du) of E_S (ds), or within INPUT_AGREE relative (the two far closer than either's rounding allows to tell
+ * apart), each with all below it */
 static int input_agrees(int i, int e, const double *est, const double *ds, const double *du) {
     const int top = U_ORDER[i] < e ? U_ORDER[i] : e;
     int j;
     for (j = 0; j <= top; j++)
-        if (!(fabs(est[j] - ds[j]) <= INPUT_MARGIN * du[j] + 1e-13 * (1.0 + fabs(ds[j])))) return 0;
-    return 1;
+        if (!(fabs(est[j] - ds[j]) <= INPUT_MARGIN * du[j] + INPUT_AGREE * (fabs(ds[j]) + fabs(est[j])) + 1e-13))
+            return j;
+    return top + 1;
 }
 
 /* the estimate at the newest time received: est_t, est (derivatives 0..UDEG of each input; the value as received) */
@@ -262,8 +301,9 @@ static void estimate_inputs(Instance *c) {
         const int d = U_DEGREE[i];
         const double span = c->s.hist_t[0] - c->s.in_first;
         int e = d;
-        if (span < U_WINDOW[i] * (1.0 - 1e-12) && input_straight(c, i)) {
-            e = (int)floor((double)(d + 1) * span / U_WINDOW[i]);
+        const double ramp = U_WINDOW[i] * LEVEL_SCALE[NLEVELS - 1]; /* until the values span the longest window */
+        if (span < ramp * (1.0 - 1e-12) && input_straight(c, i)) {
+            e = (int)floor((double)(d + 1) * span / ramp);
             if (e > d) e = d;
         }
         for (j = 0; j <= UDEG; j++) est[j] = 0.0;
@@ -284,8 +324,13 @@ static void estimate_inputs(Instance *c) {
                 memcpy(ds, ds2, sizeof ds2);
                 memcpy(du, du2, sizeof du2);
             }
-            if (found && !input_agrees(i, es, est, ds, du))
-                for (j = 0; j <= e; j++) est[j] = j <= es ? ds[j] : 0.0;
+            /* E_I up to the last order that agrees with E_S (the orders below it too); E_S above: exact samples
+             * amplify their rounding in E_I's highest orders, where E_S is as good */
+            if (found) {
+                const int agree = input_agrees(i, es, est, ds, du);
+                if (agree <= top)
+                    for (j = agree; j <= e; j++) est[j] = j <= es ? ds[j] : 0.0;
+            }
         }
         est[0] = c->s.hist_u[i];
     }

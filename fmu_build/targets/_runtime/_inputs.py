@@ -17,7 +17,8 @@ The estimator (the native FMUs run the same one, ``templates/lsc_model.c``):
 * ``E_I`` is taken where it agrees with ``E_S`` within ``MARGIN`` times
   ``E_S``'s own uncertainty, for every derivative the completion uses; the
   uncertainty of order j is the larger change of that derivative when the
-  fit's degree goes up by one and by two. Otherwise ``E_S``;
+  fit's degree goes up by one and by two. Otherwise ``E_I``'s derivatives up
+  to the last order that agrees (with all below it), ``E_S``'s above;
 * ``E_S`` is the fit over the window, among ``window`` times LEVELS, whose
   highest derivative used is the least uncertain (another one than
   ``window`` only where ``SWITCH`` times less uncertain);
@@ -30,15 +31,17 @@ The estimate is kept as the Taylor coefficients of its polynomial at the
 newest value's time, with the value received there as its constant term.
 """
 
+import functools
 import math
 
 import numpy as np
 
-NBINS = 16  # bins per window (the window's bins hold every value received in it)
-LEVELS = (0.25, 0.5, 1.0, 2.0, 4.0)  # the windows tried, in units of `window`
+NBINS = 8  # complete bins per window (the window's bins hold every value received in it)
+LEVELS = (0.5, 1.0, 2.0)  # the windows tried, in units of `window`
 _MIDDLE = LEVELS.index(1.0)
 TAPER = 2  # weight (1 - x^2)^TAPER on the window mapped to [-1, 1]: no end of the window is a kink
-MARGIN = 10.0  # E_I is taken within MARGIN times E_S's uncertainty
+MARGIN = 3.0  # E_I is taken within MARGIN times E_S's uncertainty
+AGREE = 1e-8  # E_I and E_S this close (relative) agree whatever the fit's uncertainty (rounding tells no more)
 SWITCH = 3.0  # another window than `window` only where its uncertainty is this many times less
 MAX_DEGREE = 8
 
@@ -46,8 +49,21 @@ _FACTORIALS = np.array([float(math.factorial(j)) for j in range(32)])
 _EPS = np.finfo(float).eps
 
 
+@functools.lru_cache(maxsize=None)
+def _shift_pattern(size):
+    power = np.subtract.outer(np.arange(size), np.arange(size))  # m - j
+    return np.maximum(power, 0), power >= 0
+
+
+def _shift(s, size):
+    """``S`` with ``d @ S`` the derivatives 0..size-1 at t + s of a polynomial whose derivatives at t are ``d``."""
+    power, upper = _shift_pattern(size)
+    return np.where(upper, float(s) ** power / _FACTORIALS[power], 0.0)
+
+
+@functools.lru_cache(maxsize=None)
 def _chebyshev_at_one(size):
-    """``D[a, j] = T_a^(j)(1)``, a, j < size."""
+    """``D[a, j] = T_a^(j)(1)``, a, j < size (read only)."""
     D = np.zeros((size, size))
     for a in range(size):
         v = 1.0
@@ -132,30 +148,39 @@ class _InputSignal:
         self._derivs = None  # derivatives of the estimate at _t0 (index 0: the value received there)
         self._t0 = None
         self._jet_at = (None, None)
+        self._fits = {}  # level -> ((bin index, degree) it was made at, its fit): a function of the bins
+        self._width_list = [self.window * level / NBINS for level in LEVELS]
+        self._powers = np.arange(self._nm)
 
     def _widths(self):
         return self.window * np.array(LEVELS) / NBINS
 
     def _accumulate(self, t, u, w, sign):
-        widths = self._widths()
-        k = np.floor((t - self._origin) / widths)
-        at = (np.arange(len(LEVELS)), (k - (NBINS + 1) * np.floor(k / (NBINS + 1))).astype(int))
-        n = self._n[at]
-        n[(n > 0) & (self._k[at] != k)] = 0  # a slot whose bin left the window
-        new = n <= 0
-        if sign < 0 and new.all():
-            return
-        self._m[at[0][new], at[1][new]] = 0.0
-        self._r[at[0][new], at[1][new]] = 0.0
-        self._k[at] = np.where(new, k, self._k[at])
-        self._lo[at] = np.where(new, t, np.minimum(self._lo[at], t))
-        n = n + sign
-        s = (t - (self._origin + (k + 0.5) * widths)) / widths
-        powers = s[:, None] ** np.arange(self._nm)
-        live = n > 0
-        self._n[at] = np.where(live, n, 0)
-        self._m[at] = np.where(live[:, None], self._m[at] + sign * w * powers, 0.0)
-        self._r[at] = np.where(live[:, None], self._r[at] + sign * w * u * powers[:, : self._nr], 0.0)
+        slots = NBINS + 1
+        for level, width in enumerate(self._width_list):
+            k = math.floor((t - self._origin) / width)
+            slot = k % slots
+            n = int(self._n[level, slot])
+            if n > 0 and self._k[level, slot] != k:
+                n = 0  # the slot holds a bin that left the window
+            if n <= 0:
+                if sign < 0:
+                    continue
+                self._m[level, slot] = 0.0
+                self._r[level, slot] = 0.0
+                self._k[level, slot] = k
+                self._lo[level, slot] = t
+            n += sign
+            if n <= 0:
+                self._n[level, slot] = 0
+                self._m[level, slot] = 0.0
+                self._r[level, slot] = 0.0
+                continue
+            self._n[level, slot] = n
+            self._lo[level, slot] = min(self._lo[level, slot], t)
+            powers = ((t - (self._origin + (k + 0.5) * width)) / width) ** self._powers
+            self._m[level, slot] += (sign * w) * powers
+            self._r[level, slot] += (sign * w * u) * powers[: self._nr]
 
     def record(self, t):
         """Take the current value as received at t (a repeated or earlier t replaces what came after)."""
@@ -189,31 +214,33 @@ class _InputSignal:
     def _interpolant(self, e):
         """Derivatives 0..e at the newest time of the polynomial through the newest e + 1 values."""
         pts = self.history[-(e + 1):]
-        t0 = pts[-1][0]
         n = len(pts)
         out = np.zeros(e + 1)
         if n == 1:
             out[0] = pts[0][1]
             return out
-        nodes = np.array([p[0] - t0 for p in pts[::-1]])  # newest first
-        dd = np.array([p[1] for p in pts[::-1]])
+        t0 = pts[-1][0]
+        scale = t0 - pts[0][0]
+        x = [(p[0] - t0) / scale for p in pts]
+        # Newton's divided differences on the scaled nodes, then the Newton form's Taylor coefficients at 0
+        # (plain floats: a handful of values, where numpy's calls would cost more than the arithmetic)
+        dd = [p[1] for p in pts]
         for k in range(1, n):
-            dd[k:] = (dd[k:] - dd[k - 1:-1].copy()) / (nodes[k:] - nodes[: n - k])
-        # Newton form to Taylor coefficients at 0
-        coef, basis = np.zeros(n), np.zeros(n)
-        basis[0] = 1.0
-        for k in range(n):
-            coef += dd[k] * basis
-            if k + 1 < n:
-                basis[1:] = basis[:-1] - nodes[k] * basis[1:]
-                basis[0] = -nodes[k] * basis[0]
-        out[: min(n, e + 1)] = coef[: e + 1] * _FACTORIALS[: min(n, e + 1)]
+            for m in range(n - 1, k - 1, -1):
+                dd[m] = (dd[m] - dd[m - 1]) / (x[m] - x[m - k])
+        coef = [0.0] * n
+        coef[0] = dd[n - 1]
+        for k in range(n - 2, -1, -1):  # Horner on (s - x_k): coef <- coef * (s - x_k) + dd[k]
+            for m in range(n - 1, 0, -1):
+                coef[m] = coef[m - 1] - x[k] * coef[m]
+            coef[0] = dd[k] - x[k] * coef[0]
+        out[:n] = np.array(coef) * _FACTORIALS[:n] / scale ** np.arange(n)
         return out
 
     def _straight(self):
         """True when three consecutive values of the newest lie on a straight line (to rounding): a host that
         interpolates a table linearly and steps below its spacing (the kinks at its rows cannot be told from
-        the input's own curvature until the values span the window)."""
+        the input's own curvature until the values span the windows)."""
         pts = self.history
         for (t0, u0, _), (t1, u1, _), (t2, u2, _) in zip(pts, pts[1:], pts[2:]):
             chord = (u0 * (t2 - t1) + u2 * (t1 - t0)) / (t2 - t0)
@@ -223,23 +250,48 @@ class _InputSignal:
 
     def _least_squares(self, e, levels):
         """For each index into LEVELS in `levels`: (derivatives 0..e at the newest time, their uncertainties) of the
-        fit of degree e over that window, or None when it holds too few values."""
-        levels = np.asarray(levels)
+        fit of degree e over that window's complete bins, or None when they hold too few values.
+
+        A fit depends on the complete bins only (the one being filled is left out: the taper gives the newest
+        values little weight anyway), so it is made once per bin and kept; the newest time reads it shifted
+        (its polynomial's Taylor shift, exact)."""
         t_ref = self.history[-1][0]
+        widths = self._widths()
+        k_refs = np.floor((t_ref - self._origin) / widths)
+        todo = [level for level in levels if self._fits.get(level, (None,))[0] != (k_refs[level], e)]
+        if todo:
+            for level, fit in zip(todo, self._fit_levels(e, todo, k_refs[todo])):
+                self._fits[level] = ((k_refs[level], e), fit)
+        out = []
+        for level in levels:
+            fit = self._fits[level][1]
+            if fit is None:
+                out.append(None)
+                continue
+            t_end, fits = fit  # rows: the derivatives 0..q (zero beyond) of the fits of degree q = e, e + 1, e + 2
+            at = fits @ _shift(t_ref - t_end, e + 3)[:, : e + 1]
+            out.append((at[0], np.maximum(np.abs(at[1] - at[0]), np.abs(at[2] - at[1]))))
+        return out
+
+    def _fit_levels(self, e, levels, k_refs):
+        """The fits of degree e, e + 1, e + 2 over the complete bins of each level: (end time, [derivatives 0..q
+        of the fit of degree q there]) or None, all levels in one pass."""
+        levels = np.asarray(levels)
         widths = self._widths()[levels]
         k, n = self._k[levels], self._n[levels]
-        k_ref = np.floor((t_ref - self._origin) / widths)[:, None]
-        inside = (n > 0) & (k >= k_ref - NBINS) & (k <= k_ref)
+        k_ref = np.asarray(k_refs)[:, None]
+        inside = (n > 0) & (k >= k_ref - NBINS) & (k < k_ref)
         count = (n * inside).sum(axis=1)
         lo = np.where(inside, self._lo[levels], np.inf).min(axis=1)
-        span = t_ref - lo
+        t_end = self._origin + k_ref[:, 0] * widths
+        span = t_end - lo
         ok = (count >= e + 6) & (span > 0.0)
         out = [None] * len(levels)
         if not ok.any():
             return out
         span = np.where(ok, span, 1.0)[:, None]
         size = e + 3  # fits of degree e, e + 1 and e + 2
-        alpha = np.where(inside, 2.0 * (self._origin + (k + 0.5) * widths[:, None] - t_ref) / span + 1.0, 0.0)
+        alpha = np.where(inside, 2.0 * (self._origin + (k + 0.5) * widths[:, None] - t_end[:, None]) / span + 1.0, 0.0)
         beta = 2.0 * widths[:, None] / span
         # (1 - x^2)^2 with x = alpha + beta s: a polynomial of degree 4 in the bin's time s (zero outside the window)
         o0, o1, o2 = 1.0 - alpha * alpha, -2.0 * alpha * beta, -beta * beta + 0.0 * alpha
@@ -258,12 +310,13 @@ class _InputSignal:
                 continue
             if not np.all(np.diag(L) ** 2 > 1e-14 * np.diag(N[i]).max()):
                 continue
-            D = _chebyshev_at_one(size)[:, : e + 1] * (2.0 / span[i, 0]) ** np.arange(e + 1)
+            D = _chebyshev_at_one(size) * (2.0 / span[i, 0]) ** np.arange(size)
             z = np.linalg.solve(L, y[i])
-            fits = [np.linalg.solve(L[: q + 1, : q + 1].T, z[: q + 1]) @ D[: q + 1] for q in (e, e + 1, e + 2)]
-            uncertainty = np.maximum(np.abs(fits[1] - fits[0]), np.abs(fits[2] - fits[1]))
-            if np.all(np.isfinite(fits[0])) and np.all(np.isfinite(uncertainty)):
-                out[i] = (fits[0], uncertainty)
+            fits = np.zeros((3, size))
+            for f, q in enumerate((e, e + 1, e + 2)):
+                fits[f, : q + 1] = np.linalg.solve(L[: q + 1, : q + 1].T, z[: q + 1]) @ D[: q + 1, : q + 1]
+            if np.all(np.isfinite(fits)):
+                out[i] = (float(t_end[i]), fits)
         return out
 
     def _estimate(self):
@@ -271,15 +324,11 @@ class _InputSignal:
         d = self.degree
         span = t_ref - self._first
         e = d
-        if span < self.window * (1 - 1e-12) and self._straight():
-            e = min(d, int((d + 1) * span / self.window))
+        ramp = self.window * LEVELS[-1]  # until the values span the longest window
+        if span < ramp * (1 - 1e-12) and self._straight():
+            e = min(d, int((d + 1) * span / ramp))
         estimate = self._interpolant(e)
         if e > 0:
-            def agrees(fit):
-                smooth, uncertainty = fit
-                return all(abs(estimate[j] - smooth[j]) <= MARGIN * uncertainty[j] + 1e-13 * (1.0 + abs(smooth[j]))
-                           for j in used)
-
             # the window whose highest derivative used is the least uncertain; another than `window` only where
             # SWITCH times less uncertain (the uncertainty is itself noisy: a window does not win by chance)
             es = min(e, d - 1)  # E_S: one degree less than E_I (more robust to what is not a polynomial)
@@ -289,9 +338,17 @@ class _InputSignal:
             for level, other in enumerate(fits):
                 if level != _MIDDLE and other is not None and other[1][used[-1]] < bound:
                     fit, bound = other, other[1][used[-1]]
-            if fit is not None and not agrees(fit):
-                estimate = np.zeros(e + 1)
-                estimate[: es + 1] = fit[0]
+            if fit is not None:
+                # E_I up to the last order that agrees with E_S (the orders below it too); E_S above: exact
+                # samples amplify their rounding in E_I's highest orders, where E_S is as good
+                smooth, uncertainty = fit
+                agree = 0
+                while agree < len(used) and (abs(estimate[agree] - smooth[agree])
+                                             <= MARGIN * uncertainty[agree]
+                                             + AGREE * (abs(smooth[agree]) + abs(estimate[agree])) + 1e-13):
+                    agree += 1
+                if agree < len(used):
+                    estimate = np.concatenate([estimate[:agree], smooth[agree:], np.zeros(e - es)])
         estimate = estimate.copy()
         estimate[0] = u_ref
         self._t0, self._derivs = t_ref, estimate
