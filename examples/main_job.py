@@ -8,17 +8,22 @@
    and `lambda` are FMU parameters, so one FMU serves all three runs.
 3. A table gives the error against the exact solution (max, and at the end),
    the constraint residual at the end and the run time; a plot goes to
-   out/main_job.png when matplotlib is installed (the `fmu` extra has it);
-   with ``--docs`` also to docs/_generated/main_job.png, the README's picture.
+   out/main_job.png when matplotlib is installed (the `fmu` extra has it),
+   and the numbers it draws (each run's residual at t = 0, 1, ..., 10 and
+   its errors) to out/main_job.json, whose SHA-256 the PNG carries; with
+   ``--docs`` also to docs/_generated/main_job.png and .json, the README's
+   picture (tests/test_docs_pictures.py compares them with a run).
 4. The same example is also built as native C FMUs (``target="native"``: no
    Python in the host; the alternative one has ``lambda`` tunable, the
    standard one is a second build, since the method is fixed in C) and run
    in fmpy the same way; their columns sit beside the pythonfmu ones.
 
-Run:  python examples/main_job.py [--docs]
+Run:  python examples/main_job.py [--docs] [--out FOLDER]   (FOLDER: where to write, default out/)
 """
 
 import argparse
+import hashlib
+import json
 import time
 from pathlib import Path
 
@@ -35,18 +40,19 @@ ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "out"
 
 
-def main(docs=False):
+def main(docs=False, out=OUT):
+    out = Path(out)
     t0 = time.perf_counter()
-    fmu = build_fmu(ROOT / "examples" / "specs" / "prescribed_path.toml", OUT)
+    fmu = build_fmu(ROOT / "examples" / "specs" / "prescribed_path.toml", out)
     problems = validate_fmu(str(fmu))
-    print(f"built {fmu.relative_to(ROOT)} in {time.perf_counter() - t0:.1f} s; validate_fmu: {problems or 'no problems'}\n")
+    print(f"built {_shown(fmu)} in {time.perf_counter() - t0:.1f} s; validate_fmu: {problems or 'no problems'}\n")
     t0 = time.perf_counter()
     spec = ROOT / "examples" / "specs" / "prescribed_path.toml"
-    native = {2: build_fmu(spec, OUT / "native", target="native", fix_parameters=True),
-              0: build_fmu(spec, OUT / "native", target="native", fix_parameters=True, method="standard",
+    native = {2: build_fmu(spec, out / "native", target="native", fix_parameters=True),
+              0: build_fmu(spec, out / "native", target="native", fix_parameters=True, method="standard",
                            model_name="PrescribedPathStandard")}
     native_problems = [p for f in native.values() for p in validate_fmu(str(f))]
-    print(f"built {', '.join(str(f.relative_to(ROOT)) for f in native.values())} (native C) in "
+    print(f"built {', '.join(_shown(f) for f in native.values())} (native C) in "
           f"{time.perf_counter() - t0:.1f} s; validate_fmu: {native_problems or 'no problems'}\n")
     exact = gallery.prescribed_path()  # same equations and parameters, exact solution known
     x0 = exact.exact(0.0)
@@ -56,7 +62,7 @@ def main(docs=False):
               f"{'| native: max error':>20}{'residual at end':>17}{'time [s]':>10}")
     print(header)
     print("-" * len(header))
-    results = []
+    results, shown = [], []
     for method, lam, code in runs:
         values = dict(start, method=code)
         if lam is not None:
@@ -68,6 +74,7 @@ def main(docs=False):
         X = np.array([res["y"], res["v"], res["u"]])
         err = np.abs(X - exact.exact(res["time"])).max(axis=0)
         results.append((method, lam, res, err))
+        shown.append(_numbers(method, lam, res, err))
         # the native FMU of the same completion: exact stepping in C, same output points
         native_values = {k: v for k, v in values.items() if k not in ("method", "rtol", "atol")}
         t1 = time.perf_counter()
@@ -86,22 +93,42 @@ def main(docs=False):
     except ImportError:
         print("\n(matplotlib not installed: no plot; pip install -e '.[fmu]')")
         return
+    # the numbers the picture draws, written beside it; the PNG carries their SHA-256
+    numbers = (json.dumps({"runs": shown}, indent=1) + "\n").encode()
+    stamp = {"numbers": "main_job.json sha256 " + hashlib.sha256(numbers).hexdigest()}
     fig, ax = plt.subplots(figsize=(7, 4))
     for method, lam, res, err in results:
         ax.semilogy(res["time"], np.maximum(res["constraint_residual"], 1e-16),
                     label=method if lam is None else f"{method}, lambda={lam:g}")
-    ax.set_xlabel("t")
+    ax.set_xlabel("t [s]")
     ax.set_ylabel("constraint residual (distance from the manifold)")
     ax.set_title("PrescribedPath.fmu in fmpy, start 1e-2 off the manifold")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(OUT / "main_job.png", dpi=100)
-    if docs:
-        fig.savefig(output_path("main_job.png", docs=True), dpi=100)  # the README's picture
-    print(f"\nplot: {(OUT / 'main_job.png').relative_to(ROOT)}")
+    folders = [out] + ([output_path("main_job.png", docs=True).parent] if docs else [])
+    for folder in folders:
+        (folder / "main_job.json").write_bytes(numbers)
+        fig.savefig(folder / "main_job.png", dpi=100, metadata=stamp)  # with --docs: the README's picture
+    print(f"\nplot: {_shown(out / 'main_job.png')} (numbers: {_shown(out / 'main_job.json')})")
+
+
+def _numbers(method, lam, res, err):
+    """What the picture shows of one run: its residual at t = 0, 1, ..., 10, and its errors."""
+    at = [int(round(t / 0.01)) for t in range(11)]
+    return {"method": method, "lambda": lam, "t": [float(res["time"][i]) for i in at],
+            "residual": [float(res["constraint_residual"][i]) for i in at],
+            "max error": float(err.max()), "error at end": float(err[-1])}
+
+
+def _shown(path):
+    """A path relative to the checkout when it is inside it."""
+    path = Path(path).resolve()
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
 
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--docs", action="store_true", help=HELP)
-    main(parser.parse_args().docs)
+    parser.add_argument("--out", default=OUT, help="folder to write the FMUs, plot and numbers to (default: out/)")
+    args = parser.parse_args()
+    main(args.docs, args.out)

@@ -25,7 +25,7 @@ commands:
   cosim     co-simulate FMUs connected in an SSP file (or .ssd) with a fixed macro step
               lsc-fmu cosim out/path_control.ssp --stop-time 10 --step-size 0.01 -o out/result.csv --plot
   sweep     run a parameter study (lambda, steps, tolerances, parameters) on Dask
-              lsc-fmu sweep out/PrescribedPath.fmu --grid lam=1,2,5,10 -o out/study.csv --plot out/study.png
+              lsc-fmu sweep gallery:prescribed_path --grid lam=0.5,1,2,4,8 --grid offset=0.01 -o out/study.csv
 
 Run `lsc-fmu COMMAND --help` for the options of one command.
 """
@@ -159,9 +159,12 @@ def _run_simulate(args):
 
     logs, interrupted = [], []
 
-    def logger(env, instance, status, category, message):  # keep the FMU's warnings and errors for the reason
-        if status >= 1:
-            logs.append(message.decode("utf-8", "replace"))
+    def logger(*args):  # keep the FMU's warnings and errors for the reason
+        # FMI 2.0 calls (environment, instance, status, category, message), FMI 3.0 (environment, status,
+        # category, message): the status is third from the end, the message last
+        status, message = args[-3], args[-1]
+        if status >= 1 and message:
+            logs.append(message.decode("utf-8", "replace") if isinstance(message, bytes) else str(message))
 
     def stop(signum, frame):  # Ctrl-C or SIGTERM: end the run, then clean up (the FMU may swallow the exception)
         interrupted.append(signal.Signals(signum).name)
@@ -206,7 +209,7 @@ def _run_simulate(args):
     _write_result(out, result)
     print(out)
     if args.plot:
-        print(_plot_simulation(out, result, outputs, md.modelName))
+        print(_plot_simulation(out, result, outputs, md))
     reached = result["time"][-1] if len(result) else start
     tolerance = 1e-6 * (step if step is not None else (stop_time - start) / 500)
     if not reached >= stop_time - tolerance:  # relative to the step: |stop| may dwarf the horizon
@@ -253,22 +256,12 @@ def _write_result(out, result):
     os.replace(tmp, out)
 
 
-def _plot_simulation(out, result, outputs, name):
-    import matplotlib
-    import numpy as np
-
-    matplotlib.use("Agg")
+def _plot_simulation(out, result, outputs, md):
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(len(outputs), 1, sharex=True, figsize=(7, 1.6 * len(outputs) + 1), squeeze=False)
-    for ax, output in zip(axes[:, 0], outputs):
-        ax.plot(result["time"], result[output])
-        ax.set_ylabel(output)
-        if output == "constraint_residual" and np.all(result[output] > 0):
-            ax.set_yscale("log")
-    axes[-1, 0].set_xlabel("time")
-    fig.suptitle(f"{name} in fmpy")
-    fig.tight_layout()
+    from ._cli_plots import simulation_figure
+
+    fig = simulation_figure(result, outputs, md, f"{md.modelName} in fmpy")
     png = out.with_suffix(".png")
     fig.savefig(png, dpi=100)
     plt.close(fig)
@@ -352,16 +345,23 @@ def _add_sweep(sub):
                     "processes and write one row per run: the inputs, success, message, error against the "
                     "reference, residuals, run time, steps. Needs the sweep extra (pip install -e \".[sweep]\"). "
                     "An existing output of the same study is resumed; the study's identity is kept in "
-                    "OUTPUT.study.json and a file of another study is refused.",
-        epilog="example: lsc-fmu sweep out/PrescribedPath.fmu --grid lam=1,2,5,10 --t-span 0 2 -o out/study.csv "
-               "--plot out/study.png")
+                    "OUTPUT.study.json and a file of another study is refused. Exits 1 when any run failed "
+                    "(with --allow-failures: when every run failed) or no run reaches the --recommend target, "
+                    "2 when the study is refused before running, 130 on Ctrl-C (the finished rows stay; the same "
+                    "command resumes).",
+        epilog="example: lsc-fmu sweep out/PrescribedPath.fmu --grid lam=0.5,1,2,4,8 --grid offset=0.01 --t-span 0 4 "
+               "--error-from 4 --reference gallery:prescribed_path -o out/study.csv --plot out/study.png "
+               "--recommend 1e-5")
     sweep.add_argument("target", help="an .fmu, a .toml spec, an SSP scenario, or gallery:NAME (an lsc.gallery problem)")
     sweep.add_argument("--grid", action="append", default=[], metavar="NAME=V1,V2,...",
                        help="values of one input (repeat: every combination is run)")
     sweep.add_argument("--lhs", type=int, metavar="N", help="Latin hypercube sample of N points of the --range inputs")
     sweep.add_argument("--range", action="append", default=[], metavar="NAME=LOW:HIGH", help="range of one input (with --lhs)")
     sweep.add_argument("-o", "--output", required=True, help="result file (.csv or .parquet); an existing one is resumed")
-    sweep.add_argument("--reference", default=None, help="'exact' (gallery targets), 'tightest' (default otherwise) or 'monolithic'")
+    sweep.add_argument("--reference", default=None,
+                       help="'exact' (gallery targets; their default), 'tightest' (the run at the smallest step and "
+                            "tolerances and the largest lam of each group; the default otherwise) or gallery:NAME "
+                            "(the exact solution of an lsc.gallery problem, for an FMU of the same model)")
     sweep.add_argument("--t-span", type=float, nargs=2, metavar=("T0", "T1"), help="horizon (default: the target's)")
     sweep.add_argument("--error-from", type=float, help="the error counts from this time on")
     sweep.add_argument("--scheduler", help="address of an existing Dask scheduler, or 'serial' (default: an embedded cluster)")
@@ -369,7 +369,12 @@ def _add_sweep(sub):
     sweep.add_argument("--seed", type=int, default=0, help="seed of the Latin hypercube")
     sweep.add_argument("--plot", help="write the summary plots to this PNG")
     sweep.add_argument("--recommend", type=float, metavar="ERROR", help="print the cheapest point reaching this error")
+    sweep.add_argument("--on", default="error", choices=["error", "residual_final"],
+                       help="the column --recommend holds to ERROR: the error against the reference (default) or the "
+                            "final constraint residual")
     sweep.add_argument("--cost", default="run_time", choices=["run_time", "steps"], help="cost the recommendation minimizes")
+    sweep.add_argument("--allow-failures", action="store_true",
+                       help="exit 0 when some runs fail (default: exit 1 when any run failed)")
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
     sweep.add_argument("--timeout", type=float, metavar="SECONDS",
                        help="end a run that takes longer (its worker is restarted; recorded as failed)")
@@ -379,37 +384,64 @@ def _run_sweep(args):
     """``lsc-fmu sweep``: run a study, write it, optionally plot and recommend."""
     from .study import plot_study, recommend, sweep
 
-    from ._cli_sweep import check_files, check_names, grid_of
+    from ._cli_sweep import check_files, check_names, check_plot, grid_names, grid_of, typed_grid
 
     try:
         grid = grid_of(args)
         check_files(args)
-        target = args.target
-        if target.startswith("gallery:"):
-            import lsc
-
-            name = target.split(":", 1)[1]
-            if name not in lsc.gallery.__all__ or name in ("Problem", "StateSpace"):
-                raise ValueError(f"gallery:NAME must name an lsc.gallery problem; found {name!r}")
-            target = getattr(lsc.gallery, name)()
+        check_plot(args, grid)
+        target = _gallery(args.target) if args.target.startswith("gallery:") else args.target
+        reference = args.reference
+        if reference is not None and reference.startswith("gallery:"):
+            reference = _gallery(reference)
+        elif reference not in (None, "exact", "tightest"):
+            raise ValueError(f"`--reference` must be 'exact', 'tightest' or gallery:NAME; found {reference!r}.")
         check_names(grid, target)
-        df = sweep(target, grid, reference=args.reference, scheduler=args.scheduler, progress=not args.no_progress,
+        grid = typed_grid(grid, target)
+        df = sweep(target, grid, reference=reference, scheduler=args.scheduler, progress=not args.no_progress,
                    output=args.output, t_span=args.t_span, error_from=args.error_from, n_workers=args.workers,
                    seed=args.seed, timeout=args.timeout)
-    except (ValueError, TypeError, OSError, ImportError, NotImplementedError) as exc:
+    except (ValueError, TypeError, OSError, ImportError) as exc:
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2
-    failed = int((~df["success"]).sum())
-    print(f"{len(df)} runs ({failed} failed) written to {args.output}")
+    except KeyboardInterrupt:  # the rows written so far stay; the study's files say how to go on
+        print(f"lsc-fmu: interrupted; the finished runs are in {args.output}: run the same command again to "
+              "compute only the missing ones.", file=sys.stderr)
+        return 130
+    failed = df[~df["success"]]
+    print(f"{len(df)} runs ({len(failed)} failed) written to {args.output}")
     if args.plot:
         print(plot_study(df, args.plot, cost=args.cost))
+    status = 0
     if args.recommend is not None:
-        print(recommend(df, args.recommend, cost=args.cost))
-    if len(df) and failed == len(df):
-        print(f"lsc-fmu: error: every run of the study failed; the first reason: {df['message'].iloc[0]}",
-              file=sys.stderr)
+        choice = recommend(df, args.recommend, cost=args.cost, on=args.on)
+        print(choice)
+        if choice.row is None:  # the command was asked for a point and has none
+            print(f"lsc-fmu: error: no run reaches {args.on} <= {args.recommend:g}; widen the grid (larger lam, "
+                  "smaller step or tolerances).", file=sys.stderr)
+            status = 1
+    if len(failed) and (len(failed) == len(df) or not args.allow_failures):
+        run = failed.index[0]
+        point = ", ".join(f"{k}={v}" for k, v in failed.iloc[0].items() if k in grid_names(grid))
+        first = f"run {run} ({point}): {failed['message'].iloc[0]}"
+        if len(failed) == len(df):
+            print(f"lsc-fmu: error: every run of the study failed; the first: {first}", file=sys.stderr)
+        else:
+            print(f"lsc-fmu: error: {len(failed)} of {len(df)} runs failed (the rows say why; --allow-failures "
+                  f"when some may fail); the first: {first}", file=sys.stderr)
         return 1
-    return 0
+    return status
+
+
+def _gallery(text):
+    """The lsc.gallery problem a ``gallery:NAME`` names."""
+    import lsc
+
+    name = text.split(":", 1)[1]
+    if name not in lsc.gallery.__all__ or name in ("Problem", "StateSpace"):
+        raise ValueError(f"gallery:NAME must name an lsc.gallery problem; found {name!r}")
+    return getattr(lsc.gallery, name)()
+
 
 def _add_cosim(sub):
     cosim = sub.add_parser(

@@ -7,14 +7,26 @@ import os
 
 from ._cli_checks import assignments, check_parent, decimal
 
-# Names a Latin hypercube cannot sample: categories, not numbers.
-_CATEGORICAL = ("method", "completion", "extrapolation", "iterations", "k")
+# Names a Latin hypercube cannot sample: categories, not numbers (and `k`, the number of
+# differentiations of a gallery problem; an FMU's `k` is its own, e.g. a stiffness).
+_CATEGORICAL = ("method", "completion", "extrapolation", "iterations")
 # Names a LinearDAE (gallery) target takes; it has no model parameters.
 _DAE_NAMES = ("lam", "step", "rtol", "atol", "method", "offset", "completion", "k")
 _NUMBERS = ("lam", "step", "rtol", "atol", "offset", "k", "extrapolation", "iterations")
 
 
+# Names whose values are not the model's: read here, not by an FMU variable's type.
+_OWN = _DAE_NAMES + ("extrapolation", "iterations", "algorithm", "exchange")
+
+
 def _grid_value(name, text):
+    """A --grid value: a number for the study's own numeric names, else the text as given.
+
+    Texts of other names are read later by the target's variable types
+    (`typed_grid`): a String "42" stays a text, an Integer "2.5" is refused.
+    """
+    if name not in _OWN:
+        return text
     value = decimal(text)
     if value is not None:
         return int(value) if text.strip().lstrip("+-").isdigit() else value
@@ -52,6 +64,11 @@ def grid_of(args):
             for name, values in assignments(args.grid, "--grid", "NAME=V1,V2,...").items()}
 
 
+def grid_names(grid):
+    """The input names of a grid as `grid_of` returns it."""
+    return list(grid[1] if isinstance(grid, tuple) else grid)
+
+
 def check_names(grid, target):
     """Refuse a grid name the target does not take (a LinearDAE target takes no model parameters)."""
     names = list(grid[1] if isinstance(grid, tuple) else grid)
@@ -60,6 +77,9 @@ def check_names(grid, target):
         if unknown:
             raise ValueError(f"`--grid` names {unknown} are not inputs of a gallery problem; it takes "
                              f"{', '.join(_DAE_NAMES)}.")
+        if isinstance(grid, tuple) and "k" in names:
+            raise ValueError("`--range` k: `k` (the number of differentiations) takes categories, which a Latin "
+                             "hypercube cannot sample; use --grid.")
         return
     if target.lower().endswith(".fmu") and os.path.isfile(target):
         from fmpy import read_model_description
@@ -109,3 +129,61 @@ def check_files(args):
             raise ValueError(f"`--plot` {plot!r}: the folder {folder!r} does not exist.")
     if args.recommend is not None and not (math.isfinite(args.recommend) and args.recommend > 0):
         raise ValueError(f"`--recommend` must be a positive finite error; found {args.recommend!r}.")
+
+
+def check_plot(args, grid):
+    """Refuse --plot for a study without lam before it runs (the plots are against lam)."""
+    if args.plot and "lam" not in grid_names(grid):
+        raise ValueError("`--plot` draws error and cost against lam: give lam in --grid (or --range), or leave "
+                         "out --plot.")
+
+
+def typed_grid(grid, target):
+    """The grid with each text read by the type of the variable it sets.
+
+    An FMU's variables convert by their declared type (Real, Integer, Boolean;
+    an Enumeration keeps an item's name, a String its text); a spec's, not
+    typed before it is built, become numbers where they read as one and stay
+    texts otherwise (a run reads them by the type); a ``"component.variable"`` of an SSP
+    scenario stays a text, read by ``cosimulate`` by the variable's type. A
+    value the type cannot hold is refused naming the grid name.
+    """
+    if isinstance(grid, tuple) or not isinstance(target, str):
+        return grid
+    variables = {}
+    if target.lower().endswith(".fmu") and os.path.isfile(target):
+        from fmpy import read_model_description
+
+        variables = {v.name: v for v in read_model_description(target).modelVariables}
+    elif target.lower().endswith((".ssp", ".ssd")) or os.path.isdir(target):
+        return grid
+    typed = {}
+    for name, values in grid.items():
+        if name in _OWN or not all(isinstance(v, str) for v in values):
+            typed[name] = values
+        elif name in variables:
+            typed[name] = [_typed(name, text, variables[name]) for text in values]
+        else:  # a spec's variable, typed only once it is built: a number, or a text the run reads by the type
+            typed[name] = [_number_or_text(name, text) for text in values]
+    return typed
+
+
+def _typed(name, text, variable):
+    from .study._runs import enumeration_items, fmi_value
+
+    try:
+        value = fmi_value(name, text, variable.type, enumeration_items(variable))
+    except TypeError as exc:
+        raise ValueError(f"`--grid` {name}: {exc}") from None
+    if variable.type == "Enumeration" and text.strip() in dict(enumeration_items(variable)):
+        return text.strip()  # the item's name, as given
+    return value
+
+
+def _number_or_text(name, text):
+    value = decimal(text)
+    if value is not None:
+        return int(value) if text.strip().lstrip("+-").isdigit() else value
+    if not text or text[:1].isdigit() or text[:1] in "+-.":
+        raise ValueError(f"`--grid` {name}: {text!r} is not a plain decimal number.")
+    return text  # e.g. 'true' for a Boolean parameter

@@ -1,13 +1,16 @@
 """Integration of a completion with `scipy.integrate.solve_ivp`."""
 
 import numpy as np
-from scipy.integrate import BDF, LSODA, OdeSolver, Radau, solve_ivp
+from scipy.integrate import BDF, LSODA, OdeSolver, Radau
 
 from . import _cvode, _expm
 from ._chebyshev import ChebyshevCoefficients, EvaluationFailed
 from ._completion import Completion, complete
 from ._derivative_array import lam_jet
-from ._exceptions import StiffnessWarning
+from ._exceptions import IndexDeterminationError, RankDecisionWarning, StiffnessWarning
+from ._ivp import BoundedSolution, run as run_ivp, shifted_events
+from ._rate import check_rate_on
+from ._singular import _singular_time, find_stop
 from ._validate import check_state, check_t_eval, check_t_span, check_tolerances
 
 __all__ = ["CompletionResult", "solve_completion", "solve_dae"]
@@ -66,34 +69,36 @@ class CompletionResult:
         )
 
 
-class _ForcingFailed(Exception):
-    def __init__(self, t, exc):
-        super().__init__(str(exc))
-        self.t, self.exc = t, exc
-
-
 def _is_implicit(method):
     if isinstance(method, str):
         return method in _IMPLICIT
     return isinstance(method, type) and issubclass(method, (Radau, BDF, LSODA))
 
 
-def _solve_expm(completion, t0, t1, x0, t_eval, rtol, atol, options):
+def _solve_expm(run, options):
+    """``method='expm'``: exact stepping with the matrix exponential (`lsc._expm`)."""
+    completion = run.completion
     q = options.pop("taylor_degree", None)
     max_step = options.pop("max_step", None)
+    dense = options.pop("dense_output", False)
     if options:
-        raise TypeError(f"method='expm' takes only `taylor_degree` and `max_step` options; found {sorted(options)}.")
+        raise TypeError("method='expm' takes only `taylor_degree`, `max_step` and `dense_output` options; found "
+                        f"{sorted(options)}.")
+    if not isinstance(dense, (bool, np.bool_)):
+        raise TypeError(f"`dense_output` must be True or False; found {dense!r}.")
     if not completion.dae.is_constant:
         raise ValueError("method='expm' needs constant coefficients; use an ODE method for time-varying ones.")
     if q is not None and (isinstance(q, bool) or not isinstance(q, int) or q < 0):
         raise ValueError(f"`taylor_degree` must be a non-negative int; found {q!r}.")
     if max_step is not None and not max_step > 0:
         raise ValueError(f"`max_step` must be positive; found {max_step!r}.")
-    t_out = np.linspace(t0, t1, 101) if t_eval is None else t_eval  # checked by solve_completion
-    X, message = _expm.integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=q, max_step=max_step)
+    t0, t1 = run.t_span
+    t_out = np.linspace(t0, t1, 101) if run.t_eval is None else run.t_eval
+    X, message, sol = _expm.integrate(completion, t0, t1, run.x0, t_out, run.rtol, run.atol, taylor_degree=q,
+                                      max_step=max_step, dense_output=bool(dense))
     return CompletionResult(
         t=t_out, x=X, success=True, status=0, message=message,
-        nfev=0, njev=0, nlu=0, sol=None, completion=completion,
+        nfev=0, njev=0, nlu=0, sol=sol, completion=completion,
     )
 
 
@@ -123,7 +128,7 @@ def stiffness_ratio(completion, t_span):
 
 
 def solve_completion(
-    completion, t_span, x0, *, method="RK45", t_eval=None, rtol=1e-3, atol=1e-6, project=False, interpolate=None,
+    completion, t_span, x0, *, method=None, t_eval=None, rtol=1e-3, atol=1e-6, project=False, interpolate=None,
     **options
 ):
     """Integrate a completion ``x' = G x + g(t)`` with `scipy.integrate.solve_ivp`.
@@ -142,7 +147,7 @@ def solve_completion(
         Initial state; it need not be consistent (the completion's added
         dynamics then decide what happens to the error).
     method : str or OdeSolver subclass, optional
-        Any solve_ivp method. For the implicit ones ('Radau', 'BDF',
+        Any solve_ivp method (default 'RK45'; 'auto' for a sparse completion). For the implicit ones ('Radau', 'BDF',
         'LSODA') the constant Jacobian ``G`` is passed. Large ``lam`` makes
         the completion stiff: prefer 'Radau' or 'BDF' when ``lam`` times the
         interval length is large. ``'expm'`` (constant coefficients only)
@@ -152,13 +157,17 @@ def solve_completion(
         (options ``taylor_degree`` and ``max_step`` fix them instead), and
         the output points are read from the exact propagator (one
         exponential for an equally spaced ``t_eval``, which defaults to 101
-        equally spaced times). ``'CVODE'`` integrates with SUNDIALS CVODE
+        equally spaced times); with ``dense_output=True``, ``sol(t)`` is that
+        propagator from the last step point before ``t``. ``'CVODE'`` integrates with SUNDIALS CVODE
         (BDF, dense direct solver, the constant Jacobian ``G`` or
         ``G(t)``; needs the optional package scikit-sundae; options
         ``cvode_method`` ('BDF' or 'Adams'), ``first_step``, ``min_step``,
         ``max_step``, ``max_order``, ``max_num_steps``, ``max_nonlin_iters``,
         ``max_conv_fails``, ``linsolver``): stiff completions at compiled
         speed.
+        A sparse completion (`lsc.SparseCompletion`) takes 'auto',
+        'Rodas4' (stiff: a Rosenbrock method whose solves are sparse
+        saddle-point solves) or an explicit method (docs/guide/sparse.md).
         ``'auto'`` picks 'Radau' when the completion is stiff on `t_span`
         (``stiffness_ratio`` > 100, see below) and 'DOP853' otherwise. An
         explicit method on a stiff completion runs as asked, and the
@@ -190,18 +199,26 @@ def solve_completion(
         stage (exact to rounding; the way to go when the run may stop early,
         e.g. at a terminal event, or the coefficients are not smooth). Pieces
         the construction cannot resolve within 500 evaluations are evaluated
-        pointwise; the result's message says what was built.
+        pointwise; the result's message says what was built. With an
+        interpolant the integrator runs in the offset ``t - t0``, so a run that
+        starts at t = 1e8 costs what one from 0 does. Where the construction
+        meets a time at which the completion cannot be evaluated clearly (the
+        derivative array loses rank, a coefficient is not finite), that time is
+        located once and the run ends before it (`lsc._singular`).
     **options
         Passed to solve_ivp (``dense_output``, ``max_step``, ``first_step``,
-        ``events``, ...).
+        ``events``, ...). The dense output ``sol`` refuses times outside the
+        interval integrated (a ValueError naming it; it does not extrapolate).
 
     Returns
     -------
     CompletionResult
         ``success=False`` with a message when the integration fails,
         including when the forcing becomes non-finite or cannot be evaluated
-        during the run; the result then holds the trajectory computed up to
-        the last accepted step, as `scipy.integrate.solve_ivp` does. Bad
+        during the run, or the DAE is singular at a time inside `t_span` (the
+        message names it); the result then holds the trajectory computed up to
+        the last accepted step (from the one run: each step is kept as it is
+        taken), as `scipy.integrate.solve_ivp` does. Bad
         arguments (including a time-varying ``lam`` that is not positive on
         `t_span`) raise before integrating.
 
@@ -221,73 +238,151 @@ def solve_completion(
     >>> res.success, bool(np.max(np.abs(res.x - p.exact(res.t))) < 1e-6)
     (True, True)
     """
-    if not isinstance(completion, Completion):
-        raise TypeError(f"`completion` must be an lsc Completion (see lsc.complete); found {type(completion).__name__}.")
-    t0, t1 = check_t_span(t_span)
-    x0 = check_state("x0", x0, completion.n)
-    t_eval = check_t_eval(t_eval, (t0, t1))
-    rtol, atol = check_tolerances(rtol, atol, completion.n)
-    if t1 < t0 and completion.uses_lam:
-        raise ValueError(_backward_refusal(completion, t0, t1))
-    tol = _interpolation_tol(interpolate, rtol)  # bad input fails here, whatever the method
-    completion._check_rate_on((t0, t1))  # a time-varying lam must be positive on the whole run
+    if getattr(completion, "setup", None) == "sparse":  # an operator, not a matrix: it integrates itself
+        return completion.solve(t_span, x0, method="auto" if method is None else method, t_eval=t_eval, rtol=rtol,
+                                atol=atol, project=project, interpolate=interpolate, **options)
+    method = "RK45" if method is None else method
+    run = _Run(completion, t_span, x0, t_eval, rtol, atol, interpolate)
     if method == "expm":
+        run.start(project, interpolate=False)
+        return _solve_expm(run, dict(options))
+    method = run.choose(method)
+    run.start(project)
+    if run.t_end == run.t_span[0]:  # the completion cannot be evaluated clearly beyond t0
+        return _stopped(run, np.array([run.t_span[0]]), run.x0[:, None].copy(), 0, None)
+    return (_solve_cvode if method == "CVODE" else _solve_ivp)(run, method, options)
+
+
+class _Run:
+    """A run's set-up, validated: the arguments, the method's stiffness and, once started, what is
+    integrated (the completion or its interpolant, in the offsets ``t - origin``) and up to where."""
+
+    def __init__(self, completion, t_span, x0, t_eval, rtol, atol, interpolate):
+        if not isinstance(completion, Completion):
+            raise TypeError(f"`completion` must be an lsc Completion (see lsc.complete); found {type(completion).__name__}.")
+        self.completion = completion
+        self.t_span = t0, t1 = check_t_span(t_span)
+        self.x0 = check_state("x0", x0, completion.n)
+        self.t_eval = check_t_eval(t_eval, (t0, t1))
+        self.rtol, self.atol = check_tolerances(rtol, atol, completion.n)
+        if t1 < t0 and completion.uses_lam:
+            raise ValueError(_backward_refusal(completion, t0, t1))
+        self.tol = _interpolation_tol(interpolate, self.rtol)  # bad input fails here, whatever the method
+        check_rate_on(completion.lam, (t0, t1))  # a time-varying lam must be positive on the whole run
+        self.stiffness = None
+
+    def choose(self, method):
+        """The solve_ivp method ('auto': Radau when the completion is stiff on `t_span`, else DOP853)."""
+        self.stiffness = stiffness_ratio(self.completion, self.t_span)
+        if method == "auto":
+            method = "Radau" if self.stiffness > _STIFF else "DOP853"
+        if not (isinstance(method, str) or (isinstance(method, type) and issubclass(method, OdeSolver))):
+            raise TypeError(f"`method` must be a solve_ivp method name or OdeSolver class; found {method!r}.")
+        return method
+
+    def start(self, project, interpolate=True):
+        """Project `x0` if asked, evaluate once (bad forcing input raises here, with its own message) and, for a
+        time-varying completion, build its interpolant and find where the run must stop (`_interpolant`)."""
+        c, (t0, t1) = self.completion, self.t_span
         if project:
-            x0 = completion.project(t0, x0)
-        return _solve_expm(completion, t0, t1, x0, t_eval, rtol, atol, dict(options))
-    stiffness = stiffness_ratio(completion, (t0, t1))
-    if method == "auto":
-        method = "Radau" if stiffness > _STIFF else "DOP853"
-    if not (isinstance(method, str) or (isinstance(method, type) and issubclass(method, OdeSolver))):
-        raise TypeError(f"`method` must be a solve_ivp method name or OdeSolver class; found {method!r}.")
-    if project:
-        x0 = completion.project(t0, x0)
-    # Evaluate once before integrating: bad forcing input (wrong shape,
-    # non-finite values at t0) raises here, with its own message.
-    completion.rhs(t0, x0)
+            self.x0 = c.project(t0, self.x0)
+        self.coefficients, self.built, self.stop, self.t_end, self.origin = None, "", None, t1, 0.0
+        if not interpolate:
+            return
+        c.rhs(t0, self.x0)
+        if self.tol is not None and not c.dae.is_constant:
+            self.coefficients, self.built, self.stop = _interpolant(c, t0, t1, self.tol)
+        self.t_end = t1 if self.stop is None else self.stop.t_clear
+        # With an interpolant the integrator runs in the offset s = t - origin (the interpolant's own coordinate,
+        # `ChebyshevCoefficients.matrices_local`): its stage times are then exact to the rounding of s, not of t.
+        self.origin = 0.0 if self.coefficients is None else self.coefficients.origin
 
-    rhs, jac, built = completion.rhs, completion.jac, ""
-    if tol is not None and not completion.dae.is_constant and t1 != t0:
-        try:
-            coefficients = ChebyshevCoefficients(completion, (t0, t1), tol)
-            rhs, jac, built = coefficients.rhs, coefficients.jac, f"; {coefficients.describe()}"
-        except EvaluationFailed as exc:
-            # The forcing or a rank check failed at a Chebyshev point: integrate pointwise, so a
-            # failure is reported where the integration itself breaks (the earliest such time).
-            built = f"; no interpolation (evaluating the completion failed at t={exc.t!r})"
+    @property
+    def functions(self):
+        """``(rhs, jac)`` in the integrator's time (the offsets from `origin`)."""
+        if self.coefficients is None:
+            return self.completion.rhs, self.completion.jac
+        return self.coefficients.rhs_local, self.coefficients.jac_local
 
-    def fun(t, x):
-        try:
-            return rhs(t, x)
-        except Exception as exc:  # noqa: BLE001 - anything from the coefficients ends the run with what it has
-            raise _ForcingFailed(t, exc) from exc
+    def t_eval_run(self):
+        """The output times up to where the run ends, as offsets from `origin` (or None)."""
+        if self.t_eval is None:
+            return None
+        t0, t1 = self.t_span
+        return self.t_eval[np.sign(t1 - t0) * (self.t_eval - self.t_end) <= 0] - self.origin
 
-    if method == "CVODE":
-        return _solve_cvode(completion, _as_value_error(rhs), jac, (t0, t1), x0, t_eval, rtol, atol, options, built)
-    if _is_implicit(method) and "jac" not in options:
-        options["jac"] = completion.jac(t0, x0) if completion.dae.is_constant else jac
-    if not _is_implicit(method):
-        _warn_if_costly(method, stiffness, completion, t0, x0)
-    solvers = []
-    try:
-        sol = solve_ivp(fun, (t0, t1), x0, method=_recording(method, solvers), t_eval=t_eval, rtol=rtol, atol=atol,
-                        **options)
-    except _ForcingFailed as exc:
-        t_ok = getattr(solvers[-1], "t", t0) if solvers else t0
-        partial = _partial_run(fun, t0, t_ok, x0, method, t_eval, dict(options, rtol=rtol, atol=atol))
-        return _failed(completion, exc.t, exc.exc, partial)
-    x = sol.y
-    message = sol.message + built
-    if not _is_implicit(method) and stiffness > _STIFF:
-        message += (f" (the completion is stiff on this interval: |rate| x length = {stiffness:.3g}; "
+
+def _solve_ivp(run, method, options):
+    """`scipy.integrate.solve_ivp` on the run (`lsc._ivp.run`: offsets, recorded steps, bounded dense output)."""
+    c, (t0, t1), x0 = run.completion, run.t_span, run.x0
+    rhs, jac = run.functions
+    implicit = _is_implicit(method)
+    if implicit and "jac" not in options:
+        options["jac"] = c.jac(t0, x0) if c.dae.is_constant else jac
+    if not implicit:
+        _warn_if_costly(method, run.stiffness, c, t0, x0)
+    if "events" in options and run.origin != 0.0:
+        options["events"] = shifted_events(options["events"], run.origin)
+    t_eval = run.t_eval_run()
+    result = run_ivp(rhs, (t0, run.t_end), x0, method, t_eval, run.rtol, run.atol, options, run.origin,
+                     None if run.t_eval is None else run.t_eval[: t_eval.size])
+    if result.failure is not None:
+        return _failed(run, result.failure, result.t, result.x, result.nfev)
+    sol = result.sol
+    dense = None if sol.sol is None else BoundedSolution(sol.sol, run.origin, t0, run.t_end)
+    if run.stop is not None:
+        return _stopped(run, result.t, result.x, sol.nfev, dense, sol)
+    message = sol.message + run.built
+    if not implicit and run.stiffness > _STIFF:
+        message += (f" (the completion is stiff on this interval: |rate| x length = {run.stiffness:.3g}; "
                     "method='Radau' or 'auto' takes far fewer steps)")
-    elif not sol.success and not _is_implicit(method):
-        message += (f" (the step size collapsed after t={float(sol.t[-1]):g}, but the completion is not stiff: its known "
-                    f"rates (lam, and the eigenvalues of G for constant coefficients) x length = {stiffness:.3g}; look "
-                    "for a singularity of the coefficients or the forcing just after it)")
+    elif not sol.success and not implicit:
+        message += (f" (the step size collapsed after t={float(result.t[-1]):g}, but the completion is not stiff: its "
+                    f"known rates (lam, and the eigenvalues of G for constant coefficients) x length = "
+                    f"{run.stiffness:.3g}; look for a singularity of the coefficients or the forcing just after it)")
     return CompletionResult(
-        t=sol.t, x=x, success=bool(sol.success), status=sol.status, message=message,
-        nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=sol.sol, completion=completion,
+        t=result.t, x=result.x, success=bool(sol.success), status=sol.status, message=message,
+        nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=dense, completion=c,
+    )
+
+
+def _interpolant(completion, t0, t1, tol):
+    """``(ChebyshevCoefficients or None, note, Stop or None)`` for a run from t0 to t1.
+
+    Where evaluating the completion fails at a Chebyshev point, or a piece stays unresolved (a
+    singular time need not fail at any point sampled), `lsc._singular.find_stop` looks for the first
+    time the completion cannot be evaluated clearly; the interpolant is then built up to the last clear
+    time before it, and the run ends there.
+    """
+    failed_at, coefficients = None, None
+    try:
+        coefficients = ChebyshevCoefficients(completion, (t0, t1), tol)
+    except EvaluationFailed as exc:
+        failed_at = exc.t
+    unresolved = () if coefficients is None else coefficients.unresolved
+    stop = find_stop(completion, t0, t1, failed_at, unresolved) if failed_at is not None or unresolved else None
+    if stop is not None and coefficients is None and stop.t_clear != t0:
+        # (an interpolant built on the whole interval is kept: its pieces before the stop are resolved, and
+        # one built up to a singular time spends its budget on pieces far from it)
+        try:
+            coefficients = ChebyshevCoefficients(completion, (t0, stop.t_clear), tol)
+        except EvaluationFailed as exc:
+            failed_at = exc.t
+    if coefficients is not None:
+        return coefficients, f"; {coefficients.describe()}", stop
+    # The forcing or a rank check failed at a Chebyshev point: integrate pointwise, so a
+    # failure is reported where the integration itself breaks (the earliest such time).
+    return None, f"; no interpolation (evaluating the completion failed at t={failed_at!r})", stop
+
+
+def _stopped(run, t, x, nfev, dense, sol=None):
+    """The result of a run that ended where the completion cannot be evaluated (`lsc._singular.Stop`)."""
+    how = "" if sol is None or sol.success else f"; the integrator stopped before it: {sol.message}"
+    kept = (f"; the result holds the {t.size} point(s) computed before it, up to t={float(t[-1])!r}" if t.size
+            else "; no point was computed")
+    return CompletionResult(
+        t=t, x=x, success=False, status=-2, message=f"{run.stop.message}{kept}{how}{run.built}",
+        nfev=nfev, njev=getattr(sol, "njev", 0), nlu=getattr(sol, "nlu", 0), sol=dense, completion=run.completion,
     )
 
 
@@ -318,18 +413,24 @@ def _backward_refusal(completion, t0, t1):
     )
 
 
-def _solve_cvode(completion, rhs, jac, t_span, x0, t_eval, rtol, atol, options, built):
-    constant_jac = completion.jac(t_span[0], x0) if completion.dae.is_constant else None
-    out = _cvode.solve(rhs, jac, *t_span, x0, t_eval, rtol, atol, options, constant_jac=constant_jac)
-    message = out["message"] + built
+def _solve_cvode(run, method, options):
+    """CVODE on the run (offsets from `origin`, as its right-hand side and Jacobian take them)."""
+    c, origin = run.completion, run.origin
+    rhs, jac = run.functions
+    span = (run.t_span[0] - origin, run.t_end - origin)
+    constant_jac = c.jac(span[0], run.x0) if c.dae.is_constant else None
+    out = _cvode.solve(_as_value_error(rhs), jac, *span, run.x0, run.t_eval_run(), run.rtol, run.atol, options,
+                       constant_jac=constant_jac)
+    message = out["message"] + run.built
     status = out["status"]
     if "failure" in out:
         t_fail, exc = out["failure"]
-        message, status = f"evaluating the right-hand side failed at t={float(t_fail)!r}: {exc}", -2
-    return CompletionResult(
-        t=out["t"], x=out["x"], success=out["success"], status=status, message=message,
-        nfev=out["nfev"], njev=out["njev"], nlu=0, sol=None, completion=completion,
+        message, status = f"evaluating the right-hand side failed at t={float(origin + t_fail)!r}: {exc}", -2
+    res = CompletionResult(
+        t=out["t"] if origin == 0.0 else origin + out["t"], x=out["x"], success=out["success"], status=status,
+        message=message, nfev=out["nfev"], njev=out["njev"], nlu=0, sol=None, completion=c,
     )
+    return res if run.stop is None else _stopped(run, res.t, res.x, res.nfev, None, res)
 
 
 def _interpolation_tol(interpolate, rtol):
@@ -343,13 +444,20 @@ def _interpolation_tol(interpolate, rtol):
     raise ValueError(f"`interpolate` must be None, True, False or a relative accuracy in (0, 1); found {interpolate!r}.")
 
 
-def _failed(completion, t, exc, partial=None):
-    """A failed run's result: the trajectory computed before the failure (like solve_ivp), and why."""
-    ts, xs, nfev = partial if partial is not None else (np.zeros(0), np.zeros((completion.n, 0)), 0)
+def _failed(run, failure, ts, xs, nfev):
+    """A run whose right-hand side failed mid-run (`failure`, a ForcingFailed): the trajectory computed
+    before it, and why; where the derivative array loses rank near the failure, the time it does."""
+    completion, t_end, t, exc = run.completion, run.t_end, failure.t, failure.exc
     kept = f"; the result holds the {ts.size} point(s) computed before it, up to t={float(ts[-1])!r}" if ts.size else ""
+    singular = ""
+    if isinstance(exc, (IndexDeterminationError, RankDecisionWarning)) and ts.size:
+        t_s = _singular_time(completion, float(t), float(t), abs(t_end - float(ts[0])), 1.0 if t_end >= ts[0] else -1.0)
+        if t_s is not None:
+            singular = (f"; the DAE is not uniquely solvable at t={t_s!r} (the derivative array (k={completion.k}) "
+                        "loses rank there)")
     return CompletionResult(
         t=ts, x=xs, success=False, status=-2,
-        message=f"evaluating the right-hand side failed at t={float(t)!r}: {exc}{kept}",
+        message=f"evaluating the right-hand side failed at t={float(t)!r}: {exc}{singular}{kept}{run.built}",
         nfev=nfev, njev=0, nlu=0, sol=None, completion=completion,
     )
 
@@ -379,39 +487,6 @@ def _warn_if_costly(method, stiffness, completion, t0, x0):
         "constant coefficients, or a smaller lam.",
         StiffnessWarning, stacklevel=3,
     )
-
-
-def _recording(method, solvers):
-    """`method` as an OdeSolver class that appends each instance to `solvers` (to know how far a failed run got)."""
-    import scipy.integrate
-
-    base = getattr(scipy.integrate, method, None) if method in ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA") \
-        else method
-    if not (isinstance(base, type) and issubclass(base, OdeSolver)):
-        return method  # solve_ivp reports an unknown name
-
-    def __init__(self, *args, **kwargs):
-        solvers.append(self)
-        base.__init__(self, *args, **kwargs)
-
-    return type(base.__name__, (base,), {"__init__": __init__})
-
-
-def _partial_run(fun, t0, t_ok, x0, method, t_eval, options):
-    """``(t, x, nfev)`` of the run up to the last accepted step `t_ok` before a failed evaluation."""
-    if t_eval is not None:
-        t_eval = np.asarray(t_eval, dtype=float)
-        t_eval = t_eval[np.sign(t_ok - t0) * (t_eval - t_ok) <= 0] if t_ok != t0 else t_eval[t_eval == t0]
-    if t_ok == t0:
-        keep = t_eval is None or t_eval.size > 0
-        return (np.array([t0]), x0[:, None].copy(), 0) if keep else (np.zeros(0), np.zeros((x0.size, 0)), 0)
-    options.pop("dense_output", None)
-    options.pop("events", None)
-    try:
-        sol = solve_ivp(fun, (t0, t_ok), x0, method=method, t_eval=t_eval, **options)
-    except (_ForcingFailed, ValueError):  # fails again (a solver probing past its bound, a first_step too long)
-        return np.array([t0]), x0[:, None].copy(), 0
-    return sol.t, sol.y, sol.nfev
 
 
 def solve_dae(dae, t_span, x0, *, completion="alternative", lam=None, k=None, rcond=None, **options):

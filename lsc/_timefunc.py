@@ -68,12 +68,12 @@ class ConstantFunction(TimeFunction):
 
 
 class SympyFunction(TimeFunction):
-    """A sympy matrix or vector expression in the symbol ``t``."""
+    """A sympy matrix or vector expression `expr` in the sympy symbol of time `symbol` (``t``)."""
 
     def __init__(self, name, expr, shape, t_symbol):
         super().__init__(name, shape)
         self.expr = expr
-        self._t = t_symbol
+        self.symbol = t_symbol
         self._derivs = [expr]
         self._compiled = {}
 
@@ -81,19 +81,26 @@ class SympyFunction(TimeFunction):
         import sympy
 
         while len(self._derivs) <= order:
-            self._derivs.append(self._derivs[-1].diff(self._t))
+            self._derivs.append(self._derivs[-1].diff(self.symbol))
         flat = [sympy.Matrix(d).reshape(1, int(np.prod(self.shape, dtype=int)))[:] for d in self._derivs[: order + 1]]
         entries = [e for row in flat for e in row]
         # t is always a Python float here, so the math module (then numpy for
         # what math lacks) is about twice as fast as numpy on scalars; common
         # subexpressions of the derivatives are evaluated once.
-        fn = sympy.lambdify(self._t, entries, modules=["math", "numpy"], cse=True)
+        fn = sympy.lambdify(self.symbol, entries, modules=["math", "numpy"], cse=True)
         full_shape = (order + 1,) + self.shape
 
         def jet(t):
             # lambdify returns a list whose constant entries are Python
             # numbers; np.array broadcasts nothing, so this is exact.
-            return np.array(fn(t), dtype=float).reshape(full_shape)
+            values = fn(t)
+            try:
+                return np.array(values, dtype=float).reshape(full_shape)
+            except TypeError:  # a complex value (math: a negative number to a fractional power)?
+                error = complex_entry_error(self.name, self.shape, values, t)
+                if error is None:
+                    raise
+                raise error from None
 
         self._compiled[order] = jet
         return jet
@@ -104,6 +111,8 @@ class SympyFunction(TimeFunction):
             fn = self._compile(order)
         try:
             out = fn(float(t))
+        except ComplexValueError:
+            raise
         except (ArithmeticError, ValueError, TypeError) as exc:
             # math.sqrt(-1), 1/0, log(0), or a complex value from a negative base: the
             # expression is outside its domain at t, which math reports without naming either.
@@ -114,6 +123,31 @@ class SympyFunction(TimeFunction):
         if not np.all(np.isfinite(out)):
             raise ValueError(f"`{self.name}` is not finite at t={float(t)!r}: derivatives of order 0..{order} are {out.tolist()}.")
         return out
+
+
+class ComplexValueError(ValueError):
+    """A coefficient's expression is complex at a time (outside the real numbers there)."""
+
+
+def _entry(name, shape, flat):
+    """``(text, d)``: the entry ``name[i, j]`` and the derivative order of a flat index into a jet of `shape`."""
+    size = int(np.prod(shape, dtype=int)) or 1
+    d, i = divmod(int(flat), size)
+    index = np.unravel_index(i, shape) if shape else ()
+    return f"{name}[{', '.join(str(int(k)) for k in index)}]" if index else name, d
+
+
+def complex_entry_error(name, shape, values, t):
+    """A `ComplexValueError` naming the first complex entry of a jet's flat `values` at `t`, or None."""
+    for flat, value in enumerate(values if isinstance(values, (list, tuple)) else np.ravel(values)):
+        if isinstance(value, complex) or np.iscomplexobj(value):
+            entry, d = _entry(name, shape, flat)
+            what = "its value" if d == 0 else f"its derivative of order {d}"
+            return ComplexValueError(
+                f"`{entry}` is complex at t={float(t)!r} ({what} is {complex(value)!r}): the expression leaves "
+                "the real numbers there (a negative number to a fractional power, say); lsc solves real DAEs."
+            )
+    return None
 
 
 class CallableFunction(TimeFunction):
@@ -264,6 +298,7 @@ def _sympy_matrix(name, obj, shape):
             "use one Symbol('t') (with the same assumptions) everywhere in it."
         )
     t_symbol = next(iter(symbols)) if symbols else sympy.Symbol("t")
+    mat = _real_matrix(name, mat, shape, t_symbol)
     kinks = sorted({type(a).__name__ for a in mat.atoms(*_without_derivative(sympy)) if a.has(t_symbol)})
     if kinks:
         raise ValueError(
@@ -272,6 +307,31 @@ def _sympy_matrix(name, obj, shape):
             "use a smooth alternative (e.g. sqrt(u**2 + eps**2) for Abs(u)) or split the interval at the kink."
         )
     return mat, t_symbol
+
+
+def _real_matrix(name, mat, shape, t_symbol):
+    """`mat` with entries holding ``I`` written as their real part when that is all they are (``exp(I t) +
+    exp(-I t)`` is ``2 cos t`` for real t); a TypeError naming the first entry that is complex otherwise."""
+    import sympy
+
+    if not mat.has(sympy.I):
+        return mat
+    real_t = sympy.Symbol(t_symbol.name, real=True)
+    out = mat.copy()
+    for flat in range(len(mat)):
+        e = mat[flat]
+        if not e.has(sympy.I):
+            continue
+        er = e.xreplace({t_symbol: real_t})
+        imaginary = sympy.simplify(sympy.im(er))
+        if imaginary != 0:
+            entry = _entry(name, shape, flat)[0] if shape else name
+            raise TypeError(
+                f"`{entry}` is complex: {e} (imaginary part {imaginary.xreplace({real_t: t_symbol})}); lsc solves "
+                "real DAEs: write it with real functions (cos, sin for exp(I t)) or split it into real equations."
+            )
+        out[flat] = sympy.simplify(sympy.re(er)).xreplace({real_t: t_symbol})
+    return out
 
 
 def _without_derivative(sympy):

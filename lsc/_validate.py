@@ -11,7 +11,8 @@ import numpy as np
 from ._exceptions import DimensionError
 from ._timefunc import _shape_str
 
-__all__ = ["check_k", "check_lam_value", "check_time", "check_t_span", "check_state", "check_t_eval", "check_tolerances"]
+__all__ = ["check_k", "check_lam_value", "check_time", "check_times", "check_t_span", "check_state", "check_t_eval", "check_tolerances",
+           "check_dense_times"]
 
 
 def check_k(k, name="k"):
@@ -39,6 +40,21 @@ def check_time(name, t):
     if not np.isfinite(t):
         raise ValueError(f"`{name}` must be finite; found {t!r}.")
     return t
+
+
+def check_times(name, t):
+    """A time or a sequence of times as a 1-D float array of finite times."""
+    if isinstance(t, (bool, str, bytes)):
+        raise TypeError(f"`{name}` must be a real number or a 1-D array of them; found {t!r}.")
+    try:
+        arr = np.asarray(t, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(f"`{name}` must be a real number or a 1-D array of them; found {t!r}.") from None
+    if arr.ndim > 1:
+        raise DimensionError(f"`{name}` must be a time or a 1-D array of times; found shape {_shape_str(arr.shape)}.")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"`{name}` must be finite; found {arr.reshape(-1)[~np.isfinite(arr.reshape(-1))][:3].tolist()}.")
+    return arr.reshape(-1)
 
 
 def check_t_span(t_span):
@@ -119,3 +135,24 @@ def _check_tol(name, tol, n):
 def check_tolerances(rtol, atol, n):
     """``(rtol, atol)`` checked the same way for every method: positive and finite, scalars or shape (n,)."""
     return _check_tol("rtol", rtol, n), _check_tol("atol", atol, n)
+
+
+def _number(x):
+    """A float as its shortest repr, without a trailing '.0' (10.0 -> '10', 1000002.0 -> '1000002')."""
+    text = repr(float(x))
+    return text[:-2] if text.endswith(".0") else text
+
+
+def check_dense_times(t, t0, t1):
+    """Times `t` (1-D array) asked of a dense output, within ``[t0, t1]``; a ValueError naming the interval.
+
+    Dense output does not extrapolate: `scipy.integrate.OdeSolution` does (its last polynomial, 2.9e4
+    at t = 20 after a run on [0, 10], for a solution of size 1).
+    """
+    low, high = min(t0, t1), max(t0, t1)
+    outside = t[(t < low) | (t > high) | ~np.isfinite(t)]
+    if outside.size:
+        raise ValueError(
+            f"dense output asked for t={_number(outside[0])}, outside the interval [{_number(low)}, {_number(high)}] "
+            "that was integrated: it does not extrapolate (integrate over a longer `t_span`)."
+        )

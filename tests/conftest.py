@@ -1,10 +1,16 @@
 import os
 import re
 
-import numpy as np
-import pytest
+# One BLAS thread per test process (the pytest workers and every subprocess they start, which inherit the
+# environment): the suite runs its processes side by side, and OpenBLAS threads that outnumber the cores
+# spin waiting for each other. Set before numpy loads OpenBLAS; a value given in the environment is kept.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from lsc import COMPLETIONS, gallery
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from lsc import COMPLETIONS, gallery  # noqa: E402
 
 # (method, lam) pairs that every completion test runs over.
 METHOD_LAMS = [("standard", None), ("stabilized", 2.0), ("alternative", 2.0)]
@@ -41,12 +47,15 @@ def problem(request):
     return CONSTANT_PROBLEMS[request.param]()
 
 
-# -- In CI a missing FMU host is a failure, not a skip -------------------------
+# -- In CI a missing FMU host or external tool is a failure, not a skip ----------
 # The FMU tests skip when a host (fmpy, pythonfmu, libcosimpy, ecos) is not
-# installed, so the test command works on a bare machine. CI installs all of
-# them (.ci/run), and there such a skip would hide a host that no longer
-# installs or loads: with CI=true it fails instead.
+# installed, and the tests against tools nobody here wrote skip when the
+# variable naming them is not set, so the test command works on a bare
+# machine. CI installs every host and sets every tool's variable (.ci/run),
+# and there such a skip would hide a host that no longer installs or loads, or
+# a tool that is no longer found: with CI=true it fails instead.
 FMU_HOSTS = ("fmpy", "pythonfmu", "libcosimpy", "ecospy", "ecos")
+EXTERNAL_TOOLS = ("LSC_REFERENCE_FMUS", "LSC_FMUCHECK", "LSC_FMUSIM")  # the variables their skip reasons name
 
 
 def _in_ci():
@@ -54,19 +63,19 @@ def _in_ci():
 
 
 def _host_skip_reason(report):
-    """The skip reason if `report` is a skip that names an FMU host, else None."""
+    """The skip reason if `report` is a skip that names an FMU host or an external tool's variable, else None."""
     if not report.skipped or hasattr(report, "wasxfail"):
         return None
     longrepr = report.longrepr
     reason = longrepr[2] if isinstance(longrepr, tuple) and len(longrepr) == 3 else str(longrepr)
-    return reason if re.search(r"\b(%s)\b" % "|".join(FMU_HOSTS), reason) else None
+    return reason if re.search(r"\b(%s)\b" % "|".join(FMU_HOSTS + EXTERNAL_TOOLS), reason) else None
 
 
 def _fail_host_skip(report):
     reason = _host_skip_reason(report)
     if reason is not None and _in_ci():
         report.outcome = "failed"
-        report.longrepr = f"CI=true: an FMU-host test must run, but it skipped: {reason}"
+        report.longrepr = f"CI=true: an FMU-host or external-tool test must run, but it skipped: {reason}"
 
 
 @pytest.hookimpl(hookwrapper=True)

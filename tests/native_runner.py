@@ -1,10 +1,10 @@
 """Run a native FMU in this (fresh) process with fmpy and report JSON: used by test_native.py.
 
 Reads a scenario from stdin:
-  {"fmu": path, "interface": "cs" | "me", "dt": h, "steps": N, "start_values": {...},
+  {"fmu": path, "interface": "cs" | "me", "dt": h, "steps": N, "t0": start (default 0), "start_values": {...},
    "outputs": [...], "set_at": {"i": {name: value}}, "inputs": {name: [[u, u', ...] at each step start]},
    "send_derivatives": bool, "rollback_at": i, "serialize": bool, "block": ["lsc", ...],
-   "output_derivatives": [names], "bad_calls": bool}
+   "output_derivatives": [names], "bad_calls": bool, "tolerance": the host's relative tolerance}
 and prints {"time", "values", "status", "logs", ...}.
 """
 import json
@@ -54,7 +54,8 @@ def main():
             names = [k for k in sc["input_table"] if k != "time"]
             table = np.array(list(zip(*[sc["input_table"][k] for k in ["time", *names]])),
                              dtype=[(k, float) for k in ["time", *names]])
-        res = simulate_fmu(unzipped, fmi_type="ModelExchange", stop_time=sc["dt"] * sc["steps"],
+        t0 = sc.get("t0", 0.0)
+        res = simulate_fmu(unzipped, fmi_type="ModelExchange", start_time=t0, stop_time=t0 + sc["dt"] * sc["steps"],
                            output_interval=sc["dt"], relative_tolerance=sc.get("rtol", 1e-10), input=table,
                            start_values=sc.get("start_values", {}), output=sc["outputs"], model_description=md)
         out["time"] = res["time"].tolist()
@@ -80,7 +81,8 @@ def main():
                 status.append(f"set {name}: {exc}")
 
     vrs = [var[name].valueReference for name in sc["outputs"]]
-    fmu.setupExperiment(startTime=0.0)
+    t0 = sc.get("t0", 0.0)  # the experiment's start (the steps' times are t0 + i dt)
+    fmu.setupExperiment(tolerance=sc.get("tolerance"), startTime=t0)
     set_values(sc.get("start_values", {}))
     fmu.enterInitializationMode()
     fmu.exitInitializationMode()
@@ -111,12 +113,12 @@ def main():
             except Exception as exc:
                 status.append(f"step {i}: {exc}")
                 break
-            t = i * dt + dt if sc.get("grid_times", True) else t + dt
+            t = t0 + (i * dt + dt) if sc.get("grid_times", True) else t + dt
             times.append(t)
             values.append(list(fmu.getReal(vrs)))
         return times, values
 
-    times, values = run(0, 0.0, True)
+    times, values = run(0, t0, True)
     out.update(time=times, values=values, status=status)
     if sc.get("output_derivatives"):
         dvrs = [var[name].valueReference for name in sc["output_derivatives"]]

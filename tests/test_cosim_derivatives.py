@@ -80,3 +80,27 @@ def test_recommended_configuration_reaches_order_two_on_a_thrice_differentiated_
     # 2.1e-10 (the last at the FMU's sub-step tolerance)
     assert np.all(errs < 0.5 * steps ** 2) and np.all(np.diff(errs) < 0), errs
     assert np.all(errs < 10 * np.array([3.3e-8, 5.5e-10, 2.1e-10])), errs  # within 10x of what was measured
+
+
+def test_step_control_on_the_thrice_differentiated_input_starts_and_meets_the_tolerance(path_input):
+    """Step control on the index-3 chain (the source gives the first and second derivative; the FMU
+    needs the third too): it starts at t = 0 and meets the tolerance. Under step control the orders
+    beyond the source's are the master's estimate from the history of the source's second derivative
+    (sent as 0 they left an error of 0.2 in u; left to the FMU, its estimate would differentiate the
+    uneven steps). Errors after t = 2, where the DAE FMU's inconsistent start has decayed (rate
+    lambda = 10)."""
+    out, _ = run(f"""
+res = {{}}
+for rtol in (1e-3, 1e-5):
+    r = cosimulate({path_input!r}, 10.0, 0.01, algorithm="jacobi", extrapolation=2, step_control=True, rtol=rtol,
+                   atol=1e-7, output=["dae.u"])
+    t = r["time"]
+    err = float(np.abs(r["dae.u"] - (np.sin(t) + 0.5 * np.cos(t)))[t > 2.0].max()) if r.success else None
+    res[str(rtol)] = [bool(r.success), r.message, int(r.steps), err]
+print(json.dumps(res))
+""")
+    for rtol in (1e-3, 1e-5):
+        success, message, steps, err = out[str(rtol)]
+        assert success, message
+        assert err < 10 * (1e-7 + rtol * 1.2), (rtol, err)
+    assert out["1e-05"][2] < 3000 and out["0.001"][2] < 1000, out

@@ -18,7 +18,7 @@ from lsc import (
     DimensionError, IndexDeterminationError, LinearDAE, StiffnessWarning, complete, derivative_array,
     differentiation_index, eigenanalysis, gallery, solve_completion, solve_dae, check_solvability,
 )
-from lsc._timefunc import JetCallable
+from lsc import JetCallable
 
 FAILED, SOLVED = "failed", "solved"
 
@@ -104,6 +104,18 @@ def with_k(k):
 
 
 TWO_TS = [sympy.Symbol("t", real=True), sympy.sin(t)]
+
+
+def time_scaled_pencil(s):
+    """`gallery.random_pencil` (n = 10, index 3) in the time unit `s`: ``(s A, B, f(t / s))``, exact ``x(t / s)``."""
+    p = gallery.random_pencil(n=10, blocks=(3,), seed=0)
+    f = p.dae.f
+    dae = LinearDAE(s * p.dae.A(0.0), p.dae.B(0.0),
+                    JetCallable(lambda u, order: f.jet(u / s, order) / s ** np.arange(order + 1)[:, None]))
+    ts = np.linspace(0.0, 2.0 * s, 11)
+    res = solve_dae(dae, (0.0, 2.0 * s), p.exact(0.0), lam=2.0 / s, method="Radau", t_eval=ts, rtol=1e-10, atol=1e-12)
+    res.error = float(np.max(np.abs(res.x - p.exact(ts / s)) / (1 + np.abs(p.exact(ts / s)))))
+    return res
 
 
 CASES = [
@@ -195,6 +207,13 @@ CASES = [
     (lambda: column_scaled_chain([1, 1e-12, 1, 1], "stabilized"), SOLVED, None),
     (lambda: column_scaled_chain([1e-12, 1, 1e12, 1]), SOLVED, None),
     (lambda: column_scaled_chain(np.logspace(-6, 6, 4)), SOLVED, None),
+    # a pencil in another unit of time is solved in its own (it came out index 9 at 0.01, "not solvable" at 1e4)
+    (lambda: time_scaled_pencil(1e-2), SOLVED, None),
+    (lambda: time_scaled_pencil(1e4), SOLVED, None),
+    # dense output does not extrapolate; complex sympy entries are named
+    (lambda: solve_dae(CHAIN, (0.0, 1.0), [0.0, 0.0], lam=1.0, dense_output=True).sol(2.0), ValueError,
+     "dense output asked for t=2, outside the interval [0, 1] that was integrated"),
+    (lambda: LinearDAE(N2, I2, [sympy.I, sympy.sin(t)]), TypeError, "`f[0]` is complex: I"),
 ]
 
 
@@ -397,7 +416,7 @@ def test_column_equilibration_leaves_the_alternative_completion_unchanged():
     D[1] = 2.0 ** -12
     scaled = LinearDAE(p.dae.A.value * D, p.dae.B.value * D, JetCallable(lambda s, order: p.dae.f_jet(s, order)))
     c, c_scaled = complete(p.dae, "alternative", lam=2.0), complete(scaled, "alternative", lam=2.0)
-    assert c_scaled._col_scales is not None and c._col_scales is None
+    assert c_scaled._scaling.c is not None and c._scaling.c is None
     G, g = c.matrices(0.7)
     G_s, g_s = c_scaled.matrices(0.7)
     np.testing.assert_allclose(G_s, G * D[None, :] / D[:, None], rtol=1e-9, atol=1e-9 * np.abs(G).max())
@@ -409,3 +428,37 @@ def test_column_equilibration_leaves_the_alternative_completion_unchanged():
     # the nearest consistent point is sought in the given unknowns y, so project agrees up to the scaling's metric:
     # both are consistent
     assert np.linalg.norm(c_scaled.constraint_residual(0.7, c_scaled.project(0.7, x / D))) < 1e-9
+
+
+# -- complex sympy coefficients ------------------------------------------------------------------------
+@pytest.mark.parametrize("make, fragment", [
+    (lambda: LinearDAE(N2, sympy.Matrix([[1, 0], [0, 1 + sympy.I * t]])), "`B[1, 1]` is complex: I*t + 1"),
+    (lambda: LinearDAE(N2, I2, [sympy.I, sympy.sin(t)]), "`f[0]` is complex: I"),
+    (lambda: LinearDAE(sympy.Matrix([[0, sympy.sqrt(-2)], [0, 0]]), I2), "`A[0, 1]` is complex: sqrt(2)*I"),
+])
+def test_a_complex_sympy_coefficient_is_refused_naming_the_entry(make, fragment):
+    with pytest.raises(TypeError) as info:
+        make()
+    assert fragment in str(info.value)
+
+
+def test_a_sympy_coefficient_with_i_that_is_real_is_solved():
+    """``exp(i t) + exp(-i t) = 2 cos t`` is real: taken as such, not refused."""
+    dae = LinearDAE(N2, I2, [sympy.exp(sympy.I * t) + sympy.exp(-sympy.I * t), 0])
+    res = solve_dae(dae, (0.0, 1.0), [2.0, 0.0], lam=1.0, rtol=1e-10, atol=1e-12, t_eval=[0.0, 0.5, 1.0])
+    assert res.success
+    np.testing.assert_allclose(res.x, [2 * np.cos(res.t), 0 * res.t], atol=1e-8)
+
+
+@pytest.mark.parametrize("method", ["RK45", "expm"])
+def test_a_sympy_coefficient_complex_at_run_time_names_the_entry_and_time(method):
+    """``(0.4 - t)**0.3`` is complex for t > 0.4: the run fails there naming the entry, or the set-up does."""
+    dae = LinearDAE(N2, I2, [0, (0.4 - t) ** 0.3 + 2])
+    c = complete(dae, "alternative", lam=1.0)
+    if method == "expm":
+        with pytest.raises(ValueError, match=r"`f\[1\]`.*complex at t="):
+            solve_completion(c, (0.0, 1.0), [0.0, 2.0 + 0.4**0.3], method=method)
+        return
+    res = solve_completion(c, (0.0, 1.0), [0.0, 2.0 + 0.4**0.3], method=method, interpolate=False)
+    assert not res.success and "`f[1]`" in res.message and "complex at t=" in res.message, res.message
+    assert res.t[-1] <= 0.4

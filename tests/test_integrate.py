@@ -182,7 +182,7 @@ def test_expm_alternative_residual_decays_exactly():
     (dict(taylor_degree=-1), ValueError, "`taylor_degree` must be a non-negative int"),
     (dict(max_step=0.0), ValueError, "`max_step` must be positive"),
     (dict(t_eval=[0.5, 0.2]), ValueError, "`t_eval` must be sorted"),
-    (dict(first_step=0.1), TypeError, "only `taylor_degree` and `max_step`"),
+    (dict(first_step=0.1), TypeError, "only `taylor_degree`, `max_step` and `dense_output`"),
 ])
 def test_expm_bad_options(kwargs, exception, fragment):
     dae, exact = _polynomial_chain()
@@ -282,3 +282,52 @@ def test_bad_tolerances_get_one_message_from_every_method(tol, fragment, solver)
     with pytest.raises((ValueError, TypeError)) as info:
         solve_completion(c, (0.0, 1.0), p.x0, method=solver, **tol)
     assert fragment in str(info.value)
+
+
+# -- dense output: only on the interval integrated ---------------------------------------------------
+@pytest.mark.parametrize("solver", ["RK45", "Radau", "expm"])
+def test_dense_output_is_refused_outside_t_span(solver):
+    """It extrapolated silently (2.9e4 at t = 20 where the solution is of size 1)."""
+    p = gallery.prescribed_path()
+    c = complete(p.dae, "alternative", lam=2.0)
+    res = solve_completion(c, p.t_span, p.x0, method=solver, dense_output=True, rtol=1e-10, atol=1e-12)
+    assert res.success, res.message
+    inside = np.linspace(*p.t_span, 37)
+    np.testing.assert_allclose(res.sol(inside), p.exact(inside), atol=1e-7)
+    np.testing.assert_allclose(res.sol(p.t_span[1]), p.exact(p.t_span[1]), atol=1e-7)
+    for outside in (p.t_span[1] + 10.0, p.t_span[0] - 1e-3, [0.5, p.t_span[1] + 1.0]):
+        with pytest.raises(ValueError, match=r"outside the interval \[0, 10\] that was integrated"):
+            res.sol(outside)
+
+
+# -- a DAE that becomes singular inside t_span --------------------------------------------------------
+def _singular_at_one_over_sqrt2():
+    """``x1' = x2``, ``(1 - 2 t^2) x2 = 1 + sin t``: the rank of the derivative array drops at t = 1/sqrt(2),
+    where x2 has a pole; exact ``x2 = (1 + sin t) / (1 - 2 t^2)``."""
+    import sympy
+
+    t = sympy.Symbol("t")
+    return LinearDAE([[1, 0], [0, 0]], sympy.Matrix([[0, -1], [0, 1 - 2 * t**2]]), sympy.Matrix([0, 1 + sympy.sin(t)]))
+
+
+@pytest.mark.parametrize("interpolate", [None, False])
+def test_a_singular_time_inside_t_span_ends_the_run_there_and_keeps_the_trajectory(interpolate):
+    """Found once: success=False naming t = 0.70710678..., the trajectory before it kept and right (it ran
+    for minutes, then integrated again from the start and kept only the points of that second run)."""
+    dae = _singular_at_one_over_sqrt2()
+    c = complete(dae, "alternative", lam=2.0, t_span=(0.0, 2.0))
+    calls = []  # every evaluation of the completion evaluates B's jet
+    jet = dae.B.jet
+    dae.B.jet = lambda s, order: calls.append(s) or jet(s, order)
+    res = solve_completion(c, (0.0, 2.0), [1.0, 1.0], rtol=1e-6, atol=1e-9, interpolate=interpolate)
+    assert not res.success
+    assert "0.7071067811" in res.message, res.message
+    ts = 1 / np.sqrt(2)
+    assert ts - 1e-4 < res.t[-1] < ts and res.t[0] == 0.0 and np.all(np.diff(res.t) > 0)
+    early = res.t < 0.69
+    x2 = (1 + np.sin(res.t[early])) / (1 - 2 * res.t[early] ** 2)
+    np.testing.assert_allclose(res.x[1, early], x2, rtol=1e-5)
+    if interpolate is False:  # (the interpolant's set-up samples the whole interval first)
+        assert max(calls) < ts + 1e-5  # the run did not go on after the singular time (the search for it did not)
+    # one run: the evaluations are the run's, the interpolant's set-up (500) and the search for the time (~300)
+    assert len(calls) < res.nfev + 1000, (len(calls), res.nfev)

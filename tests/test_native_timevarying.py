@@ -321,3 +321,85 @@ def test_rate_beyond_the_stepping_range_is_discarded_with_a_reason(built):
             timeout=60)
     assert r["status"][-1].startswith("step 0") and "discard" in r["status"][-1]
     assert any("lambda = 1e+08" in m and "sub-steps" in m for m in r["logs"])
+
+
+def _near_singular(digits):
+    """``x1' + x1 = f1``, ``b(t) x2 = f2`` with ``b = (t - 1)^2 + 10^-digits`` (index 1; the algebraic equation
+    nearly degenerates at t = 1), exact solution ``x = (sin t + 1, cos t)``. A perturbation of x2 at t0 grows
+    like ``b(t0) / b(t)`` towards t = 1: up to ``10^digits`` times the local errors."""
+    b = (T - 1) ** 2 + sp.Rational(1, 10 ** digits)
+    return _spec(f"NearSingular{digits}", [[1, 0], [0, 0]], [[1, 0], [0, b]], [sp.sin(T) + 1, sp.cos(T)])
+
+
+@pytest.mark.filterwarnings("ignore::lsc.RankDecisionWarning")  # the margins near t = 1 are small, as they are
+def test_build_refuses_a_near_singular_point_as_the_library_does(tmp_path):
+    """b(1) = 1e-6: the library's solvability check over the experiment's horizon refuses t = 1 ([J, F] loses
+    full row rank there); the build runs the same check and refuses with the same reason, leaving no file
+    (an FMU built anyway ran with 350 to 1e5 times the host's tolerance, with status OK)."""
+    d, _ = _near_singular(6)
+    with pytest.raises(lsc.IndexDeterminationError) as library:
+        lsc.complete(_numeric_dae(parse_spec(d)), "alternative", lam=2.0, t_span=(0.0, STOP))
+    with pytest.raises(lsc.IndexDeterminationError) as build:
+        build_fmu(d, tmp_path, target="native")
+    assert "t=1:" in str(build.value) and str(build.value) == str(library.value)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("tol", [1e-6, 1e-10])
+def test_near_singular_point_the_library_accepts_is_as_accurate_as_the_library(tmp_path, tol):
+    """b(1) = 1e-3 passes the check. The amplification b(t0) / b(t) (up to 1e3) of local errors is the
+    problem's: the FMU at the host's tolerance (fmi2SetupExperiment) is within the library's error at the
+    same tolerance (DOP853, atol = rtol / 100) and the tolerance itself, in a fresh fmpy process."""
+    d, exact_at = _near_singular(3)
+    fmu = build_fmu(d, tmp_path, target="native")
+    steps = int(round(STOP / DT))
+    r = run({"fmu": str(fmu), "dt": DT, "steps": steps, "outputs": _names(d), "tolerance": tol, "block": BLOCK})
+    assert set(r["status"]) == {"ok"}
+    exact = np.array(exact_at(np.array(r["time"])), dtype=float).reshape(2, -1)
+    err_fmu = np.abs(np.array(r["values"]).T - exact).max()
+    c = lsc.complete(_numeric_dae(parse_spec(d)), "alternative", lam=2.0, t_span=(0.0, STOP))
+    res = lsc.solve_completion(c, (0.0, STOP), exact[:, 0], method="DOP853", t_eval=r["time"], rtol=tol,
+                               atol=tol / 100)
+    err_lib = np.abs(res.x - exact).max()
+    assert err_fmu <= 2 * err_lib + tol, (err_fmu, err_lib)
+
+
+def _rot2_in(eps, start):
+    """Rot2 in the time unit `eps` from t = `start`: ``(eps A(t/eps), B(t/eps), f(t/eps))``, exact ``x(t/eps)``."""
+    src = PROBLEMS_SOURCES["Rot2"]
+    sub = {T: T / eps}
+    xe = sp.Matrix(src["xe"]).subs(sub)
+    name = f"Rot2_{'micro' if eps < 1 else 'unit'}_{int(start)}"
+    d, _ = _spec(name, (eps * sp.Matrix(src["A"])).subs(sub), sp.Matrix(src["B"]).subs(sub), xe, lam=2.0 / eps,
+                 stop=start + STOP * eps)
+    d["experiment"].update(start=start, step=DT * eps)
+    for i, state in enumerate(d["states"].values()):
+        state["start"] = float(xe[i].subs(T, start))
+    return name, d
+
+
+@pytest.mark.parametrize("eps, start", [(1e-6, 0.0), (1.0, 1e5), (1.0, 1e6)], ids=["microseconds", "1e5", "1e6"])
+def test_a_time_scaled_or_late_horizon_is_tabulated_like_the_unit_one(built, tmp_path, eps, start):
+    """Rot2 on [0, 2e-6] (in microseconds) was refused as 'not solvable'; from t = 1e5 its tables took 8x the
+    pieces and lost the margin past the stop time that Model Exchange hosts use, from t = 1e6 it was refused
+    naming '[1e+06, 1e+06]'. Each is Rot2 on [0, 2]: the same tables, and the exact solution in CS and ME."""
+    def pieces(description):
+        return int(description.split("piecewise Chebyshev, ")[1].split(" piece")[0])
+
+    from fmpy import read_model_description
+
+    base = read_model_description(str(built["Rot2"])).description
+    name, d = _rot2_in(eps, start)
+    fmu = build_fmu(d, tmp_path, target="native")
+    description = read_model_description(str(fmu)).description
+    assert pieces(description) == pieces(base), description
+    assert "margin past the stop time shortened" not in description
+    assert f"tabulated on [{start:.12g}, {start + STOP * eps * 1.1:.12g}]" in description
+    steps = int(round(STOP / DT))
+    for interface, tol in (("cs", 1e-8), ("me", 1e-6)):
+        r = run({"fmu": str(fmu), "interface": interface, "dt": DT * eps, "steps": steps, "t0": start,
+                 "outputs": _names(d), "rtol": 1e-10, "block": BLOCK})
+        got = np.array(r["values"]).T
+        exact = np.array(sp.lambdify(T, sp.Matrix(PROBLEMS_SOURCES["Rot2"]["xe"]), "numpy")(
+            (np.array(r["time"]) - 0.0) / eps), dtype=float).reshape(3, -1)
+        assert rel_err(got, exact) < tol, (interface, rel_err(got, exact))

@@ -347,6 +347,7 @@ def test_the_tables_size_is_bounded_with_the_inputs_columns(tmp_path, monkeypatc
     assert not list(tmp_path.glob("*.fmu*"))
 
 
+@pytest.mark.slow  # 17 s of CPU on its own
 def test_forty_inputs_on_a_long_horizon_are_refused_early(tmp_path):
     # at the real bound: refused after a few pieces (a lower bound of the size), not after the whole fit (which
     # made a 121 MB model.h and a 35 MB FMU in 111 s)

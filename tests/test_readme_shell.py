@@ -87,14 +87,47 @@ def _libtbb():
     return "libtbb.so.12" in found
 
 
-def _script(lines, times):
-    """One bash script: every line in order, its start and end time and status appended to `times`."""
+def _script(lines, times, listing=None):
+    """One bash script: every line in order, its start and end time and status appended to `times`.
+
+    With `listing`, every file under out/ (path, modification time, size) is appended to it after each
+    line, as ``i path mtime size`` (see `written_twice`).
+    """
     parts = []
     for i, line in enumerate(lines):
         parts.append(f'__t0=$(date +%s.%N)\n{line}\n__rc=$?\n'
-                     f'echo "{i} $__rc $__t0 $(date +%s.%N)" >> "{times}"\n'
-                     f'[ "$__rc" -eq 0 ] || exit "$__rc"\n')
-    return "".join(parts)
+                     f'echo "{i} $__rc $__t0 $(date +%s.%N)" >> "{times}"\n')
+        if listing is not None:
+            parts.append(f'(cd "$__root" && find out -type f -printf "{i} %p %T@ %s\\n" 2>/dev/null) >> "{listing}"\n')
+        parts.append('[ "$__rc" -eq 0 ] || exit "$__rc"\n')
+    return ('__root=$(pwd)\n' if listing is not None else "") + "".join(parts)
+
+
+def written_twice(listing):
+    """{file: [indices of the lines that wrote it]} for the files under out/ that more than one line wrote.
+
+    `listing` holds ``i path mtime size`` rows, all files after line i; a line wrote a file that
+    appears after it or changed modification time or size.
+    """
+    after = {}
+    for row in listing.splitlines():
+        head, mtime, size = row.rsplit(" ", 2)
+        i, path = head.split(" ", 1)
+        after.setdefault(int(i), {})[path] = (mtime, size)
+    writers, before = {}, {}
+    for i in sorted(after):
+        for path, stamp in after[i].items():
+            if before.get(path) != stamp:
+                writers.setdefault(path, []).append(i)
+        before = after[i]
+    return {path: lines for path, lines in writers.items() if len(lines) > 1}
+
+
+def test_written_twice_names_the_lines():
+    listing = "\n".join(["0 out/a.fmu 1.0 10", "1 out/a.fmu 1.0 10", "1 out/b.csv 2.0 5", "2 out/a.fmu 3.0 10",
+                          "2 out/b.csv 2.0 5", "2 out/my file.csv 4.0 1"])
+    assert written_twice(listing) == {"out/a.fmu": [0, 2]}
+    assert written_twice("0 out/a 1.0 1\n1 out/a 1.0 1") == {}
 
 
 @pytest.mark.install
@@ -115,7 +148,8 @@ def test_every_readme_shell_line_on_a_fresh_clone(tmp_path):
     lines, notes = zip(*page_lines((clone / "README.md").read_text(), blocks))
 
     times = tmp_path / "times.txt"
-    (tmp_path / "readme.sh").write_text(_script(lines, times))
+    listing = tmp_path / "listing.txt"
+    (tmp_path / "readme.sh").write_text(_script(lines, times, listing))
     t0 = time.perf_counter()
     with open(tmp_path / "stdout.txt", "w") as out, open(tmp_path / "stderr.txt", "w") as err:
         proc = subprocess.run(["bash", str(tmp_path / "readme.sh")], cwd=clone, env=env, stdout=out, stderr=err,
@@ -130,6 +164,11 @@ def test_every_readme_shell_line_on_a_fresh_clone(tmp_path):
     stdout, stderr = (tmp_path / "stdout.txt").read_text(), (tmp_path / "stderr.txt").read_text()
     failed = lines[len(records) - 1] if records else lines[0]  # a failing line is recorded, then the script stops
     assert proc.returncode == 0 and len(records) == len(lines), (failed, stdout[-3000:], stderr[-3000:])
+
+    # no line overwrites what another wrote (a native build replaced the main job's pythonfmu FMU, so the
+    # ecos recipe after it never ran on a pythonfmu FMU)
+    twice = written_twice(listing.read_text())
+    assert not twice, {path: [lines[i] for i in which] for path, which in twice.items()}
 
     status = subprocess.run(["git", "status", "--porcelain"], cwd=clone, capture_output=True, text=True, check=True)
     assert status.stdout == "", f"the README's lines changed the checkout:\n{status.stdout}"

@@ -94,7 +94,7 @@ def test_fmu_values_are_converted_by_the_variables_type(value, kind, expected):
 @pytest.mark.parametrize("value, kind", [("yes", "Boolean"), (2, "Boolean"), (0.5, "Boolean"), (True, "Real"),
                                          ("abc", "Real"), (2.5, "Integer"), (True, "Integer"), (None, "Real")])
 def test_fmu_values_of_the_wrong_type_are_refused(value, kind):
-    with pytest.raises(TypeError, match=f"`flag` sets a {kind} variable"):
+    with pytest.raises(TypeError, match=f"`flag` sets an? {kind} variable"):
         _runs.fmi_value("flag", value, kind)
 
 
@@ -347,3 +347,172 @@ def test_grid_lam_sets_only_the_lambda_of_fmus_lsc_built(tmp_path):
     outputs, residuals, with_lambda = _runs.ssp_layout({"components": {"dae": str(ours), "other": str(theirs)},
                                                         "connections": []})
     assert with_lambda == ["dae"]
+
+
+# -- a resumed study measures every row against one reference ------------------------------------
+def test_resuming_with_an_extended_grid_is_refused(tmp_path):
+    # the rows of lam = 1, 2, 5 were measured against the lam = 5 run; kept next to new rows measured
+    # against lam = 10, recommend(2e-3) said "no run reaches" where a fresh study said lam = 2
+    output = tmp_path / "s.csv"
+    _serial({"lam": [1.0, 2.0, 5.0], "offset": [0.1]}, output, reference="tightest")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    with pytest.raises(ValueError, match=r"holds another study: .*grid.*'lam': \[1.0, 2.0, 5.0\].*"
+                                         r"'lam': \[1.0, 2.0, 5.0, 10.0\]"):
+        _serial({"lam": [1.0, 2.0, 5.0, 10.0], "offset": [0.1]}, output, reference="tightest")
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    # the same grid resumes
+    _serial({"lam": [1.0, 2.0, 5.0], "offset": [0.1]}, output, reference="tightest")
+
+
+def test_resuming_with_another_reference_function_of_the_same_name_is_refused(tmp_path):
+    exact = gallery.prescribed_path(t_span=T_SPAN).exact
+    output = tmp_path / "s.csv"
+    _serial({"lam": [1.0, 2.0]}, output, reference=lambda t: exact(t))
+    with pytest.raises(ValueError, match="holds another study: reference"):
+        _serial({"lam": [1.0, 2.0]}, output, reference=lambda t: 2.0 * exact(t))
+
+
+# -- every FMI type as a grid value -------------------------------------------------------------
+OPTIONS = [("Option 1", 1), ("Option 2", 2)]
+
+
+@pytest.mark.parametrize("value, expected", [("Option 2", 2), (1, 1), ("2", 2), (np.int64(2), 2), (2.0, 2)])
+def test_enumeration_values_are_item_names_or_values(value, expected):
+    converted = _runs.fmi_value("mode", value, "Enumeration", items=OPTIONS)
+    assert converted == expected and type(converted) is int
+
+
+@pytest.mark.parametrize("value", ["Option 3", 3, True, 1.5, None])
+def test_enumeration_values_outside_the_items_are_refused(value):
+    with pytest.raises(TypeError, match=r"`mode` sets an Enumeration variable \(items 'Option 1' = 1, "
+                                        r"'Option 2' = 2\); found"):
+        _runs.fmi_value("mode", value, "Enumeration", items=OPTIONS)
+
+
+def test_string_values_are_texts():
+    assert _runs.fmi_value("label", "a b", "String") == "a b"
+    for value in (42, 1.5, None, True):
+        with pytest.raises(TypeError, match="`label` sets a String variable; found"):
+            _runs.fmi_value("label", value, "String")
+
+
+def _feedthrough():
+    from _support import reference_fmus
+
+    folder, reason = reference_fmus("2.0")
+    if folder is None:
+        pytest.skip(reason)
+    return str(folder / "Feedthrough.fmu")
+
+
+FEEDTHROUGH_INPUTS = {"Float64_continuous_input": [0.5], "Float64_discrete_input": [1.5], "Int32_input": [3],
+                      "Boolean_input": [True], "step": [0.01]}  # its default experiment has no step size
+
+
+def test_a_study_sets_enumeration_and_string_variables():
+    # an Enumeration failed every row with KeyError: 'Enumeration'
+    grid = {**FEEDTHROUGH_INPUTS, "Enumeration_input": ["Option 2", 1], "String_input": ["a text"]}
+    # the default reference ('tightest'): one trajectory cannot be the reference of two Enumeration values
+    df = sweep(_feedthrough(), grid, t_span=(0.0, 0.1), scheduler="serial", progress=False)
+    assert df["success"].tolist() == [True, True], df["message"].tolist()
+    grid["Enumeration_input"] = ["Option 3"]
+    df = sweep(_feedthrough(), grid, t_span=(0.0, 0.1), scheduler="serial", progress=False)
+    assert not df["success"][0]
+    assert "`Enumeration_input` sets an Enumeration variable (items 'Option 1' = 1, 'Option 2' = 2); " \
+           "found 'Option 3'" in df["message"][0]
+
+
+def test_cli_sweep_converts_grid_values_by_the_variables_type(tmp_path, capsys):
+    from fmu_build.__main__ import main
+
+    args = ["sweep", _feedthrough(), "--t-span", "0", "0.1", "--scheduler", "serial", "--no-progress",
+            "--grid", "step=0.01",
+            "--grid", "Float64_continuous_input=0.5", "--grid", "Float64_discrete_input=1", "--grid", "Boolean_input=true",
+            "--grid", "Enumeration_input=Option 2,1"]
+    # a String "42" stays a text (it was made the number 42 and refused)
+    assert main(args + ["-o", str(tmp_path / "s.csv"), "--grid", "Int32_input=3", "--grid", "String_input=42"]) == 0, \
+        capsys.readouterr().err
+    df = pd.read_csv(tmp_path / "s.csv", dtype={"String_input": str})
+    assert df["success"].all() and df["String_input"].tolist() == ["42", "42"]
+    assert df["Enumeration_input"].tolist() == ["Option 2", "1"] or df["Enumeration_input"].tolist() == ["Option 2", 1]
+    assert main(args + ["-o", str(tmp_path / "t.csv"), "--grid", "Int32_input=2.5", "--grid", "String_input=a"]) == 2
+    assert "`--grid` Int32_input: `Int32_input` sets an Integer variable; found '2.5'" in capsys.readouterr().err
+
+
+# -- inputs of a swept FMU ------------------------------------------------------------------------
+def test_an_fmu_with_inputs_is_refused_unless_the_grid_sets_them(tmp_path):
+    from fmu_build import build_fmu
+
+    fmu = build_fmu(os.path.join(SPECS, "path_input.toml"), tmp_path, target="native")
+    with pytest.raises(ValueError, match=r"inputs \['p'\].*hold them at their start values"):
+        sweep(fmu, {"lam": [1.0]}, t_span=(0.0, 0.5), scheduler="serial", progress=False)
+    df = sweep(fmu, {"lam": [1.0], "p": [0.0]}, t_span=(0.0, 0.5), scheduler="serial", progress=False)
+    assert df["success"].all()
+
+
+# -- the reference a study offers is one it computes -----------------------------------------------
+def test_monolithic_is_no_reference(capsys):
+    from fmu_build.__main__ import main
+
+    with pytest.raises(ValueError, match="`reference` must be None, 'exact', 'tightest', a callable or a gallery "
+                                         "Problem; found 'monolithic'"):
+        _serial({"lam": [1.0]}, reference="monolithic")
+    with pytest.raises(SystemExit):
+        main(["sweep", "--help"])
+    assert "monolithic" not in capsys.readouterr().out
+    for page in ("docs/cli.md", "docs/studies.md"):  # the option, not the word
+        with open(os.path.join(ROOT, page), encoding="utf-8") as fh:
+            assert "'monolithic'" not in fh.read(), page
+    assert "'monolithic'" not in (sweep.__doc__ or "")
+
+
+# -- the command line's status and options ------------------------------------------------------------
+def test_cli_sweep_exits_1_when_a_run_failed(tmp_path, capsys):
+    from fmu_build.__main__ import main
+
+    args = ["sweep", "gallery:prescribed_path", "--grid", "lam=-1,1", "--t-span", "0", "1", "--scheduler", "serial",
+            "--no-progress"]
+    assert main(args + ["-o", str(tmp_path / "a.csv")]) == 1
+    err = capsys.readouterr().err
+    assert "1 of 2 runs failed" in err and "run 0 (lam=-1): `lam` must be positive; found -1" in err
+    assert "--allow-failures" in err
+    assert main(args + ["-o", str(tmp_path / "b.csv"), "--allow-failures"]) == 0
+    assert main(["sweep", "gallery:prescribed_path", "--grid", "lam=-1", "--scheduler", "serial", "--no-progress",
+                 "-o", str(tmp_path / "c.csv"), "--allow-failures"]) == 1  # none ran: nothing to allow
+
+
+def test_cli_sweep_recommends_on_the_residual(tmp_path, capsys):
+    from fmu_build.__main__ import main
+
+    assert main(["sweep", "gallery:prescribed_path", "--grid", "lam=1,2,4,8", "--grid", "offset=0.1", "--t-span", "0",
+                 "2", "--scheduler", "serial", "--no-progress", "-o", str(tmp_path / "s.csv"), "--recommend", "1e-3",
+                 "--on", "residual_final", "--cost", "steps"]) == 0
+    assert "recommended (residual_final <= 0.001 at least steps): lam=4" in capsys.readouterr().out
+
+
+# -- a script without a main guard ------------------------------------------------------------------
+def test_a_study_in_a_script_without_a_main_guard(tmp_path):
+    # the embedded cluster's worker processes imported the script again and ran its study:
+    # spawn tracebacks, "Nanny failed to start"
+    script = tmp_path / "study.py"
+    script.write_text(textwrap.dedent("""
+        from lsc import gallery
+        from fmu_build import sweep
+        print("the script's top level ran")
+        df = sweep(gallery.prescribed_path(t_span=(0.0, 1.0)), {"lam": [1.0, 2.0]}, n_workers=1, progress=False)
+        print("rows", df["success"].tolist())
+    """))
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert run.stdout.count("the script's top level ran") == 1, run.stdout
+    assert "rows [True, True]" in run.stdout and "Traceback" not in run.stderr, run.stderr[-3000:]
+
+
+def test_cli_grid_values_of_a_spec_are_numbers_or_texts_for_the_run_to_type():
+    from fmu_build._cli_sweep import typed_grid
+
+    spec = os.path.join(SPECS, "prescribed_path.toml")  # typed only once built: a run reads the texts by the type
+    assert typed_grid({"lam": [2], "c": ["0.5", "1"], "project_initial": ["true"]}, spec) == \
+        {"lam": [2], "c": [0.5, 1], "project_initial": ["true"]}
+    with pytest.raises(ValueError, match="`--grid` c: '1e' is not a plain decimal number"):
+        typed_grid({"c": ["1e"]}, spec)

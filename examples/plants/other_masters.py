@@ -70,21 +70,27 @@ def ecos_binary():
     src = Path(ecospy.__file__).parent / "binaries" / "ecos"
     dest = Path(tempfile.gettempdir()) / f"lsc_ecos_{os.getuid()}" / "ecos"
     if not dest.exists():
+        # copied beside it and renamed: a process that finds `dest` never runs a half-written copy
         dest.parent.mkdir(exist_ok=True)
-        shutil.copy(src, dest)
-        dest.chmod(dest.stat().st_mode | stat.S_IXUSR)
+        fd, part = tempfile.mkstemp(prefix=".ecos-", dir=dest.parent)
+        os.close(fd)
+        shutil.copy(src, part)
+        os.chmod(part, os.stat(part).st_mode | stat.S_IXUSR)
+        os.replace(part, dest)
     return dest
 
 
-def run_ecos(ssp, step_size, stop_time, outputs):
-    """Rows (time, outputs...) from ``ecos simulate`` (its CSV: 6 decimals) and the wall time of the run."""
+def run_ecos(ssp, step_size, stop_time, outputs, parameter_set=None):
+    """Rows (time, outputs...) from ``ecos simulate`` (its CSV: 6 decimals) and the wall time of the run;
+    ``parameter_set``: the name of the SSP parameter set ecos applies (it applies none unless named)."""
     from fmu_build import native_host_env
 
     folder = tempfile.mkdtemp(prefix="lsc_ecos_")
     try:
         t0 = time.perf_counter()
         proc = subprocess.run([str(ecos_binary()), "simulate", "--path", str(Path(ssp).resolve()), "--stepSize",
-                               repr(step_size), "--stopTime", repr(stop_time), "--noParallel", "-l", "err"],
+                               repr(step_size), "--stopTime", repr(stop_time), "--noParallel", "-l", "err",
+                               *(["--parameterSet", parameter_set] if parameter_set else [])],
                               cwd=folder, env=native_host_env(), capture_output=True, text=True, timeout=1800)
         elapsed = time.perf_counter() - t0
         csvs = list(Path(folder).glob("*.csv"))

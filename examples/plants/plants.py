@@ -5,6 +5,9 @@
   ``maxOutputDerivativeOrder = 2`` and ``canInterpolateInputs``.
 - :func:`build_lag_plant`: ``w' = -w + g u`` made with pythonfmu (exact
   exponential step for a held input; no derivatives in or out).
+- :func:`build_source`, :func:`build_scalar_plant`: scalar C FMUs (source: ``scalar.c``), a source
+  ``y = expr(t)`` and a plant ``x' = a x + b u, y = x, z = c x + d u + e`` stepped exactly, each
+  with or without output derivatives, input interpolation and rollback (test cases for the master).
 - :func:`write_ssp`: an ``.ssp`` archive (``SystemStructure.ssd`` + the FMUs).
 """
 import os
@@ -29,10 +32,14 @@ def _fmpy_headers():
     return Path(fmpy.__file__).parent / "c-code"
 
 
-def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y2"), input_name="u", follower=False):
+def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y2"), input_name="u", follower=False,
+                       units=None, unit_definitions=None):
     """Compile ``linear_plant.c`` into ``dest/name.fmu`` with the given matrices as start values.
 
     ``follower=True``: the exact index-2 follower x1 = u, x2 = -u' instead (A, b unused).
+    ``units``: ``{variable: unit name}`` (the unit attribute of those variables); ``unit_definitions``:
+    ``{unit name: {"m": 1, "factor": 0.01, ...} or None}``, the model description's UnitDefinitions (the
+    BaseUnit's attributes; None: the name alone).
     """
     dest = Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
@@ -46,21 +53,34 @@ def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y
                         "-DFMI2_FUNCTION_PREFIX=", f"-I{_fmpy_headers()}", *defines,
                         str(HERE / "linear_plant.c"), "-o", str(tmp / "binaries" / "linux64" / f"{name}.so"), "-lm"],
                        check=True)
+        units = units or {}
+        unit = lambda key: f' unit="{escape(units[key])}"' if key in units else ""  # noqa: E731
         variables = []
         for vr, (key, v) in enumerate(zip(_NAMES, values)):
             variables.append(f'<ScalarVariable name="{key}" valueReference="{vr}" causality="parameter" '
-                             f'variability="{"tunable" if key == "substeps" else "fixed"}"><Real start="{v!r}"/></ScalarVariable>')
+                             f'variability="{"tunable" if key == "substeps" else "fixed"}"><Real start="{v!r}"'
+                             f'{unit(key)}/></ScalarVariable>')
         variables.append(f'<ScalarVariable name="{input_name}" valueReference="9" causality="input" '
-                         f'variability="continuous"><Real start="0.0"/></ScalarVariable>')
+                         f'variability="continuous"><Real start="0.0"{unit(input_name)}/></ScalarVariable>')
         for i, out in enumerate(output_names):
             variables.append(f'<ScalarVariable name="{out}" valueReference="{10 + i}" causality="output" '
-                             f'variability="continuous" initial="exact"><Real start="{values[6 + i]!r}"/></ScalarVariable>')
+                             f'variability="continuous" initial="exact"><Real start="{values[6 + i]!r}"{unit(out)}/>'
+                             '</ScalarVariable>')
+        definitions = ""
+        if unit_definitions:
+            items = []
+            for uname, base in unit_definitions.items():
+                attrs = "".join(f' {k}="{v!r}"' for k, v in (base or {}).items())
+                items.append(f'<Unit name="{escape(uname)}">' + (f"<BaseUnit{attrs}/>" if base is not None else "")
+                             + "</Unit>")
+            definitions = "<UnitDefinitions>" + "".join(items) + "</UnitDefinitions>"
         xml = f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{{{uuid.uuid4()}}}"
   description="linear two-state plant x' = A x + b u (RK4, output derivatives)" generationTool="lsc examples/plants"
   numberOfEventIndicators="0">
   <CoSimulation modelIdentifier="{name}" canHandleVariableCommunicationStepSize="true" canInterpolateInputs="true"
     maxOutputDerivativeOrder="2" canGetAndSetFMUstate="true" canSerializeFMUstate="true"/>
+  {definitions}
   <ModelVariables>
     {chr(10).join('    ' + v for v in variables).strip()}
   </ModelVariables>
@@ -84,6 +104,88 @@ def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y
         os.replace(partial, out)
     return out
 
+
+
+def _package(dest, name, source_file, defines, xml):
+    """Compile ``source_file`` with ``defines`` and zip it with ``xml`` into ``dest/name.fmu`` (atomically)."""
+    dest = Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        (tmp / "binaries" / "linux64").mkdir(parents=True)
+        subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra", "-Werror",
+                        "-DFMI2_FUNCTION_PREFIX=", f"-I{_fmpy_headers()}", *defines, str(HERE / source_file),
+                        "-o", str(tmp / "binaries" / "linux64" / f"{name}.so"), "-lm"], check=True)
+        (tmp / "modelDescription.xml").write_text(xml)
+        (tmp / "sources").mkdir()
+        shutil.copy(HERE / source_file, tmp / "sources")
+        out = dest / f"{name}.fmu"
+        partial = dest / f".{name}.fmu.part"
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
+            for f in sorted(tmp.rglob("*")):
+                if f.is_file():
+                    zf.write(f, f.relative_to(tmp).as_posix())
+        os.replace(partial, out)
+    return out
+
+
+def _scalar_xml(name, description, variables, outputs, derivatives, interpolate, rollback):
+    flags = (f'canInterpolateInputs="{str(interpolate).lower()}" maxOutputDerivativeOrder="{2 if derivatives else 0}" '
+             f'canGetAndSetFMUstate="{str(rollback).lower()}" canSerializeFMUstate="{str(rollback).lower()}"')
+    unknowns = "".join(f'<Unknown index="{i}" dependencies="{deps}"/>' for i, deps in outputs)
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{{{uuid.uuid4()}}}"
+  description="{escape(description)}" generationTool="lsc examples/plants" numberOfEventIndicators="0">
+  <CoSimulation modelIdentifier="{name}" canHandleVariableCommunicationStepSize="true" {flags}/>
+  <ModelVariables>
+    {chr(10).join(variables)}
+  </ModelVariables>
+  <ModelStructure><Outputs>{unknowns}</Outputs><InitialUnknowns>{unknowns}</InitialUnknowns></ModelStructure>
+</fmiModelDescription>
+"""
+
+
+def build_source(dest, name, y, d1=None, d2=None, rollback=True):
+    """A C source FMU ``dest/name.fmu`` whose output ``y`` is the C expression ``y`` of ``t``.
+
+    With ``d1`` and ``d2`` (C expressions of ``t``: y' and y'') it declares
+    ``maxOutputDerivativeOrder = 2`` and returns them; ``rollback`` sets ``canGetAndSetFMUstate``.
+    """
+    derivatives = d1 is not None
+    defines = ["-DSCALAR_SOURCE=1", f"-DSCALAR_DERIVATIVES={int(derivatives)}", f"-DSOURCE_Y(t)=({y})"]
+    if derivatives:
+        defines += [f"-DSOURCE_D1(t)=({d1})", f"-DSOURCE_D2(t)=({d2 if d2 is not None else 0.0})"]
+    variables = ['<ScalarVariable name="y" valueReference="0" causality="output" variability="continuous"><Real/>'
+                 '</ScalarVariable>']
+    xml = _scalar_xml(name, f"y = {y}", variables, [(1, "")], derivatives, False, rollback)
+    return _package(dest, name, "scalar.c", defines, xml)
+
+
+def build_scalar_plant(dest, name, a, b, c=0.0, d=0.0, e=0.0, x0=0.0, derivatives=False, interpolate=True,
+                       rollback=True):
+    """A C FMU ``dest/name.fmu`` of ``x' = a x + b u, y = x, z = c x + d u + e`` (exact steps for the
+    received input polynomial); ``z`` depends on ``u`` directly when ``d != 0``.
+
+    ``derivatives``: output derivatives of orders 1 and 2 (``maxOutputDerivativeOrder = 2``);
+    ``interpolate``: ``canInterpolateInputs``; ``rollback``: ``canGetAndSetFMUstate``.
+    """
+    values = [float(v) for v in (a, b, c, d, e, x0)]
+    defines = [f"-DSCALAR_DERIVATIVES={int(bool(derivatives))}",
+               "-DPLANT_PARAMETERS=" + ",".join(repr(v) for v in values)]
+    variables = [f'<ScalarVariable name="{key}" valueReference="{vr}" causality="parameter" variability="fixed">'
+                 f'<Real start="{v!r}"/></ScalarVariable>' for vr, (key, v) in enumerate(zip("abcde", values))]
+    variables.append(f'<ScalarVariable name="x0" valueReference="5" causality="parameter" variability="fixed">'
+                     f'<Real start="{values[5]!r}"/></ScalarVariable>')
+    variables.append('<ScalarVariable name="u" valueReference="6" causality="input" variability="continuous">'
+                     '<Real start="0.0"/></ScalarVariable>')
+    variables.append('<ScalarVariable name="y" valueReference="7" causality="output" variability="continuous">'
+                     '<Real/></ScalarVariable>')
+    variables.append('<ScalarVariable name="z" valueReference="8" causality="output" variability="continuous">'
+                     '<Real/></ScalarVariable>')
+    outputs = [(8, ""), (9, "7" if values[3] != 0.0 else "")]
+    description = f"x' = {a} x + {b} u, y = x, z = {c} x + {d} u + {e}"
+    xml = _scalar_xml(name, description, variables, outputs, bool(derivatives), bool(interpolate), bool(rollback))
+    return _package(dest, name, "scalar.c", defines, xml)
 
 _LAG = '''
 import math

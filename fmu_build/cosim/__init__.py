@@ -25,17 +25,24 @@ The master couples FMUs by their connections, at a fixed or controlled macro ste
   derivative order the master has: the polynomial's 1..p, then the source's
   exact derivatives beyond ``p`` (up to the highest order the FMU accepts,
   probed once with rollback); orders the master does not have are not sent.
-- **Algebraic loops**: a cycle of direct feedthrough is reported; with
-  ``iterations = 0`` it is cut, with ``iterations > 0`` iterated.
+- **Algebraic loops**: a cycle of direct feedthrough is reported and solved
+  as a fixed point (Anderson acceleration, to the tolerance, its gain
+  measured; module ``_loops``); with ``iterations = 0`` it is then cut and a
+  gain of magnitude 1 or more ends the run, with ``iterations > 0`` it is
+  solved at every exchange.
 - **Step iteration**: with ``iterations > 0`` every macro step is repeated
   (rollback) with the inputs interpolated through the end values just
-  computed, until the coupling values change by less than ``rtol``.
-- **Step control**: ``step_control=True`` varies ``H`` to keep a local
-  coupling error estimate within ``atol + rtol |y|`` (module ``_stepper``).
-- **Divergence is never success**: a non-finite coupling value, or a Real
-  coupling value beyond ``max_growth`` times the start scale, ends the run
-  with ``success=False`` and a message naming the variable, the time and the
-  recommended configuration.
+  computed, until the coupling values change by less than the tolerance.
+- **Output derivatives** are used while they are Taylor coefficients of the
+  values produced (module ``_derivatives``).
+- **Step control**: ``step_control=True`` varies ``H`` to keep the defect of
+  what each step produced within ``atol + rtol |y|``, locating jumps
+  (module ``_stepper``).
+- **Divergence is never success, growth is not divergence**: a non-finite
+  coupling value, or a value on a cycle of the connection graph that leaves
+  its extrapolation by more than its size while swinging and growing, ends
+  the run with ``success=False`` and a message naming the variable, the time
+  and the recommended configuration (module ``_divergence``).
 - A failing FMI call or a value an FMU rejects stops the run: the result
   keeps the rows computed so far, ``success`` is False and ``message`` names
   the component, the variable and the time.

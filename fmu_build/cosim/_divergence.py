@@ -1,4 +1,17 @@
-"""Divergence of the coupling: the check after every macro step (docs/cosimulation.md, 'Divergence')."""
+"""Divergence of the coupling, told apart from growth (docs/cosimulation.md, 'Divergence').
+
+A coupled recursion that is unstable has a root ``r`` with ``|r| > 1`` that the system itself does not
+have; once its mode dominates a coupling value, the value is no longer predicted by the extrapolation of
+its own past: for a root below -1 the defect of a degree-``q`` extrapolation is ``|r - 1|^(q + 1) / |r|``
+times the value, and for a pair of complex roots the value swings through zero with a growing amplitude.
+Any smooth signal the step resolves -- an exponential, a large ramp -- keeps its defect a fraction of
+its size and its sign. The monitor therefore watches the Real coupling values that run along a cycle of
+the connection graph (a feed-forward coupling cannot diverge: each FMU only integrates what it receives)
+and calls a value divergent when, over the last ``WINDOW`` steps, its defect exceeded the largest
+magnitude it had before in all but two of them, it changed sign, and it grew ``GROWTH``-fold. A root above
++1 makes an exponential like any physical one and cannot be told from the values; the loops that make one
+(an algebraic loop cut with gain above 1) are checked at the start (``LoopSolver.start``).
+"""
 
 import math
 
@@ -9,57 +22,60 @@ from ._result import _Stop
 RECOMMENDED = ("docs/cosimulation.md recommends, for a loop through a differentiated input, a plant that gives "
                "output derivatives, the DAE FMU built native, algorithm='jacobi', extrapolation=2 and "
                "lambda_per_step=1.0 (or a smaller loop gain; see 'Divergence')")
-WINDOW = 12  # steps of growing alternating second differences that mean divergence
-PEAK_MARGIN = 1.1  # growth beyond the earlier peak that an oscillation must show to be divergence
+WINDOW = 8  # consecutive steps of a value off its extrapolation by more than its size that mean divergence
+GROWTH = 2.0  # growth of the value over those steps
 
 
-class DivergenceCheck:
-    """The divergence check of a run (`Run`: its coupling ``value``, ``real`` slots, ``scale``, ``sources``,
-    ``loop_names``, ``max_growth``, and the window ``recent``, ``peak``, ``recent_dropped``)."""
+class DivergenceMonitor:
+    """The divergence check after every macro step, and the optional bound ``max_growth`` (None: no bound;
+    ``math.inf``: no divergence check at all)."""
 
-    def check_growth(self, t):
-        """Divergence (documented in docs/cosimulation.md, 'Divergence'): a Real coupling value beyond
-        ``max_growth`` times the start scale, or one whose second differences alternate in sign and
-        grow in magnitude over ``WINDOW`` consecutive steps (a parasitic root of the coupling below -1,
-        the usual instability of an explicit coupling), ends the run."""
-        if not self.real.any() or math.isinf(self.max_growth):
+    def __init__(self, layout, max_growth):
+        self.layout, self.max_growth = layout, max_growth
+        self.watch = layout.cycle_slot & layout.real & (max_growth is None or not math.isinf(max_growth))
+        n = len(layout.sources)
+        self.peak = np.zeros(n)
+        self.off, self.values = np.zeros((0, n), dtype=bool), np.zeros((0, n))
+        self.scale = 1.0
+
+    def start(self, value):
+        real = self.layout.real
+        self.scale = max(1.0, float(np.abs(value[real]).max(initial=0.0)))
+        self.peak = np.where(real, np.abs(value), 0.0)
+        self.values = value[None, :].copy()
+
+    def check(self, value, defect, t):
+        """After the step to ``t``: ``value`` the coupling values, ``defect`` their distance from the band."""
+        real = self.layout.real
+        if not real.any():
             return
-        mag = np.where(self.real, np.abs(self.value), 0.0)
-        worst = int(np.argmax(mag))
-        if mag[worst] > self.max_growth * self.scale:
-            self._diverged(worst, t, f"|{{}}| = {mag[worst]:.3g} exceeds max_growth ({self.max_growth:.3g}) times "
-                                     f"the start scale ({self.scale:.3g})")
-        self.recent.append(self.value.copy())
-        if len(self.recent) > WINDOW + 2:
-            self.peak = np.maximum(self.peak, np.abs(self.recent[0])) if self.recent_dropped else np.abs(self.recent[0])
-            self.recent_dropped = True
-            del self.recent[0]
-        if len(self.recent) < WINDOW + 2:
+        mag = np.where(real, np.abs(value), 0.0)
+        if self.max_growth is not None and mag.max() > self.max_growth * self.scale:
+            s = int(np.argmax(mag))
+            raise _Stop(f"|{self.layout.name(s)}| = {mag[s]:.3g} exceeds max_growth ({self.max_growth:.3g}) times "
+                        f"the start scale ({self.scale:.3g}) at t = {t!r}")
+        off = self.watch & (defect > self.peak) & (self.peak > 0)
+        self.peak = np.maximum(self.peak, mag)
+        self.off = np.vstack([self.off, off])[-WINDOW:]
+        self.values = np.vstack([self.values, value])[-(WINDOW + 1):]
+        if len(self.off) < WINDOW:
             return
-        d2 = np.diff(np.array(self.recent), 2, axis=0)  # WINDOW rows
-        alternating = np.all(d2[1:] * d2[:-1] < 0, axis=0)
-        growing = np.all(np.abs(d2[1:]) > np.abs(d2[:-1]), axis=0)
-        visible = np.abs(d2[-1]) > 1e-8 * self.scale
-        # a bounded signal near the Nyquist rate (a beat) has growing alternating differences too:
-        # divergence also needs values 10 % beyond every one seen before the window
-        beyond = (np.abs(np.array(self.recent)).max(axis=0) > PEAK_MARGIN * self.peak) if self.recent_dropped else True
-        bad = np.flatnonzero(alternating & growing & visible & beyond & self.real)
+        first = np.abs(self.values[0])
+        swings = np.any(np.sign(self.values[1:]) != np.sign(self.values[:-1]), axis=0)
+        bad = np.flatnonzero((self.off.sum(axis=0) >= WINDOW - 2) & swings & (mag > GROWTH * first))
         if bad.size:
             s = int(bad[0])
-            self._diverged(s, t, f"{{}} oscillates from step to step with an amplitude that grew "
-                                 f"{abs(d2[-1, s] / d2[0, s]):.3g}-fold over the last {WINDOW} steps")
+            self._diverged(s, t, f"{self.layout.name(s)} left its extrapolation by more than the largest magnitude "
+                                 f"it had before in {int(self.off[:, s].sum())} of the last {WINDOW} steps, swinging "
+                                 f"through zero and growing {mag[s] / first[s]:.3g}-fold (to {value[s]:.3g})")
 
     def _diverged(self, s, t, what):
-        a, y = self.sources[s]
-        name = f"{a}.{y}"
-        loop = next((lp for lp in self.loop_names if name in lp), None)
+        name = self.layout.name(s)
+        loop = next((lp for lp in self.layout.loop_names if name in lp), None)
         if loop is not None:
-            advice = (f"{name} is in the algebraic loop through {', '.join(loop)}, whose gain is above 1 in "
-                      "magnitude: no step size or extrapolation helps; a loop gain below 1, or `iterations` > 0 "
-                      "(which iterates the loop at each exchange; if it does not contract, the growth check "
-                      "still stops the run)")
+            advice = (f"{name} is in the algebraic loop through {', '.join(loop)}: iterations > 0 solves it at every "
+                      "exchange")
         else:
             advice = RECOMMENDED
-        raise _Stop(f"the coupling diverged: {what.format(name)} at t = {t!r}; this configuration is "
-                    f"unstable for this system: {advice}")
-
+        raise _Stop(f"the coupling diverged: {what} at t = {t!r}; this configuration is unstable for this system: "
+                    f"{advice}")

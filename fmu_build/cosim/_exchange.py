@@ -5,6 +5,11 @@ share reference 7): every read and write goes through the getter and setter of
 the variable's type, and a value is converted to that type by rules that
 refuse what they cannot interpret (``"false"`` is False, ``0.3`` is no
 Boolean, ``2.5`` is no Integer).
+
+A connection between variables of different units carries an affine map (`_units`): the master's
+coupling values stay in the source output's unit, and every value or input derivative set on the
+connected input is converted to the input's unit there (`_slave_class`); start values are in the variable's
+own unit (`Component.set_start`).
 """
 
 import os
@@ -12,6 +17,7 @@ import zipfile
 
 import numpy as np
 
+from . import _units
 from ._system import IDENTIFIER, unzip
 
 # types a connection may join (Enumeration values are Integers on the wire, as in libcosim)
@@ -99,8 +105,54 @@ def _check_python_model(name, path, unzipdir):
                          "pythonfmu would run the first one's code. Run it in another process.")
 
 
-def _unit(v):
-    return v.unit or (v.declaredType.unit if v.declaredType is not None else None)
+def _slave_class():
+    """fmpy's FMI 2.0 Co-Simulation slave whose connected Real inputs take values in the source's unit."""
+    import math
+
+    from fmpy.fmi1 import FMICallException
+    from fmpy.fmi2 import FMU2Slave
+
+    class ConversionOverflow(FMICallException):
+        """A finite value that a connection's unit map takes beyond the range of a double (the master stops
+        there, as on a failed call, rather than set inf)."""
+
+        def __init__(self, function, text):
+            Exception.__init__(self, text)
+            self.function, self.status = function, 3
+
+    class FMU2SlaveWithUnits(FMU2Slave):  # (fmpy picks the FMI version's functions by the name's prefix)
+        """Values and input derivatives set on a value reference of ``wire`` (an input -> `_units.Affine` from
+        its connection's source unit) are converted: a value by the map, a derivative by its scale."""
+
+        wire, wire_names = {}, {}
+
+        def _converted(self, function, vr, value, derivative):
+            wire, out = self.wire, []
+            for r, v in zip(vr, value):
+                m = wire.get(r)
+                x = v if m is None else m.scale * v if derivative else m(v)
+                if m is not None and math.isfinite(v) and not math.isfinite(x):
+                    raise ConversionOverflow(function, f"the {'derivative' if derivative else 'value'} {v!r} "
+                                             f"converted to the unit of the input {self.wire_names.get(r, r)} is "
+                                             f"{x!r}, beyond the range of a double")
+                out.append(x)
+            return out
+
+        def setReal(self, vr, value):
+            if self.wire:
+                value = self._converted("fmi2SetReal", vr, value, False)
+            return super().setReal(vr, value)
+
+        def setRealInputDerivatives(self, vr, order, value):
+            if self.wire:
+                value = self._converted("fmi2SetRealInputDerivatives", vr, value, True)
+            return super().setRealInputDerivatives(vr, order, value)
+
+        def set_own(self, vr, value):
+            """Values in the variables' own units (start values)."""
+            return super().setReal(vr, value)
+
+    return FMU2SlaveWithUnits
 
 
 class Component:
@@ -108,7 +160,6 @@ class Component:
 
     def __init__(self, name, path, unzipdir, callbacks, max_unpacked):
         from fmpy import read_model_description
-        from fmpy.fmi2 import FMU2Slave
 
         self.name, self.path = name, path
         where = f"component {name!r} ({path})"
@@ -134,8 +185,9 @@ class Component:
             raise ValueError(f"component {name!r} ({os.path.basename(path)}): modelIdentifier "
                              f"{cs.modelIdentifier!r} is not a plain identifier; it names the binary inside the "
                              "FMU and is never a path.")
-        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir, modelIdentifier=cs.modelIdentifier,
-                             instanceName=name)
+        self.units = _units.fmu_units(self.md)
+        self.fmu = _slave_class()(guid=self.md.guid, unzipDirectory=self.unzipdir, modelIdentifier=cs.modelIdentifier,
+                                  instanceName=name)
         # logging on: pythonfmu FMUs pass their messages (errors included) to the logger only then
         try:
             self.fmu.instantiate(callbacks=callbacks, loggingOn=True)
@@ -173,6 +225,7 @@ class Component:
         return [float(v) if kind == "Real" else int(v) for v in values]
 
     def set(self, kind, refs, values):
+        """Set values of one wire type; a connected Real input's value is in its source's unit (converted)."""
         fmu = self.fmu
         if kind == "Real":
             fmu.setReal(list(refs), [float(v) for v in values])
@@ -183,9 +236,22 @@ class Component:
         else:
             fmu.setString(list(refs), [str(v) for v in values])
 
+    def set_start(self, kind, refs, values):
+        """Like `set`, with values in the variables' own units (start values, not connection values)."""
+        if kind == "Real":
+            self.fmu.set_own(list(refs), [float(v) for v in values])
+        else:
+            self.set(kind, refs, values)
 
-def check_types(comps, connections, connectors=None, where="`system`"):
-    """Causality and type agreement of every connection and SSD connector (before anything runs)."""
+
+def check_types(comps, connections, connectors=None, where="`system`", system=None):
+    """Causality, type and unit agreement of every connection and SSD connector (before anything runs).
+
+    Units (``system``: the `System` read, for its unit definitions, connector units and connections with
+    ``suppressUnitConversion``): each connector's unit must convert to its FMU variable's; each connection
+    between different units gets the affine map from the source's unit to the input's (`_units.conversion`),
+    installed on the input's FMU; one that cannot be converted is refused naming both units.
+    """
     for (c, name), kind in (connectors or {}).items():
         v = comps[c].variables.get(name)
         if v is not None and v.type != kind:
@@ -201,9 +267,83 @@ def check_types(comps, connections, connectors=None, where="`system`"):
             if ta != tb:
                 raise ValueError(f"connection {a}.{y} -> {b}.{u}: enumeration type {ta!r} cannot feed enumeration "
                                  f"type {tb!r}; their items mean different things.")
-        ua, ub = _unit(src), _unit(dst)
-        if ua and ub and ua != ub:
-            raise ValueError(f"connection {a}.{y} -> {b}.{u}: unit {ua!r} cannot feed unit {ub!r}; connected "
-                             "variables must have the same unit (or one side none).")
         if src.type == "String":
             raise ValueError(f"connection {a}.{y} -> {b}.{u}: String connections are not exchanged by this master.")
+    _check_units(comps, connections, where, system)
+
+
+def _check_time(c, definitions, where):
+    """The master steps in seconds and input derivatives are per second: an FMU whose independent variable is
+    in another unit (FMI 2.0 allows one) is refused."""
+    for v in c.md.modelVariables:
+        name = _units.variable_unit(v) if v.causality == "independent" else None
+        if name is None:
+            continue
+        unit = definitions.lookup(name)
+        if (unit is None and name != "s") or (unit is not None and not unit.same(_units.SECOND)):
+            found = "no file defines it" if unit is None else unit.describe()
+            raise ValueError(f"{where}: component {c.name!r}: its time {v.name!r} is in unit {name!r} ({found}); "
+                             "the master steps in seconds (s); refused.")
+
+
+def _check_units(comps, connections, where, system):
+    """Connector units against their variables', the time of every FMU, and the map of every connection (see
+    `check_types`)."""
+    ssp_units = getattr(system, "units", {}) or {}
+    connector_units = getattr(system, "connector_units", {}) or {}
+    unconverted = getattr(system, "unconverted", set()) or set()
+    transformations = getattr(system, "transformations", {}) or {}
+
+    def definitions(*names):
+        return _units.Definitions((where, ssp_units), *((f"the FMU of {n}", comps[n].units) for n in names))
+
+    for n, c in comps.items():
+        _check_time(c, definitions(n), where)
+
+    for (c, name), unit in connector_units.items():
+        v = comps[c].variables.get(name)
+        if v is not None:  # a connector of no variable is refused where it is used
+            _units.conversion(unit, _units.variable_unit(v), definitions(c),
+                              f"{where}: connector {c}.{name}", _units.is_relative(v))
+    for c in comps.values():
+        c.fmu.wire, c.fmu.wire_names = {}, {}
+    for a, y, b, u in connections:
+        src, dst = comps[a].variable(y, "output"), comps[b].variable(u, "input")
+        what = f"{where}: connection {a}.{y} -> {b}.{u}"
+        if src.type != "Real":
+            if (b, u) in transformations:
+                raise ValueError(f"{what}: a LinearTransformation applies to Real values; this connection is "
+                                 f"{src.type}; refused.")
+            continue
+        defs = definitions(a, b)
+        unit_src, unit_dst = _units.variable_unit(src), _units.variable_unit(dst)
+        at_src, at_dst = connector_units.get((a, y), unit_src), connector_units.get((b, u), unit_dst)
+        # the value leaves the output in its unit, is presented in the start connector's, arrives in the end
+        # connector's (unconverted with suppressUnitConversion: the numbers pass as they are), is transformed
+        # there by the connection's LinearTransformation (SSP 1.0: after the conversion, in the end connector's
+        # unit) and is set in the input's unit
+        steps = [(unit_src, at_src), (at_dst, unit_dst)]
+        if (b, u) not in unconverted:
+            steps.insert(1, (at_src, at_dst))
+        else:
+            # "the environment will not perform any automatic unit conversions": a connector in another unit than
+            # its variable's would need one; which the file means cannot be told
+            for (c, v), unit, own in (((a, y), at_src, unit_src), ((b, u), at_dst, unit_dst)):
+                if unit is not None and own is not None and unit != own:
+                    raise ValueError(f"{what}: suppressUnitConversion, but connector {c}.{v} is in unit {unit!r} and "
+                                     f"its variable in unit {own!r}: that conversion would be done although the file "
+                                     "suppresses conversions; refused.")
+        transformation = transformations.get((b, u), _units.IDENTITY)
+
+        def through(relative):
+            maps = [_units.conversion(frm, to, defs, what, relative) for frm, to in steps]
+            return _units.compose(maps[:-1] + [transformation] + maps[-1:], what)
+
+        rel_src, rel_dst = _units.is_relative(src), _units.is_relative(dst)
+        total = through(rel_src and rel_dst)
+        if rel_src != rel_dst and through(True) != through(False):
+            raise ValueError(f"{what}: one side is a relative quantity (a difference), the other not, and their "
+                             f"units {unit_src!r} and {unit_dst!r} differ by an offset; refused.")
+        if not total.is_identity:
+            ref = comps[b].variables[u].valueReference
+            comps[b].fmu.wire[ref], comps[b].fmu.wire_names[ref] = total, f"{b}.{u}"

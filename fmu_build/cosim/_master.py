@@ -1,6 +1,7 @@
 """``cosimulate``: argument checks, loading the components, and the run's life cycle."""
 
 import logging
+import math
 import os
 import shutil
 import sys
@@ -16,7 +17,6 @@ from ._stepper import MAX_STEPS, StepControl
 from ._system import MAX_UNPACKED, read_system
 
 ALGORITHMS = ("jacobi", "gauss-seidel")
-MAX_GROWTH = 1e6
 
 logger = logging.getLogger("fmu_build.cosim")
 
@@ -24,7 +24,7 @@ logger = logging.getLogger("fmu_build.cosim")
 def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrapolation=0, iterations=0,
                start_values=None, output=None, start_time=0.0, rtol=1e-10, progress=None, exchange="ordered",
                step_control=False, atol=None, min_step=None, max_step=None, lambda_per_step=None,
-               max_growth=MAX_GROWTH, max_input_order=None, allow_external=False, max_unpacked=MAX_UNPACKED):
+               max_growth=None, max_input_order=None, allow_external=False, max_unpacked=MAX_UNPACKED):
     """Co-simulate connected FMI 2.0 Co-Simulation FMUs, at a fixed or controlled macro step.
 
     Parameters
@@ -39,10 +39,14 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
     extrapolation : {0, 1, 2}
         Degree of the input polynomial over a step (0: zero-order hold).
     iterations : int
-        0: explicit coupling (algebraic loops cut and reported). ``> 0``: each
-        macro step is repeated up to this many times with rollback through
-        the FMU state (every FMU must declare ``canGetAndSetFMUstate``), and
-        algebraic loops are iterated at each exchange.
+        0: explicit coupling: an algebraic loop is solved at the start, its
+        gain measured, and then cut (one connection takes the previous
+        exchange's value); a gain of magnitude 1 or more ends the run there.
+        ``> 0``: each macro step is repeated with rollback through the FMU
+        state (every FMU must declare ``canGetAndSetFMUstate``) until its
+        values settle within the tolerance, and algebraic loops are solved at
+        every exchange; at most this many repetitions and passes, else the
+        run ends with ``success=False`` naming what did not converge.
     start_values : dict, optional
         ``{"component.variable": value}`` set before initialization, converted
         to the variable's type (a Boolean takes True/False, 1/0, "true"/"false").
@@ -52,25 +56,30 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
     start_time : float
         Start of the run.
     rtol : float
-        Relative tolerance: of the step iteration's change, and of the step
-        control's error estimate.
+        Relative tolerance: of the algebraic and derivative loops solved at an
+        exchange, of the step iteration's change, and of the step control's
+        error estimate.
     exchange : {"ordered", "simultaneous"}
         ``"ordered"``: at a communication point, inputs are set before the
         outputs that depend on them directly are read (consistent values).
         ``"simultaneous"``: every connected output is read, then every input
         set (libcosim's and ecos's fixed-step algorithms).
     step_control : bool
-        Vary the macro step to keep the local coupling error estimate within
-        ``atol + rtol |value|`` (see docs/cosimulation.md for the estimate);
-        a rejected step is repeated smaller after rollback, or, if some FMU
-        cannot roll back, kept with a warning (the estimate is then an
-        indicator only).
+        Vary the macro step to keep the defect of what each step produced
+        (every Real coupling value against the polynomial its consumers
+        received, every recorded continuous output against its own
+        extrapolation) within ``atol + rtol |value|``, jumps located and
+        crossed (docs/cosimulation.md, 'Step control'); a rejected step is
+        repeated smaller after rollback, or, if some FMU cannot roll back,
+        kept with a warning (the estimate is then an indicator, and a step
+        kept beyond 10 times the tolerance ends the run).
     atol : float, optional
-        Absolute tolerance of the step control (default ``rtol``).
+        Absolute tolerance (default ``rtol``).
     min_step, max_step : float, optional
-        Bounds of the controlled step (default ``1e-6 * step_size`` and the
+        Bounds of the controlled step (default ``1e-12 * step_size`` and the
         whole interval); a step the control would make smaller than
-        ``min_step`` ends the run with ``success=False``.
+        ``min_step``, or a pace that would take more than 1e7 steps, ends the
+        run with ``success=False``.
     max_input_order : int, optional
         Highest input-derivative order sent to an FMU that interpolates
         (default: every order the master has, the sources' exact derivatives
@@ -82,12 +91,13 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         ``generationTool`` or ``author`` is "lsc fmu_build"; a parameter named
         ``lambda`` of another FMU means something else) to ``lambda_per_step / H`` before the run and after each step change
         (λH fixed: the configuration of our DAE FMUs' theory).
-    max_growth : float
-        Divergence criterion: a Real coupling value whose magnitude exceeds
-        ``max_growth * max(1, largest |coupling value| at the start)``, or
-        one that oscillates from step to step with a growing amplitude beyond
-        every value it had before, ends the run with ``success=False``.
-        ``math.inf`` disables it.
+    max_growth : float, optional
+        A bound the user knows: a Real coupling value whose magnitude exceeds
+        ``max_growth * max(1, largest |coupling value| at the start)`` ends
+        the run with ``success=False`` (default None: no bound; growth is
+        not divergence). Divergence is checked anyway: a value on a cycle of
+        the connection graph that leaves its extrapolation by more than its
+        size, swinging and growing, ends the run. ``math.inf`` disables both.
     allow_external : bool
         Let a packed ``.ssp`` use FMUs outside the archive (True or False only).
     max_unpacked : int
@@ -103,7 +113,9 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         Structured array with ``time`` and one field per output (one row per
         communication point); ``success`` and ``message`` tell how the run
         ended; the rows computed before a failure are kept; ``steps`` and
-        ``rejected`` count the macro steps.
+        ``rejected`` count the macro steps; ``error_estimates``, ``jumps``,
+        ``dropped_derivatives`` and ``loop_gains`` tell what the master
+        measured (see :class:`CosimResult`).
 
     Examples
     --------
@@ -141,12 +153,12 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
             for index, (name, path) in enumerate(system.components.items()):
                 comps[name] = Component(name, path, os.path.join(workdir, str(index)), _callbacks.callbacks(),
                                         budget)
-            check_types(comps, system.connections, system.connectors, system.origin)
+            check_types(comps, system.connections, system.connectors, system.origin, system)
             start_values = {**_bound(comps, system), **(start_values or {})}  # given values take precedence
             _check_start_values(comps, start_values)
             run = Run(comps, system.connections, sink, algorithm=algorithm, p=extrapolation, iterations=iterations,
-                      output=output, rtol=rtol, exchange=exchange, control=control, max_growth=max_growth,
-                      lambda_per_step=lambda_per_step, max_input_order=max_input_order)
+                      output=output, rtol=rtol, atol=atol, exchange=exchange, control=control,
+                      max_growth=max_growth, lambda_per_step=lambda_per_step, max_input_order=max_input_order)
             progress = _Progress(1, sys.stderr.isatty() if progress is None else progress)
             return _execute(run, dict(start_values or {}), start_time, stop_time, step_size, progress)
     finally:
@@ -172,15 +184,16 @@ def _check_arguments(algorithm, extrapolation, exchange, iterations, step_size, 
         raise ValueError(f"`start_time` must be finite; found {start_time!r}.")
     if not (np.isfinite(stop_time) and stop_time > start_time):
         raise ValueError(f"`stop_time` must be finite and after `start_time` ({start_time!r}); found {stop_time!r}.")
-    if not max_growth > 1:
-        raise ValueError(f"`max_growth` must be > 1 (math.inf disables the check); found {max_growth!r}.")
+    if max_growth is not None and not max_growth > 1:
+        raise ValueError(f"`max_growth` must be > 1 or None (math.inf disables the divergence checks); found "
+                         f"{max_growth!r}.")
     if lambda_per_step is not None and not (np.isfinite(lambda_per_step) and lambda_per_step > 0):
         raise ValueError(f"`lambda_per_step` must be positive and finite or None; found {lambda_per_step!r}.")
 
 
 def _check_numbers(**values):
     """Each option that is a number is a real number (not a str, not a bool), or None where allowed."""
-    optional = {"atol", "min_step", "max_step", "lambda_per_step"}
+    optional = {"atol", "min_step", "max_step", "lambda_per_step", "max_growth"}
     for name, value in values.items():
         if value is None and name in optional:
             continue
@@ -206,18 +219,38 @@ def _check_horizon(start_time, stop_time, step_size):
 
 
 def _bound(comps, system):
-    """The SSD's parameter bindings as start values, each checked against its variable's type."""
+    """The SSD's parameter bindings as start values, each checked against its variable's type, a Real's
+    value converted from its unit to the variable's (`_units.conversion`; no unit: the variable's own)."""
+    from . import _units
     from ._exchange import convert
     from ._system import _split
 
     values = {}
-    for key, (kind, text) in system.parameters.items():
+    for key, binding in system.parameters.items():
+        kind, text = binding.kind, binding.text
         cname, var = _split(key, comps)
         v = comps[cname].variables.get(var)
         if v is None or v.type != kind or v.causality not in ("parameter", "input"):
             found = "no such variable" if v is None else f"a {v.causality} {v.type}"
             raise ValueError(f"{system.origin}: the ParameterBinding of {key} is a {kind}; the FMU has {found}.")
-        values[key] = convert(text, kind, f"{system.origin}: the ParameterBinding of {key}")
+        what = f"{system.origin}: the ParameterBinding of {key}"
+        # the text of an SSP file, in the XML Schema's syntax (Python's float() would read 1_000 as 1000)
+        parse = {"Real": _units.xs_double, "Integer": _units.xs_int, "Boolean": _units.xs_boolean}.get(kind)
+        value = convert(parse(text, what) if parse else text, kind, what)
+        if binding.unit is not None:
+            # the variable's unit: the FMU's, else the one its connector in the SSD gives
+            target = _units.variable_unit(v) or system.connector_units.get((cname, var))
+            if target is None:
+                raise ValueError(f"{what} is in unit {binding.unit!r}; {key} has no unit in the FMU or the SSD to "
+                                 "convert it to; refused (give the value without a unit to apply it as it is).")
+            defs = _units.Definitions((f"{system.origin} (its ParameterSet)", binding.units),
+                                      (system.origin, system.units), (f"the FMU of {cname}", comps[cname].units))
+            given = value
+            value = _units.conversion(binding.unit, target, defs, what, _units.is_relative(v))(value)
+            if math.isfinite(given) and not math.isfinite(value):
+                raise ValueError(f"{what}: {given!r} in unit {binding.unit!r} is {value!r} in unit {target!r}, "
+                                 "beyond the range of a double; refused.")
+        values[key] = value
     return values
 
 
@@ -259,11 +292,14 @@ def _execute(run, start_values, t0, stop_time, H, progress):
         logger.error("co-simulation stopped: %s", stop)
     finally:
         progress.close()
-    result = np.array(run.rows, dtype=run.result_fields).view(CosimResult)
+    result = np.array(run.rows, dtype=run.layout.result_fields).view(CosimResult)
     result.success, result.message = status["success"], status["message"]
-    result.loops, result.order = run.loop_names, list(run.gs_order)
+    result.loops, result.order = run.layout.loop_names, list(run.layout.gs_order)
     result.steps, result.rejected = run.accepted, run.rejected
     result.error_estimates = list(run.estimates)
+    result.loop_gains = list(run.loops.gains)
+    result.jumps = list(run.jumps)
+    result.dropped_derivatives = dict(run.derivs.dropped)
     return result
 
 

@@ -30,6 +30,15 @@ class CosimResult(np.ndarray):
         Macro steps rejected by the step control (and repeated smaller).
     error_estimates : list of float
         The step control's scaled error estimate of every accepted step (empty without it).
+    jumps : list of tuple
+        ``(t, t_end, "component.variable", size)`` of every jump the step control located and
+        crossed in the step ``[t, t_end]`` (the extrapolation restarts after each).
+    dropped_derivatives : dict
+        ``{"component.variable": t}``: outputs whose derivatives the master stopped using at ``t``
+        because they were no Taylor coefficients of the values produced (a warning says so).
+    loop_gains : list of float
+        The gain of each algebraic loop (``loops``) measured at its cut connection (NaN if its
+        iterates never moved).
 
     Examples
     --------
@@ -40,7 +49,8 @@ class CosimResult(np.ndarray):
 
     def __array_finalize__(self, obj):
         for key, default in (("success", True), ("message", "ok"), ("loops", []), ("order", []), ("steps", 0),
-                             ("rejected", 0), ("error_estimates", [])):
+                             ("rejected", 0), ("error_estimates", []), ("jumps", []), ("dropped_derivatives", {}),
+                             ("loop_gains", [])):
             setattr(self, key, getattr(obj, key, default))
 
 

@@ -9,8 +9,15 @@ Rules checked before anything runs (each error names the element, the file and t
   ``allow_external=True``; only the SSD and the referenced FMUs are extracted, and extraction
   stops beyond ``max_unpacked`` bytes (archive members' real sizes, not their headers);
 - every temporary folder is removed on every exit path (a failed read included).
+
+Units are read, not applied: the SSD's unit definitions (``ssd:Units``), each connector's unit, each
+inline parameter value's unit with its parameter set's definitions (``ssv:Units``), each connection's
+``suppressUnitConversion`` and ``LinearTransformation``. The master converts them to the FMUs' units, or
+refuses (``_units``). What the master would drop is refused here: a Boolean, Integer or Enumeration
+mapping on a connection, parameter values of another format, a connector declared twice.
 """
 
+import math
 import os
 import posixpath
 import re
@@ -20,12 +27,26 @@ import tempfile
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
+from typing import NamedTuple
+
+from ._units import Affine, parse_units, xs_double
 
 SSD_NS = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 FMU_TYPE = "application/x-fmu-sharedlibrary"
 CONNECTOR_TYPES = ("Real", "Integer", "Boolean", "String", "Enumeration")
+PARAMETER_SET = "application/x-ssp-parameter-set"
 IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 MAX_UNPACKED = 1 << 30  # bytes one archive may unpack to (SSP or FMU)
+
+
+class Binding(NamedTuple):
+    """A value an SSD binds to a component's variable: its type and text, and for a Real its unit (None: the
+    variable's own) with the definitions of the parameter set it comes from."""
+
+    kind: str
+    text: str
+    unit: str = None
+    units: dict = None
 
 
 class System:
@@ -44,7 +65,11 @@ class System:
     def __init__(self, components, connections, workdir=None, origin="`system`"):
         self.components, self.connections, self.workdir, self.origin = components, connections, workdir, origin
         self.connectors = {}  # (component, connector) -> type declared in the SSD
-        self.parameters = {}  # "component.variable" -> value bound in the SSD (applied as a start value)
+        self.parameters = {}  # "component.variable" -> Binding in the SSD (applied as a start value)
+        self.units = {}  # unit name -> _units.Unit defined by the SSD (ssd:Units)
+        self.connector_units = {}  # (component, connector) -> unit name the SSD gives a Real connector
+        self.unconverted = set()  # (component, input) of connections with suppressUnitConversion="true"
+        self.transformations = {}  # (component, input) -> _units.Affine of a connection's LinearTransformation
 
     def __iter__(self):
         return iter((self.components, self.connections, self.workdir))
@@ -217,7 +242,7 @@ def _from_ssd(data, where, locate):
                          "are applied (a run without them would be another model). Give the values as "
                          "`start_values`.")
     parameters = {}
-    components, connectors = {}, {}
+    components, connectors, connector_units = {}, {}, {}
     elements = _child(system, "Elements")
     for index, element in enumerate(list(elements) if elements is not None else []):
         kind, name = _local(element.tag), element.get("name")
@@ -234,9 +259,11 @@ def _from_ssd(data, where, locate):
             raise ValueError(f"{where}: component {name!r} is of type {kind!r}; only FMUs ({FMU_TYPE}) are "
                              "supported (a nested SSP is not).")
         components[name] = locate(source, index)
-        connectors.update(_connectors(element, name))
+        types, units = _connectors(element, name, where)
+        connectors.update(types)
+        connector_units.update(units)
         parameters.update(_bindings(element, name, where))
-    connections = []
+    connections, unconverted, transformations = [], set(), {}
     links = _child(system, "Connections")
     for c in list(links) if links is not None else []:
         a, y, b, u = (c.get(k) for k in ("startElement", "startConnector", "endElement", "endConnector"))
@@ -247,20 +274,50 @@ def _from_ssd(data, where, locate):
         if not a or not b:
             raise ValueError(f"{where}: connection {a}.{y} -> {b}.{u}: connections to the system's own connectors "
                              "are not supported.")
-        if any(_local(e.tag) == "LinearTransformation" for e in c.iter()):
-            raise ValueError(f"{where}: connection {a}.{y} -> {b}.{u} has a LinearTransformation, which this "
-                             "master does not apply.")
+        transformation = _transformation(c, f"{where}: connection {a}.{y} -> {b}.{u}")
+        if transformation is not None:
+            transformations[(b, u)] = transformation
         for comp in (a, b):
             if comp not in components:
                 raise ValueError(f"{where}: connection {a}.{y} -> {b}.{u}: no component {comp!r}.")
+        suppress = (c.get("suppressUnitConversion") or "false").strip()
+        if suppress not in ("true", "false", "1", "0"):
+            raise ValueError(f"{where}: connection {a}.{y} -> {b}.{u}: suppressUnitConversion must be true or "
+                             f"false; found {suppress!r}.")
+        if suppress in ("true", "1"):
+            unconverted.add((b, u))
         connections.append((a, y, b, u))
     system = System(components, _check_connections(connections, where), None, where)
     system.connectors, system.parameters = connectors, parameters
+    system.units = parse_units(_one(root, "Units", where), where)
+    system.connector_units, system.unconverted = connector_units, unconverted
+    system.transformations = transformations
     return system
 
 
+def _transformation(connection, what):
+    """The `Affine` map of a connection's ``ssc:LinearTransformation`` (None: none). A Boolean, Integer or
+    Enumeration mapping is refused: without it the input would get the unmapped value."""
+    found = None
+    for e in connection:
+        kind = _local(e.tag)
+        if kind == "LinearTransformation":
+            if found is not None:
+                raise ValueError(f"{what} has two LinearTransformations; a connection has at most one.")
+            factor, offset = (xs_double(e.get(k), f"{what}: the LinearTransformation's {k}") if e.get(k) is not None
+                              else default for k, default in (("factor", 1.0), ("offset", 0.0)))
+            if not (math.isfinite(factor) and math.isfinite(offset)) or factor == 0.0:
+                raise ValueError(f"{what}: the LinearTransformation's factor and offset must be finite, the factor "
+                                 f"other than 0 (the input would be a constant); found {factor!r} and {offset!r}.")
+            found = Affine(factor, offset)
+        elif kind.endswith("Transformation"):
+            raise ValueError(f"{what} has a {kind}, which this master does not apply; refused (the input would get "
+                             "the unmapped value).")
+    return found
+
+
 def _bindings(element, name, where):
-    """``{"component.parameter": value}`` of a component's inline ParameterBindings; what this master
+    """``{"component.parameter": Binding}`` of a component's inline ParameterBindings; what this master
     cannot apply exactly (an external .ssv, a prefix, a mapping, an Enumeration item) is refused."""
     found = {}
     block = _child(element, "ParameterBindings")
@@ -269,27 +326,52 @@ def _bindings(element, name, where):
         if binding.get("source") or binding.get("prefix") or _child(binding, "ParameterMapping") is not None:
             raise ValueError(f"{what} with a source file, a prefix or a ParameterMapping is not applied by this "
                              "master; refused. Give the values inline or as `start_values`.")
+        kind = binding.get("type", PARAMETER_SET).strip()
+        if kind != PARAMETER_SET:
+            raise ValueError(f"{what} is of type {kind!r}; only SSP parameter sets ({PARAMETER_SET}) are read; "
+                             "refused (a run without its values would be another model).")
         values = _child(binding, "ParameterValues")
-        sets = [e for e in (list(values) if values is not None else []) if _local(e.tag) == "ParameterSet"]
-        for parameters in (_child(ps, "Parameters") for ps in sets):
+        sets = list(values) if values is not None else []
+        if values is not None and (len(sets) != 1 or _local(sets[0].tag) != "ParameterSet"):
+            raise ValueError(f"{what}'s ParameterValues must hold one ParameterSet; found "
+                             f"{[_local(e.tag) for e in sets]}; refused (a run without its values would be another "
+                             "model).")
+        for ps in sets:
+            units = parse_units(_one(ps, "Units", f"{what}'s ParameterSet"), f"{what}'s ParameterSet")
+            parameters = _child(ps, "Parameters")
             for parameter in list(parameters) if parameters is not None else []:
                 kinds = [e for e in parameter if _local(e.tag) in ("Real", "Integer", "Boolean", "String")]
                 if not parameter.get("name") or len(kinds) != 1 or kinds[0].get("value") is None:
                     raise ValueError(f"{what}: parameter {parameter.get('name')!r} must have a name and one "
                                      "Real, Integer, Boolean or String value; refused.")
-                found[f"{name}.{parameter.get('name')}"] = (_local(kinds[0].tag), kinds[0].get("value"))
+                kind, unit = _local(kinds[0].tag), kinds[0].get("unit")
+                if unit is not None and kind != "Real":
+                    raise ValueError(f"{what}: parameter {parameter.get('name')!r} is a {kind} with a unit; only a "
+                                     "Real has one (SSP); refused.")
+                found[f"{name}.{parameter.get('name')}"] = Binding(kind, kinds[0].get("value"), unit, units)
     return found
 
 
-def _connectors(element, name):
-    """``{(component, connector): declared type}`` of a component's Connectors (the types given)."""
-    found = {}
+def _connectors(element, name, where):
+    """``{(component, connector): declared type}`` of a component's Connectors (the types given), and
+    ``{(component, connector): unit}`` of its Real connectors that name one."""
+    types, units, seen = {}, {}, set()
     block = _child(element, "Connectors")
     for connector in list(block) if block is not None else []:
-        kinds = [_local(e.tag) for e in connector if _local(e.tag) in CONNECTOR_TYPES]
+        kinds = [e for e in connector if _local(e.tag) in CONNECTOR_TYPES]
+        if _local(connector.tag) == "Connector" and (name, connector.get("name")) in seen:
+            raise ValueError(f"{where}: connector {name}.{connector.get('name')} is declared twice; a connector's "
+                             "name is unique in its component.")
+        seen.add((name, connector.get("name")))
         if kinds and connector.get("name"):
-            found[(name, connector.get("name"))] = kinds[0]
-    return found
+            types[(name, connector.get("name"))] = _local(kinds[0].tag)
+            unit = kinds[0].get("unit")
+            if unit is not None:
+                if _local(kinds[0].tag) != "Real":
+                    raise ValueError(f"{where}: connector {name}.{connector.get('name')} is a "
+                                     f"{_local(kinds[0].tag)} with a unit; only a Real has one (SSP); refused.")
+                units[(name, connector.get("name"))] = unit
+    return types, units
 
 
 def _local(tag):
@@ -298,6 +380,15 @@ def _local(tag):
 
 def _child(element, name):
     return next((e for e in element if _local(e.tag) == name), None)
+
+
+def _one(element, name, where):
+    """The child ``name`` of ``element`` (None: none); two are refused (the second would be ignored)."""
+    found = [e for e in element if _local(e.tag) == name]
+    if len(found) > 1:
+        raise ValueError(f"{where}: {len(found)} {name} elements where the SSP allows one; refused (the second "
+                         "would be ignored).")
+    return found[0] if found else None
 
 
 def _check_name(name, where):

@@ -1,6 +1,11 @@
 """Running a study's jobs: serially, or on Dask worker processes."""
+import contextlib
 import math
 import os
+import sys
+from functools import partial
+
+from ._runs import warm_up
 
 class _Progress:
     """A tqdm bar of runs done, with running and failed counts."""
@@ -52,47 +57,97 @@ def _crash_result(exc):
                 steps=0, t=None, x=None, residual=None)
 
 
-def _execute(runner, payload, settings, jobs, accept, scheduler, n_workers, bar, timeout=None):
+def _execute(runner, payload, settings, jobs, accept, scheduler, n_workers, bar, timeout=None, kind=None):
+    """Run `jobs` ``[(tag, point)]`` with `runner`, passing each result to ``accept(tag, result)``.
+
+    Every process that runs jobs first calls ``warm_up(kind, payload,
+    settings)`` (imports, the FMU loaded once), so that no run's ``run_time``
+    carries a worker's start-up.
+    """
     if scheduler == "serial":
+        if jobs:
+            warm_up(kind, payload, settings)
         for tag, point in jobs:
             bar.update(1)
             accept(tag, runner(payload, point, settings))
         return
-    import dask
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
-    cluster = None
     if scheduler is None:
-        # A run that kills its worker is not retried on another one: it is recorded as failed.
-        # Temporary TLS credentials: no other local process can submit code to these workers.
-        # temporary-directory: Dask's scratch space goes into the study's folder, removed at the end
-        with dask.config.set({"distributed.scheduler.allowed-failures": 0,
-                              "temporary-directory": settings.get("workdir")}):
-            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                   dashboard_address=None, silence_logs=50, security=True,
-                                   local_directory=settings.get("workdir"))  # removed with the study
-            client = Client(cluster)
-    elif isinstance(scheduler, str):
-        client = Client(scheduler)
-    else:
-        client = scheduler
+        with _workers_without_the_script():
+            _execute_embedded(runner, payload, settings, jobs, accept, n_workers, bar, timeout, kind)
+        return
+    client = Client(scheduler) if isinstance(scheduler, str) else scheduler
     try:
         if isinstance(payload, str) and payload.lower().endswith(".fmu") and not _local(client):
             with open(payload, "rb") as fh:  # workers elsewhere need not share a file system
                 payload = fh.read()
-        _run_jobs(client, runner, payload, settings, jobs, accept, bar, timeout)
+        _run_jobs(client, runner, payload, settings, jobs, accept, bar, timeout, kind)
     finally:
-        if cluster is not None:
+        if isinstance(scheduler, str):
             client.close()
-            cluster.close()
 
 
-def _run_jobs(client, runner, payload, settings, jobs, accept, bar, timeout):
+@contextlib.contextmanager
+def _workers_without_the_script():
+    """Worker processes start without running the calling script's top level.
+
+    multiprocessing's ``spawn`` (Dask's default) runs the parent's ``__main__``
+    again in every child, as ``__mp_main__``: a script that calls `sweep`
+    without an ``if __name__ == "__main__":`` guard started a study in every
+    worker, which failed to start. The runs need only ``fmu_build`` (metrics
+    and references are computed in this process), so while the cluster lives
+    (its nannies start and restart workers) ``__main__`` names no file or
+    module for the children to run.
+    """
+    main = sys.modules.get("__main__")
+    if main is None:
+        yield
+        return
+    saved = {name: main.__dict__[name] for name in ("__file__", "__spec__") if name in main.__dict__}
+    main.__dict__.pop("__file__", None)
+    main.__spec__ = None
+    try:
+        yield
+    finally:
+        main.__dict__.pop("__spec__", None)
+        main.__dict__.update(saved)
+
+
+def _execute_embedded(runner, payload, settings, jobs, accept, n_workers, bar, timeout, kind):
+    """The jobs on a LocalCluster of `n_workers` processes, started here and closed at the end."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    # A run that kills its worker is not retried on another one: it is recorded as failed.
+    # Temporary TLS credentials: no other local process can submit code to these workers.
+    # temporary-directory: Dask's scratch space goes into the study's folder, removed at the end
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0,
+                          "temporary-directory": settings.get("workdir")}):
+        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, silence_logs=50, security=True,
+                               local_directory=settings.get("workdir"))  # removed with the study
+        client = Client(cluster)
+    try:
+        _run_jobs(client, runner, payload, settings, jobs, accept, bar, timeout, kind)
+    finally:
+        client.close()
+        cluster.close()
+
+
+def _run_jobs(client, runner, payload, settings, jobs, accept, bar, timeout, kind=None):
     """Submit at most one run per worker thread; record each result, crash or timeout as it comes."""
     import time
     from concurrent.futures import CancelledError
 
     from distributed import KilledWorker, wait
+
+    warm = partial(warm_up, kind, payload, settings)
+    if jobs:
+        try:
+            client.run(warm)
+        except Exception:  # a worker that cannot warm up fails its runs, which say why
+            pass
 
     # At most one run in flight per worker thread: a worker that dies then takes down only the run
     # it was computing, and a run caught in the crash of another is retried once.
@@ -126,22 +181,12 @@ def _run_jobs(client, runner, payload, settings, jobs, accept, bar, timeout):
             accept(tag, result)
             fut.release()
         if timeout:
-            _end_overdue(client, futures, timeout, accept)
+            _end_overdue(client, futures, timeout, accept, warm)
         submit()
         bar.update(len(futures))
 
 
-def _warm_up():
-    import importlib
-
-    for name in ("lsc", "fmpy", "fmu_build.study._runs"):
-        try:
-            importlib.import_module(name)
-        except ImportError:
-            pass
-
-
-def _end_overdue(client, futures, timeout, accept):
+def _end_overdue(client, futures, timeout, accept, warm):
     """Record runs past `timeout` as failed and restart the workers computing them."""
     import time
 
@@ -159,7 +204,8 @@ def _end_overdue(client, futures, timeout, accept):
     if workers:
         # End the worker process at once (a graceful restart waits for the stuck run); its nanny
         # starts a fresh one, and the scheduler moves the worker's other runs.
-        count = len(client.scheduler_info()["workers"])
+        workers_before = set(client.scheduler_info()["workers"])
+        count = len(workers_before)
         try:
             client.run(os._exit, 1, workers=list(workers))
         except Exception:  # the connection dies with the process
@@ -169,7 +215,9 @@ def _end_overdue(client, futures, timeout, accept):
             time.sleep(0.1)  # the scheduler notices the death before a fresh worker can be counted
         try:
             client.wait_for_workers(count, timeout=120)
-            client.run(_warm_up)  # a fresh worker imports the numerical stack: not the next run's time
+            fresh = sorted(set(client.scheduler_info()["workers"]) - workers_before)
+            if fresh:  # a fresh worker imports and loads what the others have: not the next run's time
+                client.run(warm, workers=fresh)
         except Exception:  # fewer workers (no nanny to restart it): the study goes on with the others
             pass
     restarted = time.monotonic()

@@ -83,10 +83,16 @@ def recommend(df, error_target, *, cost="run_time", on="error", horizon=None, ei
     >>> float(recommend(df, 1e-5, cost="steps").row["lam"])
     4.0
     """
+    import pandas as pd
+
     if cost not in df.columns:
         raise ValueError(f"`cost` must be a column of `df`; found {cost!r}.")
-    if not error_target > 0:
-        raise ValueError(f"`error_target` must be positive; found {error_target!r}.")
+    if not pd.api.types.is_numeric_dtype(df[cost]) or pd.api.types.is_bool_dtype(df[cost]):
+        raise ValueError(f"`cost` must be a numeric column ('run_time', 'steps'); found {cost!r} "
+                         f"({df[cost].dtype}).")
+    real = isinstance(error_target, (int, float, np.integer, np.floating)) and not isinstance(error_target, bool)
+    if not (real and math.isfinite(error_target) and error_target > 0):
+        raise ValueError(f"`error_target` must be a positive finite number; found {error_target!r}.")
     if on not in ("error", "residual_final"):
         raise ValueError(f"`on` must be 'error' or 'residual_final'; found {on!r}.")
     ok = df[df["success"] & (df[on] <= error_target)]
@@ -150,9 +156,6 @@ def plot_study(df, path, *, cost="run_time", max_curves=12):
     """
     import pathlib
 
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     if "lam" not in df.columns:
@@ -162,34 +165,66 @@ def plot_study(df, path, *, cost="run_time", max_curves=12):
     if not os.path.isdir(os.path.dirname(os.path.abspath(path))):
         raise ValueError(f"`path` {os.fspath(path)!r}: the folder {os.path.dirname(os.path.abspath(path))!r} "
                          "does not exist.")
-    inputs = [c for c in df.columns[: list(df.columns).index("success")] if c != "lam"]
-    ok = df[df["success"]]
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4))
-    groups = ok.groupby(inputs, sort=True) if inputs else [((), ok)]
-    for key, group in groups:
-        group = group.sort_values("lam")
-        label = ", ".join(f"{n}={v:g}" if isinstance(v, (int, float)) else f"{n}={v}"
-                          for n, v in zip(inputs, key if isinstance(key, tuple) else (key,))) or None
-        axes[0].loglog(group["lam"], group["error"], "o-", label=label)
-        axes[1].loglog(group["lam"], group[cost], "o-", label=label)
-    axes[0].set(xlabel="lam", ylabel="error", title="error against lam")
-    axes[1].set(xlabel="lam", ylabel=cost, title=f"cost ({cost}) against lam")
-    if inputs and len(ok.groupby(inputs)) <= 8:
-        axes[0].legend(fontsize=7)
-    curves = df.attrs.get("curves", {})
-    chosen = sorted((r for r in curves if r in ok.index), key=lambda r: ok.loc[r, "lam"])
-    if len(chosen) > max_curves:
-        chosen = [chosen[i] for i in np.linspace(0, len(chosen) - 1, max_curves).astype(int)]
-    for run in chosen:
-        t, r = curves[run]
-        axes[2].semilogy(t, np.maximum(r, 1e-17), label=f"lam={ok.loc[run, 'lam']:g}")
-    axes[2].set(xlabel="t", ylabel="constraint residual", title="residual decay")
-    if chosen:
-        axes[2].legend(fontsize=7)
-    fig.tight_layout()
+    fig = study_figure(df, cost=cost, max_curves=max_curves)
     path = pathlib.Path(path)
     tmp = path.with_name(path.name + ".tmp.png")
     fig.savefig(tmp, dpi=110)
     plt.close(fig)
     os.replace(tmp, path)
     return path
+
+
+def study_figure(df, *, cost="run_time", max_curves=12):
+    """The figure of `plot_study`: error and cost against lam, residual curves against time.
+
+    The axes of lam and of the values are logarithmic where they span decades
+    (`fmu_build._cli_plots.axis_scale`); time and lam carry the FMU's time
+    unit when the study knows it (``df.attrs['time_unit']``).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .._cli_plots import axis_scale, label
+
+    unit = df.attrs.get("time_unit")
+    inputs = [c for c in df.columns[: list(df.columns).index("success")] if c != "lam"]
+    ok = df[df["success"]]
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4))
+    def described(row):  # the group's inputs other than lam, as in the legend
+        return ", ".join(f"{n}={v:g}" if isinstance(v, (int, float)) and not isinstance(v, bool) else f"{n}={v}"
+                         for n, v in zip(inputs, row))
+
+    groups = ok.groupby(inputs, sort=True) if inputs else [((), ok)]
+    for key, group in groups:
+        group = group.sort_values("lam")
+        name = described(key if isinstance(key, tuple) else (key,)) or None
+        axes[0].plot(group["lam"], group["error"], "o-", label=name)
+        axes[1].plot(group["lam"], group[cost], "o-", label=name)
+    lam_label = label("lam", f"1/{unit}" if unit else None)
+    lam_scale = axis_scale(ok["lam"])  # log where lam spans decades, as the value axes
+    axes[0].set(xlabel=lam_label, ylabel="error", title="error against lam", xscale=lam_scale,
+                yscale=axis_scale(ok["error"]))
+    axes[1].set(xlabel=lam_label, ylabel=label(cost, "s" if cost == "run_time" else None),
+                title=f"cost ({cost}) against lam", xscale=lam_scale, yscale=axis_scale(ok[cost]))
+    if axes[1].get_yscale() == "linear":
+        axes[1].set_ylim(bottom=0.0)  # a flat cost looks flat, not like noise magnified
+    if inputs and len(ok.groupby(inputs)) <= 8:
+        axes[0].legend(fontsize=7)
+    curves = df.attrs.get("curves", {})
+    chosen = sorted((r for r in curves if r in ok.index), key=lambda r: ok.loc[r, "lam"])
+    if len(chosen) > max_curves:
+        chosen = [chosen[i] for i in np.linspace(0, len(chosen) - 1, max_curves).astype(int)]
+    drawn = []
+    for run in chosen:
+        t, r = curves[run]
+        others = described(ok.loc[run, inputs]) if inputs else ""
+        axes[2].plot(t, r, label=f"lam={ok.loc[run, 'lam']:g}" + (f", {others}" if others else ""))
+        drawn.append(np.asarray(r, dtype=float))
+    axes[2].set(xlabel=label("t", unit), ylabel="constraint residual", title="residual decay",
+                yscale=axis_scale(np.concatenate(drawn)) if drawn else "linear")
+    if chosen:
+        axes[2].legend(fontsize=7)
+    fig.tight_layout()
+    return fig

@@ -16,10 +16,65 @@ from ..cosim._callbacks import attach, callbacks as process_callbacks
 
 # Names of the grid that set how a run is computed rather than the model.
 NUMERICAL = ("lam", "step", "rtol", "atol", "method")
+# The other names a LinearDAE target takes (it has no model parameters).
+DAE_OWN = ("offset", "completion", "k")
 
 _EXTRACTED = {}  # sha256 of an FMU's bytes -> its extraction folder, per worker process
 _DESCRIPTIONS = {}  # extraction folder -> model description, per worker process
 _LOADED = {}  # FMU model identifier -> GUID loaded in this process (pythonfmu modules are shared)
+_WARMED = set()  # sha256 of the FMUs this process has loaded once before its runs
+
+
+class ReferencePoint(dict):
+    """A point run as the 'tightest' reference of its group.
+
+    A LinearDAE run at such a point keeps its dense output (``sol`` in its
+    result), so that the runs of its group are compared with it at their own
+    times, not with a straight line between its steps.
+    """
+
+
+def warm_up(kind, payload, settings):
+    """Pay a process's one-time costs before its first run, so that ``run_time`` is the run's own.
+
+    Imports the numerical stack, and for an FMU extracts it, loads its
+    library and instantiates it once (a pythonfmu FMU imports its model
+    module and what that imports): the first run of each worker took ten
+    times the others. Never raises (a run reports what fails).
+    """
+    import importlib
+
+    for name in ("numpy", "scipy.linalg", "lsc", "fmpy"):
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            pass
+    if kind == "dae":  # the first completion and integration of a process set up what the later ones reuse
+        t0, t1 = (float(t) for t in settings["t_span"])
+        run_dae(payload, {}, {**settings, "t_span": (t0, t0 + 1e-6 * (t1 - t0))})
+        return
+    if kind != "fmu":
+        return
+    try:
+        import hashlib
+
+        from fmpy.fmi2 import FMU2Slave
+
+        md, unzipped, refusal = _load_description(payload, settings)
+        if refusal:
+            return
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
+                          instanceName="study")
+        with attach(["study"]):
+            slave.instantiate(callbacks=process_callbacks(), loggingOn=False)
+            slave.freeInstance()
+        if isinstance(payload, (bytes, bytearray)):
+            _WARMED.add(hashlib.sha256(payload).hexdigest())
+        else:
+            with open(payload, "rb") as fh:
+                _WARMED.add(hashlib.sha256(fh.read()).hexdigest())
+    except Exception:  # the runs say what is wrong with the FMU
+        pass
 
 
 def _failed(message, start, **extra):
@@ -60,7 +115,7 @@ def _run_dae(problem, point, settings, start):
     import lsc
 
     dae, t_span, x0 = problem["dae"], settings["t_span"], np.asarray(problem["x0"], dtype=float)
-    model = {k: v for k, v in point.items() if k not in NUMERICAL + ("offset", "completion", "k")}
+    model = {k: v for k, v in point.items() if k not in NUMERICAL + DAE_OWN}
     if model:
         raise ValueError(f"a LinearDAE target takes no model parameters; found {sorted(model)}")
     completion = lsc.complete(dae, point.get("completion", "alternative"), lam=point.get("lam", 1.0),
@@ -83,13 +138,17 @@ def _run_dae(problem, point, settings, start):
                "rtol": point.get("rtol", 1e-6), "atol": point.get("atol", 1e-9)}
     if "step" in point:
         options["max_step"] = point["step"]
+    dense = isinstance(point, ReferencePoint)
+    if dense:
+        options["dense_output"] = True
     result = lsc.solve_completion(completion, t_span, x0, **options)
     residual = np.asarray(result.residual, dtype=float)
     steps = int(max(result.t.size - 1, 0))
     return dict(success=bool(result.success), message=str(result.message),
                 residual_final=float(residual[-1]) if residual.size else math.nan,
                 residual_peak=float(np.max(residual)) if residual.size else math.nan,
-                run_time=time.perf_counter() - start, steps=steps, t=result.t, x=result.x, residual=residual)
+                run_time=time.perf_counter() - start, steps=steps, t=result.t, x=result.x, residual=residual,
+                sol=result.sol if dense else None)
 
 
 def _extract(fmu, workdir=None):
@@ -132,12 +191,11 @@ def _run_fmu(fmu, point, settings, start):
     if refusal:
         return _failed(refusal, start)
     var = {v.name: v for v in md.modelVariables}
-    states = [v.name for v in md.modelVariables if v.causality == "output" and _start_name(v.name) in var]
+    states = compared_outputs(md)
     residual_var = var.get("constraint_residual")
 
-    t0, t1 = settings["t_span"] if settings.get("t_span") else (
-        float(md.defaultExperiment.startTime or 0.0), float(md.defaultExperiment.stopTime or 1.0))
-    h = float(point.get("step", settings.get("step") or (md.defaultExperiment.stepSize or (t1 - t0) / 100)))
+    t0, t1 = (float(t) for t in settings["t_span"])  # `sweep` refuses an FMU without a horizon or a step
+    h = float(point["step"] if "step" in point else md.defaultExperiment.stepSize)
     n_steps = steps_over(t0, t1, h)
     values = _fmu_values(point, var, states)
 
@@ -160,7 +218,8 @@ def _initialize_and_step(slave, var, values, states, residual_var, read_vrs, t0,
         slave.enterInitializationMode()
         for name, value in values.items():
             v = var[name]
-            setter = {"Real": slave.setReal, "Integer": slave.setInteger, "Boolean": slave.setBoolean}[v.type]
+            setter = {"Real": slave.setReal, "Integer": slave.setInteger, "Enumeration": slave.setInteger,
+                      "Boolean": slave.setBoolean, "String": slave.setString}[v.type]
             setter([v.valueReference], [value])
         slave.exitInitializationMode()
         t_out, x_out, r_out, steps, success, message = _step_through(
@@ -180,6 +239,14 @@ def _initialize_and_step(slave, var, values, states, residual_var, read_vrs, t0,
                 residual_peak=float(np.max(residual)) if residual.size else math.nan,
                 run_time=time.perf_counter() - start, steps=steps,
                 t=np.array(t_out[:x.shape[1]]), x=x, residual=residual)
+
+
+def compared_outputs(md):
+    """The outputs a study compares with its reference: the states of an FMU lsc built (the outputs ``x``
+    with a start value ``x_0``), else every Real output."""
+    names = {v.name for v in md.modelVariables}
+    outputs = [v for v in md.modelVariables if v.causality == "output"]
+    return [v.name for v in outputs if start_name(v.name) in names] or [v.name for v in outputs if v.type == "Real"]
 
 
 def _load_description(fmu, settings):
@@ -244,8 +311,9 @@ def _fmu_values(point, var, states):
             if value not in solvers:
                 raise ValueError(f"`method` must be one of {solvers}; found {value!r}")
             value = solvers.index(value)
-        values[fmi_name] = fmi_value(name, value, var[fmi_name].type)
+        values[fmi_name] = fmi_value(name, value, var[fmi_name].type, enumeration_items(var[fmi_name]))
     offset = float(point.get("offset", 0.0))
+    states = [s for s in states if _start_name(s) in var]  # an FMU without start values is refused up front
     if offset:
         for s in states:
             key = _start_name(s)
@@ -265,14 +333,50 @@ def steps_over(t0, t1, h):
 _TRUE, _FALSE = ("true", "1"), ("false", "0")
 
 
-def fmi_value(name, value, kind):
-    """`value` of the grid's `name` as the FMI type `kind` ('Real', 'Integer', 'Boolean'), or a TypeError.
+def fmi_value(name, value, kind, items=None):
+    """`value` of the grid's `name` as the FMI type `kind`, or a TypeError naming `name`.
 
-    Texts are read, never passed through ``bool()``: "false" and "0" are False.
+    `kind` is 'Real', 'Integer', 'Boolean', 'String' or 'Enumeration' (then
+    `items` lists the type's ``(name, value)`` pairs, and `value` is an item's
+    name or value). Texts are read, never passed through ``bool()``: "false"
+    and "0" are False; a String takes only a text (a number is not guessed to
+    be one).
     """
-    def refuse():
-        raise TypeError(f"`{name}` sets a {kind} variable; found {value!r} ({type(value).__name__}).")
+    article = "an" if kind[0] in "AEIOU" else "a"
+    if kind == "Enumeration":
+        items = list(items or [])
+        listed = ", ".join(f"{n!r} = {v}" for n, v in items)
 
+        def refuse():
+            raise TypeError(f"`{name}` sets an Enumeration variable (items {listed}); found {value!r} "
+                            f"({type(value).__name__}).")
+
+        names = dict(items)
+        if isinstance(value, str):
+            text = value.strip()
+            if text in names:
+                return int(names[text])
+            try:
+                number = int(text)
+            except ValueError:
+                refuse()
+        elif isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+            refuse()
+        else:
+            number = value
+        if not (math.isfinite(number) and float(number) == int(number) and int(number) in names.values()):
+            refuse()
+        return _int32(name, int(number))
+
+    def refuse():
+        raise TypeError(f"`{name}` sets {article} {kind} variable; found {value!r} ({type(value).__name__}).")
+
+    if kind == "String":
+        if not isinstance(value, str):
+            refuse()
+        return value
+    if kind not in ("Real", "Integer", "Boolean"):
+        raise TypeError(f"`{name}` sets a variable of type {kind}, which a study cannot set.")
     if isinstance(value, str):
         text = value.strip().lower()
         if kind == "Boolean" and text in _TRUE + _FALSE:
@@ -288,17 +392,35 @@ def fmi_value(name, value, kind):
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         refuse()
     if kind == "Integer":
-        if float(value) != int(value):
+        if not math.isfinite(value) or float(value) != int(value):
             refuse()
-        return int(value)
+        return _int32(name, int(value))
     return float(value)
 
 
-def _start_name(name):
+def _int32(name, value):
+    """An FMI 2.0 Integer is 32 bits: ctypes would silently wrap a larger one (2**32 + 3 reaches the FMU as 3)."""
+    if not -2 ** 31 <= value < 2 ** 31:
+        raise TypeError(f"`{name}` sets an FMI Integer, a 32-bit integer; found {value!r}, outside "
+                        f"[{-2 ** 31}, {2 ** 31 - 1}].")
+    return value
+
+
+def enumeration_items(variable):
+    """The ``(name, value)`` items of an Enumeration variable's declared type (empty for other types)."""
+    declared = getattr(variable, "declaredType", None)
+    return [(item.name, int(item.value)) for item in getattr(declared, "items", None) or []]
+
+
+def start_name(name):
+    """The start-value parameter of the state output `name` in an FMU lsc built: ``x_0``, ``x_0[2]``."""
     if "[" in name:
         base, rest = name.split("[", 1)
         return f"{base}_0[{rest}"
     return f"{name}_0"
+
+
+_start_name = start_name
 
 
 # Grid names of an SSP target that are options of ``cosimulate`` rather than start values.

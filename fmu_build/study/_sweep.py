@@ -7,21 +7,27 @@ import tempfile
 import numpy as np
 
 from ._execute import _execute, _Progress
-from ._grid import METRICS, _group_key, _points, _tightest, _valid
-from ._output import _read_finished, _rewrite, _stream_path, check_identity, check_output
-from ._runs import run_dae, run_fmu, run_ssp
+from ._grid import METRICS, _group_key, _points, _tightest, _valid, value_lists
+from ._identity import _identity
+from ._output import _read_finished, _rewrite, _stream_path, check_identity, check_output, one_line
+from ._runs import (DAE_OWN, NUMERICAL, SSP_OPTIONS, ReferencePoint, compared_outputs, run_dae, run_fmu, run_ssp,
+                    start_name)
 
 # -- the target ----------------------------------------------------------------
 def _target(target, t_span, x0):
     """(kind, payload, exact reference or None, t_span) for any accepted target."""
     import lsc
 
-    if isinstance(target, lsc.gallery.Problem):
-        return "dae", {"dae": target.dae, "x0": target.x0}, target.exact, tuple(t_span or target.t_span)
     if isinstance(target, lsc.LinearDAE):
         if t_span is None or x0 is None:
             raise ValueError("a LinearDAE target needs `t_span` and `x0` (a gallery Problem carries both).")
         return "dae", {"dae": target, "x0": np.asarray(x0, dtype=float)}, None, tuple(t_span)
+    if x0 is not None:  # the rows would say nothing of the state asked for
+        raise ValueError("`x0` is the initial state of a LinearDAE target; this target has its own (a gallery "
+                         "Problem's x0, an FMU's start values): set an FMU's start values in the grid (`y_0`), "
+                         "or pass the Problem's `dae` with `x0`.")
+    if isinstance(target, lsc.gallery.Problem):
+        return "dae", {"dae": target.dae, "x0": target.x0}, target.exact, tuple(t_span or target.t_span)
     if isinstance(target, dict):
         return "spec", target, None, t_span
     if isinstance(target, (str, os.PathLike)):
@@ -43,23 +49,41 @@ def _target(target, t_span, x0):
 
 # -- errors against a reference ------------------------------------------------
 def _error(t, x, ref, error_from):
-    """Largest absolute state error over the output times from `error_from` on."""
+    """``(largest absolute state error from `error_from` on, a note for the message)``.
+
+    A callable reference (an exact solution, a LinearDAE reference run's
+    dense output) is evaluated at the run's times. A reference run sampled at
+    its own steps is compared only at the times it shares with the run: read
+    between its samples by a straight line, a reference exact to 1e-11 was
+    reported 1e-2 away.
+    """
     if t is None or x is None or x.size == 0:
-        return math.nan
+        return math.nan, ""
+    mask = t >= error_from - 1e-12 * max(1.0, abs(error_from))
+    note = ""
     if callable(ref):
         xr = np.asarray(ref(t), dtype=float)
     else:
         tr, xrr = ref
-        if t[-1] > tr[-1] + 1e-9 * max(1.0, abs(tr[-1])) or t[0] < tr[0] - 1e-9 * max(1.0, abs(tr[0])):
-            return math.nan
-        xr = np.array([np.interp(t, tr, row) for row in xrr])
+        scale = max(abs(tr[-1] - tr[0]), abs(tr[0]), abs(tr[-1]), 1e-300)
+        j = np.clip(np.searchsorted(tr, t), 1, max(tr.size - 1, 1))
+        nearest = np.where(np.abs(tr[j - 1] - t) <= np.abs(tr[np.minimum(j, tr.size - 1)] - t), j - 1,
+                           np.minimum(j, tr.size - 1))
+        shared = np.abs(tr[nearest] - t) <= 1e-9 * scale
+        xr = np.asarray(xrr, dtype=float)[:, nearest]
+        if np.count_nonzero(mask & shared) < np.count_nonzero(mask):
+            note = (f"the error is taken at the {np.count_nonzero(mask & shared)} of the {np.count_nonzero(mask)} "
+                    "output times the reference run shares")
+        mask = mask & shared
     if xr.shape != x.shape:
         raise ValueError(f"the reference has shape {xr.shape} where the run has {x.shape}.")
-    mask = t >= error_from - 1e-12 * max(1.0, abs(error_from))
     if not mask.any():
-        return math.nan
+        return math.nan, note or "no output time of the run from error_from on"
+    if not np.all(np.isfinite(xr[:, mask])):
+        bad = t[mask][~np.all(np.isfinite(xr[:, mask]), axis=0)][0]
+        return math.nan, f"no error: the reference is not finite at t={float(bad)!r}"
     err = float(np.max(np.abs(x[:, mask] - xr[:, mask])))
-    return err if math.isfinite(err) else math.inf
+    return (err if math.isfinite(err) else math.inf), note
 
 
 
@@ -83,15 +107,14 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
         (`scipy.stats.qmc.LatinHypercube`, seeded by `seed`); positive ranges
         of ``lam``, ``step``, ``rtol``, ``atol`` are sampled log-uniformly.
         See the module docstring for the names with a meaning of their own.
-    reference : None, 'exact', 'tightest', 'monolithic', callable or Problem
+    reference : None, 'exact', 'tightest', callable or Problem
         What the ``error`` column measures against. A callable maps times
-        ``t`` (shape (m,)) to states (shape (n, m)); a gallery Problem gives
-        its exact solution. 'tightest' runs, for every combination of the
-        model inputs, one extra run with the smallest step and tolerances and
-        the largest ``lam`` of the grid. 'monolithic' (SSP targets only) is
-        reserved: ``cosimulate`` has no monolithic solve, so it raises
-        NotImplementedError (pass the monolithic solution as a callable). None:
-        the exact solution if the target has one, else 'tightest'.
+        ``t`` (shape (m,)) to states (shape (n, m)), e.g. the monolithic
+        solution of an SSP scenario's system; a gallery Problem gives its
+        exact solution. 'tightest' runs, for every combination of the model
+        inputs, one extra run with the smallest step and tolerances and the
+        largest ``lam`` of the grid. None: the exact solution if the target
+        has one, else 'tightest'.
     metrics : dict, optional
         Extra columns ``{name: function(t, x, residual) -> float}``, computed
         on the client from each run's trajectory.
@@ -165,6 +188,8 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
     if scheduler is None and not (isinstance(n_workers, (int, np.integer)) and not isinstance(n_workers, bool)
                                   and n_workers >= 1):
         raise ValueError(f"`n_workers` must be a positive integer; found {n_workers!r}.")
+    if isinstance(grid, dict):
+        grid = value_lists(grid)  # each iterable read once: the points and the study's identity see the same values
     points, names = _points(grid, seed)
     metrics = dict(metrics or {})
     for name in metrics:
@@ -174,13 +199,33 @@ def sweep(target, grid, *, reference=None, metrics=None, scheduler=None, progres
     lock = None
     try:
         kind, payload, reference, settings = _setup(target, reference, t_span, x0, workdir)
+        states = None
+        if kind == "fmu":
+            from fmpy import read_model_description
+
+            md = read_model_description(payload)
+            label = os.path.basename(os.fspath(target)) if not isinstance(target, dict) else "the spec's FMU"
+            _check_fmu_names(md, names, label)
+            _check_inputs(payload, names)
+            if "step" not in names and (md.defaultExperiment is None or md.defaultExperiment.stepSize is None):
+                raise ValueError(f"the FMU {label!r} has no default step size: give `step` in the grid.")
+            states = len(compared_outputs(md))
+        elif kind == "dae":
+            model = [name for name in names if name not in NUMERICAL + DAE_OWN]
+            if model:
+                raise ValueError(f"a LinearDAE target takes no model parameters; found {model}: it takes "
+                                 f"{', '.join(NUMERICAL + DAE_OWN)}.")
+            states = int(np.size(payload["x0"]))
+        if callable(reference):
+            _check_one_model(kind, grid, names)
+            _check_reference(reference, settings["t_span"], states)
         settings["error_from"] = settings["t_span"][0] if error_from is None and settings["t_span"] else error_from
         _check_error_from(error_from, settings["t_span"])
         lock = None
         if output is not None:
             os.makedirs(os.path.dirname(os.path.abspath(output)), exist_ok=True)
             lock = _lock(output)
-            check_identity(output, _identity(target, payload, names, reference, settings, metrics))
+            check_identity(output, _identity(target, payload, grid, seed, names, reference, settings, metrics))
         return _study(kind, payload, points, names, reference, settings, metrics, output, scheduler, n_workers,
                       progress, curves, timeout)
     finally:
@@ -244,12 +289,20 @@ def _setup(target, reference, t_span, x0, workdir):
     if kind == "spec":
         payload = _build_spec(payload, workdir)
         kind = "fmu"
-    if kind == "fmu" and t_span is None:  # the FMU's default experiment (read from the archive, not run)
+    time_unit = None
+    if kind == "fmu":  # read from the archive, not run
         from fmpy import read_model_description
 
-        experiment = read_model_description(payload).defaultExperiment
-        if experiment is not None and experiment.stopTime is not None:
-            t_span = (float(experiment.startTime or 0.0), float(experiment.stopTime))
+        from .._cli_plots import time_unit as unit_of_time
+
+        md = _model_description(payload)
+        time_unit = unit_of_time(md)
+        experiment = md.defaultExperiment
+        if t_span is None and experiment is not None and experiment.stopTime is not None:
+            t_span = (float(experiment.startTime or 0.0), float(experiment.stopTime))  # the default experiment
+        if t_span is None:
+            raise ValueError(f"the FMU {os.path.basename(payload)!r} has no default experiment with a stop time: "
+                             "give `t_span`.")
     if isinstance(reference, lsc.gallery.Problem):
         reference = reference.exact
     if reference is None:
@@ -259,42 +312,114 @@ def _setup(target, reference, t_span, x0, workdir):
             raise ValueError("`reference='exact'` needs a target with an exact solution (a gallery Problem); "
                              "pass a callable or 'tightest'.")
         reference = exact
-    elif reference == "monolithic":
-        if kind != "ssp":
-            raise ValueError("`reference='monolithic'` is for SSP targets; found a target of kind " + repr(kind) + ".")
-        raise NotImplementedError("`reference='monolithic'` needs a monolithic solve of the scenario from "
-                                  "fmu_build.cosim, which does not provide one yet: pass a callable or 'tightest'.")
     elif not (callable(reference) or reference == "tightest"):
-        raise ValueError(f"`reference` must be None, 'exact', 'tightest', 'monolithic', a callable or a gallery "
-                         f"Problem; found {reference!r}.")
-    return kind, payload, reference, {"t_span": t_span, "workdir": workdir}
+        raise ValueError(f"`reference` must be None, 'exact', 'tightest', a callable or a gallery Problem; "
+                         f"found {reference!r}.")
+    return kind, payload, reference, {"t_span": t_span, "workdir": workdir, "time_unit": time_unit}
 
 
-def _identity(target, payload, names, reference, settings, metrics):
-    """What makes two studies the same: stored with the output, compared when resuming."""
-    import hashlib
+def _model_description(fmu):
+    """The model description of an FMU a study can run (FMI 2.0 Co-Simulation), or a ValueError saying why not."""
+    import zipfile
 
-    import lsc
+    from fmpy import read_model_description
 
-    if isinstance(target, lsc.gallery.Problem):
-        what = {"gallery": target.name}
-    elif isinstance(target, lsc.LinearDAE):
-        what = {"LinearDAE": [float(v) for v in np.ravel(payload["x0"])]}
-    elif isinstance(target, dict):
-        what = {"spec": repr(sorted(target.items()))}
+    label = os.path.basename(os.fspath(fmu))
+    if not zipfile.is_zipfile(fmu) or "modelDescription.xml" not in zipfile.ZipFile(fmu).namelist():
+        raise ValueError(f"`target` {label!r} is not an FMU (a zip archive holding modelDescription.xml).")
+    try:
+        md = read_model_description(fmu)
+    except Exception as exc:
+        raise ValueError(f"`target` {label!r}: its modelDescription.xml cannot be read ({exc}).") from None
+    if md.fmiVersion != "2.0":
+        raise ValueError(f"studies run FMI 2.0 Co-Simulation FMUs; `target` {label!r} is FMI {md.fmiVersion}.")
+    if md.coSimulation is None:
+        raise ValueError(f"studies run FMI 2.0 Co-Simulation FMUs; `target` {label!r} has no Co-Simulation "
+                         "interface (Model Exchange only).")
+    return md
+
+
+# What FMI 2.0 lets a master set before initialization: inputs, and variables with initial exact or approx.
+_DEFAULT_INITIAL = {"parameter": "exact", "calculatedParameter": "calculated", "output": "calculated",
+                    "local": "calculated"}
+
+
+def _check_fmu_names(md, names, label):
+    """Refuse grid names the FMU has no variable for, or whose variable a master may not set."""
+    var = {v.name: v for v in md.modelVariables}
+    for name in ("step", "offset"):
+        if name in names and name in var:
+            raise ValueError(f"`{name}` is also a variable of the FMU {label!r}: the grid's `{name}` is the study's "
+                             f"own ({'the communication step' if name == 'step' else 'a move of the start values'}) "
+                             "and would never set it; a study cannot set that variable.")
+    if "offset" in names and not any(v.causality == "output" and start_name(v.name) in var for v in md.modelVariables):
+        raise ValueError(f"`offset` moves the start values `<output>_0` of the states of an FMU lsc built; {label!r} "
+                         "has none: set its start values by name in the grid instead.")
+    for name in names:
+        if name in ("step", "offset"):
+            continue
+        fmi_name = {"lam": "lambda", "method": "solver"}.get(name, name)
+        called = f"`{name}`" + (f" (the FMU variable `{fmi_name}`)" if fmi_name != name else "")
+        v = var.get(fmi_name)
+        if v is None:
+            raise ValueError(f"{called} is not a variable of the FMU {label!r} (nor `step`, `offset`).")
+        initial = v.initial or _DEFAULT_INITIAL.get(v.causality)
+        if v.causality == "independent":
+            what = "the independent variable"
+        elif v.variability == "constant":
+            what = "a constant (variability='constant')"
+        elif v.causality != "input" and initial not in ("exact", "approx"):
+            article = "an" if v.causality[0] in "aeiou" else "a"
+            what = f"{article} {v.causality} computed by the FMU (initial='{initial}')"
+        else:
+            continue
+        raise ValueError(f"{called} is {what} in {label!r}: FMI lets a master set only inputs, parameters "
+                         "and start values (initial 'exact' or 'approx'), so the grid cannot vary it.")
+
+
+def _check_one_model(kind, grid, names):
+    """Refuse a reference that is one trajectory for a grid of several models."""
+    # the rate, the integrator and its settings, the offset leave the exact solution as it is
+    own = NUMERICAL + ("offset",) + {"dae": DAE_OWN, "ssp": SSP_OPTIONS, "fmu": ("lambda", "solver")}.get(kind, ())
+    if isinstance(grid, dict):
+        varied = [n for n in names if n not in own and len({repr(v) for v in grid[n]}) > 1]
     else:
-        what = {"file": os.path.basename(os.fspath(target))}
-    path = payload if isinstance(payload, str) and os.path.isfile(payload) else None
-    if path:  # the FMU (built from a spec, or given) by its content
-        with open(path, "rb") as fh:
-            what["sha256"] = hashlib.sha256(fh.read()).hexdigest()
-    ref = reference if isinstance(reference, str) else "callable " + getattr(reference, "__qualname__",
-                                                                          type(reference).__name__)
-    t_span = settings["t_span"]
-    return {"target": what, "grid names": list(names), "reference": ref,
-            "t_span": [float(t) for t in t_span] if t_span else None,
-            "error_from": None if settings["error_from"] is None else float(settings["error_from"]),
-            "metrics": sorted(metrics)}
+        varied = [n for n in names if n not in own]
+    if varied:
+        raise ValueError(f"`reference` is one trajectory (a function of time), but the grid varies the model inputs "
+                         f"{varied}: each value is another model with another solution, and every row would be "
+                         "measured against one of them. Use reference='tightest' (a reference run for each "
+                         "combination of model inputs), or one study per value.")
+
+
+def _check_reference(reference, t_span, states):
+    """Evaluate a callable reference at the start, middle and end of the horizon: it must give every state."""
+    if not t_span:
+        return
+    times = np.array([float(t_span[0]), 0.5 * (float(t_span[0]) + float(t_span[1])), float(t_span[1])])
+    try:
+        values = np.asarray(reference(times), dtype=float)
+    except Exception as exc:
+        raise ValueError(f"`reference` raised {type(exc).__name__} at the times {times.tolist()}: {exc}") from None
+    if values.ndim != 2 or values.shape[1] != times.size or (states is not None and values.shape[0] != states):
+        raise ValueError(f"`reference` must map times (shape (m,)) to states (shape (n, m)); it returns shape "
+                         f"{values.shape} at 3 times; the runs have {states if states is not None else 'n'} states.")
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"`reference` is not finite at the times {times.tolist()}: {values.tolist()}.")
+
+
+def _check_inputs(fmu, names):
+    """Refuse an FMU whose inputs the study would hold at their start values without being told."""
+    from fmpy import read_model_description
+
+    inputs = [v.name for v in read_model_description(fmu).modelVariables if v.causality == "input"]
+    missing = [name for name in inputs if name not in names]
+    if missing:
+        raise ValueError(f"the FMU has inputs {missing} and a study would hold them at their start values: give each "
+                         "a constant value in the grid (e.g. {" + f"{missing[0]!r}: [0.0]" + "}, "
+                         f"--grid {missing[0]}=0.0 on the command line), or run the FMU "
+                         "with an input table (lsc-fmu simulate --input, fmpy.simulate_fmu(input=...)), or connect "
+                         "it in an SSP scenario and sweep that.")
 
 
 def _study(kind, payload, points, names, reference, settings, metrics, output, scheduler, n_workers, progress,
@@ -316,10 +441,11 @@ def _study(kind, payload, points, names, reference, settings, metrics, output, s
     table = _Table(points, columns, reference, tight, settings["error_from"], metrics, curves, stream)
     table.rows.update(finished)
     table.done[0], table.failed[0] = len(finished), sum(1 for r in finished.values() if not r["success"])
-    jobs = [(("ref", key), point) for key, point in tight.items()] + [(("run", i), points[i]) for i in todo]
+    jobs = [(("ref", key), ReferencePoint(point)) for key, point in tight.items()] + \
+        [(("run", i), points[i]) for i in todo]
     bar = _Progress(len(points), table.done, table.failed, progress)
     try:
-        _execute(runner, payload, settings, jobs, table.accept, scheduler, n_workers, bar, timeout)
+        _execute(runner, payload, settings, jobs, table.accept, scheduler, n_workers, bar, timeout, kind)
     finally:
         bar.close()
     table.flush()
@@ -328,6 +454,7 @@ def _study(kind, payload, points, names, reference, settings, metrics, output, s
     df["steps"] = df["steps"].astype(int)
     df.attrs["curves"] = table.curves
     df.attrs["t_span"] = settings["t_span"]
+    df.attrs["time_unit"] = settings.get("time_unit")
     if output is not None and os.fspath(output).lower().endswith(".parquet"):
         tmp = f"{os.fspath(output)}.tmp{os.getpid()}"
         plain = df.copy()
@@ -351,7 +478,9 @@ class _Table:
         if tag[0] == "ref":
             key = tag[1]
             ok = result["success"] and result["t"] is not None
-            self.references[key] = (result["t"], result["x"]) if ok else None
+            # a LinearDAE reference run brings its dense output: read between its steps at the order of its method
+            sol = result.get("sol")
+            self.references[key] = (sol if sol is not None else (result["t"], result["x"])) if ok else None
             self.reasons[key] = result["message"]
             for run, res in self.waiting.pop(key, []):
                 self.emit(run, res)
@@ -388,7 +517,9 @@ class _Table:
                               f"{self.reasons.get(key, 'unknown')}")
         if result["success"] and ref is not None:
             try:
-                row["error"] = _error(result["t"], result["x"], ref, self.error_from)
+                row["error"], note = _error(result["t"], result["x"], ref, self.error_from)
+                if note:
+                    row["message"] = f"{row['message']}; {note}"
             except Exception as exc:
                 row["message"] = f"{row['message']}; the error could not be computed: {exc}"
         for name, fn in self.metrics.items():
@@ -397,6 +528,7 @@ class _Table:
             except Exception as exc:
                 row[name] = math.nan
                 row["message"] = f"{row['message']}; metric {name!r} failed: {exc}"
+        row["message"] = one_line(row["message"])  # one row, one line: a line cut by a crash is found on resuming
         self.rows[run] = row
         if self.keep_curves and result.get("residual") is not None:
             t_run, r_run = np.asarray(result["t"]), np.asarray(result["residual"])

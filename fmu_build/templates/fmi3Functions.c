@@ -242,36 +242,42 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
     return fmi3OK;
 }
 
+/* Every setter is the core's: its checks of the state, the variable and the value, and its effects element by
+ * element (a refused element leaves the ones before it set, as in FMI 2.0). This layer only translates the
+ * FMI 3.0 value references: time and project_initial, which the core's Real setter does not know. */
 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, const fmi3Float64 values[],
                           size_t nValues) {
     Instance *c = (Instance *)instance;
-    size_t i;
+    size_t k;
+    fmi2Status s;
     if (!allowed(c, "fmi3SetFloat64", ANY_ALIVE) || !scalar_sizes(c, "fmi3SetFloat64", nvr, nValues)) return fmi3Error;
-    if (nvr == 0) return fmi3OK;
-    if (nullargs(c, "fmi3SetFloat64", vr, "valueReferences", values, "values")) return fmi3Error;
-    for (i = 0; i < nvr; i++) {
-        if (vr[i] == VR3_TIME || vr[i] == VR3_PROJECT) {
-            logmsg(c, fmi2Error, "fmi3SetFloat64: value reference %u is %s", vr[i], vr[i] == VR3_TIME
-                   ? "time, the independent variable (fmi3SetTime or fmi3DoStep advance it)" : "a Boolean");
-            return fmi3Error;
-        }
-    }
-    return status3(fmi2SetReal(c, vr, nvr, values));
+    if (nvr > 0 && nullargs(c, "fmi3SetFloat64", vr, "valueReferences", values, "values")) return fmi3Error;
+    for (k = 0; k < nvr && vr[k] != VR3_TIME && vr[k] != VR3_PROJECT; k++) {}
+    s = fmi2SetReal(c, vr, k, values); /* k = 0: the state check alone */
+    if (k == nvr || s > fmi2Warning) return status3(s);
+    logmsg(c, fmi2Error, "fmi3SetFloat64: value reference %u is %s", vr[k], vr[k] == VR3_TIME
+           ? "time, the independent variable (fmi3SetTime or fmi3DoStep advance it)" : "a Boolean");
+    return fmi3Error;
 }
 
 fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, fmi3Boolean values[],
                           size_t nValues) {
     Instance *c = (Instance *)instance;
+    const fmi2ValueReference project = VRB_PROJECT;
     size_t i;
     if (!allowed(c, "fmi3GetBoolean", ANY_ALIVE) || !scalar_sizes(c, "fmi3GetBoolean", nvr, nValues)) return fmi3Error;
-    if (nvr == 0) return fmi3OK;
-    if (nullargs(c, "fmi3GetBoolean", vr, "valueReferences", values, "values")) return fmi3Error;
+    if (nvr > 0 && nullargs(c, "fmi3GetBoolean", vr, "valueReferences", values, "values")) return fmi3Error;
+    if (nvr == 0) return status3(fmi2GetBoolean(c, NULL, 0, NULL));
     for (i = 0; i < nvr; i++) {
+        fmi2Boolean v = fmi2False;
+        fmi2Status s;
         if (vr[i] != VR3_PROJECT) {
             logmsg(c, fmi2Error, "fmi3GetBoolean: unknown value reference %u", vr[i]);
             return fmi3Error;
         }
-        values[i] = c->s.project_initial != 0;
+        s = fmi2GetBoolean(c, &project, 1, &v);
+        if (s > fmi2Warning) return status3(s);
+        values[i] = v != fmi2False;
     }
     return fmi3OK;
 }
@@ -279,18 +285,21 @@ fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], 
 fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, const fmi3Boolean values[],
                           size_t nValues) {
     Instance *c = (Instance *)instance;
+    const fmi2ValueReference project = VRB_PROJECT;
     size_t i;
-    if (!allowed(c, "fmi3SetBoolean", Instantiated | InitializationMode) || !scalar_sizes(c, "fmi3SetBoolean", nvr, nValues))
-        return fmi3Error;
-    if (nvr == 0) return fmi3OK;
-    if (nullargs(c, "fmi3SetBoolean", vr, "valueReferences", values, "values")) return fmi3Error;
+    if (!allowed(c, "fmi3SetBoolean", ANY_ALIVE) || !scalar_sizes(c, "fmi3SetBoolean", nvr, nValues)) return fmi3Error;
+    if (nvr > 0 && nullargs(c, "fmi3SetBoolean", vr, "valueReferences", values, "values")) return fmi3Error;
+    if (nvr == 0) return status3(fmi2SetBoolean(c, NULL, 0, NULL));
     for (i = 0; i < nvr; i++) {
+        const fmi2Boolean v = values[i] ? fmi2True : fmi2False;
+        fmi2Status s;
         if (vr[i] != VR3_PROJECT) {
             logmsg(c, fmi2Error, "fmi3SetBoolean: unknown value reference %u", vr[i]);
             return fmi3Error;
         }
+        s = fmi2SetBoolean(c, &project, 1, &v);
+        if (s > fmi2Warning) return status3(s);
     }
-    for (i = 0; i < nvr; i++) c->s.project_initial = values[i] ? 1 : 0;
     return fmi3OK;
 }
 

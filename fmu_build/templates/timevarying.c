@@ -27,7 +27,8 @@ static int tv_piece(double t, double *s) {
         const int mid = (lo + hi + 1) / 2;
         if (TV_BREAKS[mid] <= t) lo = mid; else hi = mid - 1;
     }
-    *s = (2.0 * t - TV_BREAKS[lo] - TV_BREAKS[lo + 1]) / (TV_BREAKS[lo + 1] - TV_BREAKS[lo]);
+    /* t - lo and hi - t are exact: no rounding of |t| itself (1e-11 of a piece of length 2 at t = 1e5) */
+    *s = ((t - TV_BREAKS[lo]) - (TV_BREAKS[lo + 1] - t)) / (TV_BREAKS[lo + 1] - TV_BREAKS[lo]);
     *s = *s < -1.0 ? -1.0 : (*s > 1.0 ? 1.0 : *s);
     return lo;
 }
@@ -138,7 +139,7 @@ static int tv_values(Instance *c, const double *t, int nt, double *out) {
     /* the usual case: all times in the piece of the first (one search, one sweep) */
     if (t[nt - 1] < TV_BREAKS[p + 1] || (p == TV_NPIECE - 1 && t[nt - 1] <= TV_T1 + TV_TIME_SLACK(TV_T1))) {
         for (q = 1; q < nt; q++) {
-            const double sq = (2.0 * t[q] - TV_BREAKS[p] - TV_BREAKS[p + 1]) / (TV_BREAKS[p + 1] - TV_BREAKS[p]);
+            const double sq = ((t[q] - TV_BREAKS[p]) - (TV_BREAKS[p + 1] - t[q])) / (TV_BREAKS[p + 1] - TV_BREAKS[p]);
             s[q] = sq > 1.0 ? 1.0 : sq;
         }
         if (nt == TV_NODES) {

@@ -6,6 +6,12 @@ either sympy expressions (small problems) or callables with closed-form
 derivatives (large ones), so ``f`` and every derivative a completion needs
 are exact.
 
+The field's large sparse benchmarks (`msd_ind3`, `stokes_ind2`,
+`triple_chain`, `rcl_ladder`) are `SparseProblem` s at any size: scipy.sparse
+coefficients, a manufactured exact solution, the published descriptor system
+and what is known in closed form (finite-spectrum dimension, projectors).
+`read_descriptor` reads ``E, A, B, C`` from Matrix Market or ``.mat`` files.
+
 Problems built from the Kronecker canonical form use *manufactured*
 solutions: for ``P (E y' + Ab y) = f`` with ``E = diag(I, N)``,
 ``Ab = diag(C, I)`` and ``x = Q y``, any smooth ``y*`` is the exact
@@ -25,9 +31,14 @@ True
 
 from ._base import Problem, StateSpace
 from ._canonical import nilpotent_chain
+from ._chains import msd_ind3, triple_chain
+from ._descriptor import read_descriptor
 from ._mechanical import mechanical, prescribed_path
 from ._random import moving_pencil, random_pencil
+from ._rcl import rcl_ladder
 from ._rotating import rotating_canonical
+from ._sparse_base import Descriptor, SparseProblem
+from ._stokes import stokes_descriptor, stokes_ind2
 from ._thesis import _lambdified_exact  # noqa: F401  (private; the FMU tests use it)
 from ._thesis import stiff_index1, thesis_example1, thesis_example3, thesis_example4, thesis_example5
 
@@ -45,4 +56,12 @@ __all__ = [
     "stiff_index1",
     "rotating_canonical",
     "moving_pencil",
+    "SparseProblem",
+    "Descriptor",
+    "msd_ind3",
+    "stokes_ind2",
+    "stokes_descriptor",
+    "triple_chain",
+    "rcl_ladder",
+    "read_descriptor",
 ]
