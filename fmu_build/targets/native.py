@@ -378,7 +378,7 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     placeholder = "{00000000-0000-0000-0000-000000000000}"
     header, info = _model_header(spec, ident=ident, guid=placeholder, G0=G0, G1=G1, W0=W0, W1=W1, maps=maps,
                                  lam_tunable=lam_tunable, fpars=fpars, kpars=kpars, f_jet=tv is None,
-                                 input_orders=_needed_input_orders(spec, dae, spec.k))
+                                 input_orders=_needed_input_orders(spec, dae, comp.k))
     fixed_note = (f" Parameters in A or B fixed at their spec values: {', '.join(kpars)}." if kpars else "")
     lam_note = {"alternative": "lambda tunable (G and the forcing map are affine in lambda, checked at build time)",
                 "stabilized": "lambda fixed at build time (the stabilized completion is not affine in lambda)",
