@@ -2,10 +2,11 @@
 fitted with its derivatives by ``lsc-fmu simulate --input``.
 
 1. ``examples/specs/path_input.toml`` (index 3; the completion needs p'' and p''') with p = sin t from
-   ``examples/inputs/path.csv`` (rows 0.01 apart): both hosts interpolate the table linearly and set the
-   value at each of their steps. Error in u = sin t + 0.5 cos t over t >= 2 for Model Exchange (Euler) and
-   Co-Simulation at host steps h = 0.01, 0.004, 0.002 (it must not grow as h shrinks), and fmusim's CVODE at
-   rtol 1e-10 (it must complete).
+   ``examples/inputs/path.csv`` (rows 0.01 apart): the hosts (and fmpy's ``simulate_fmu`` in Model
+   Exchange) interpolate the table linearly and set the value at each of their steps. Error in
+   u = sin t + 0.5 cos t over t >= 2 for Model Exchange (Euler; fmpy's CVode too) and Co-Simulation at host
+   steps h = 0.01, 0.004, 0.002 (it must not grow as h shrinks), and fmusim's CVODE at rtol 1e-10 (it must
+   complete).
 2. ``examples/specs/rlc_source.toml`` (index 2, start consistent with u = sin t): ``lsc-fmu simulate
    --input`` (the table fitted, derivatives sent from the start) and ``--linear-input`` (values only, as
    fmpy sends them) against the closed-form solution, t >= 2.
@@ -19,6 +20,7 @@ Run: python examples/inputs_in_hosts.py [--fmu PATH] [--docs]
 """
 import argparse
 import csv
+import json
 import os
 import shutil
 import subprocess
@@ -77,6 +79,28 @@ def fmucheck(tool, fmu, kind, h):
         shutil.rmtree(folder, ignore_errors=True)
 
 
+_FMPY_ME = """
+import json, sys
+import numpy as np
+from fmpy import simulate_fmu
+fmu, table, solver, h = sys.argv[1:5]
+rows = np.loadtxt(table, delimiter=",", skiprows=1)
+signal = np.array([tuple(r) for r in rows], dtype=[("time", float), ("p", float)])
+r = simulate_fmu(fmu, fmi_type="ModelExchange", input=signal, output=["u"], output_interval=float(h),
+                 step_size=float(h), solver=solver, relative_tolerance=1e-8, stop_time=10.0)
+print(json.dumps({"time": r["time"].tolist(), "u": r["u"].tolist()}))
+"""
+
+
+def fmpy_me(fmu, h, solver):
+    """fmpy's simulate_fmu, Model Exchange, the table as its input (linear interpolation), in a subprocess."""
+    proc = subprocess.run([sys.executable, "-c", _FMPY_ME, str(fmu), str(PATH_TABLE), solver, repr(h)],
+                          capture_output=True, text=True, timeout=600)
+    if proc.returncode != 0:
+        return None, f"exit {proc.returncode}: {(proc.stderr.strip().splitlines() or [''])[-1][:80]}"
+    return {name: np.array(values) for name, values in json.loads(proc.stdout).items()}, ""
+
+
 def u_error(result):
     """max |u - (sin t + 0.5 cos t)| over t >= 2, or the reason the run gave none."""
     if result[0] is None:
@@ -99,10 +123,14 @@ def path_table(fmu):
                (("fmusim", "LSC_FMUSIM"), ("fmuCheck", "LSC_FMUCHECK")) if not hosts[name]]
     columns = [(f"{name} {kind.upper()}{', Euler' if kind == 'me' else ''}", name, kind)
                for kind in ("me", "cs") for name in ("fmusim", "fmuCheck") if hosts[name]]
+    columns += [("fmpy ME, Euler", "fmpy", "Euler"), ("fmpy ME, CVode (rtol 1e-8)", "fmpy", "CVode")]
     lines += ["| host step h | " + " | ".join(c[0] for c in columns) + " |", "|---" * (len(columns) + 1) + "|"]
     for h in STEPS:
         cells = []
         for _, name, kind in columns:
+            if name == "fmpy":
+                cells.append(_cell(u_error(fmpy_me(fmu, h, kind))))
+                continue
             run = fmusim if name == "fmusim" else fmucheck
             cells.append(_cell(u_error(run(hosts[name], fmu, kind, h))))
         lines.append(f"| {h:g} | " + " | ".join(cells) + " |")
