@@ -3,7 +3,7 @@
 Generated at build time by sympy, so the FMU needs no sympy at run time.
 """
 
-from .._model import _exact_degree, _affine_in_inputs, _input_derivatives, _inputs_in, _mangle, _mangled, _needed_input_orders
+from .._model import _exact_degree, _affine_in_inputs, _input_window, _input_derivatives, _inputs_in, _mangle, _mangled, _needed_input_orders
 
 _BUILD_PLACEHOLDER = "@LSC_BUILD@"
 
@@ -118,6 +118,7 @@ def _model_source(spec, k, dae):
         "f_varies": t in spec.f.free_symbols or bool(spec.inputs),
         "A_inputs": bool(_inputs_in(spec.A, spec)), "B_inputs": bool(_inputs_in(spec.B, spec)),
         "inputs": spec.inputs, "input_orders": input_orders,
+        "input_windows": {u["name"]: _input_window(spec, u) for u in spec.inputs},
         "exact_degree": exact_degree, "f_order_max": f_order_max, "f_time": t in spec.f.free_symbols,
         "f_affine": _affine_in_inputs(spec),
         "outputs": [{key: out[key] for key in ("name", "unit", "description")} for out in spec.outputs],

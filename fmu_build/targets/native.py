@@ -98,6 +98,12 @@ def _c_array(name, values, ctype="double"):
     return f"static const {ctype} {name}[{len(values)}] = {{{body}}};"
 
 
+def _c_string(text):
+    """A C string literal of `text` (any character escaped as a byte: a name may be any identifier)."""
+    return '"' + "".join(ch if ch.isascii() and (ch.isalnum() or ch in "_ .") else "".join(f"\\{b:03o}" for b in ch.encode())
+                         for ch in text) + '"'
+
+
 def _check_expressible(spec, fix_parameters):
     """Raise NativeTargetError for what the native C cannot hold; return the names of the parameters fixed."""
     if spec.t in (spec.A.free_symbols | spec.B.free_symbols):
@@ -178,11 +184,14 @@ def _is_linear_in_states(expr, state_symbols, spec):
         return False
 
 
-def _model_header(spec, *, ident, guid, G0, G1, W0, W1, maps, lam_tunable, fpars, kpars, f_jet=True):
+def _model_header(spec, *, ident, guid, G0, G1, W0, W1, maps, lam_tunable, fpars, kpars, input_orders, f_jet=True):
     """The generated part: sizes, value references, matrices and the C of f and the outputs (`f_jet` False: no
     C of f's jet, which the time-varying runtime does not call: its forcing is tabulated). `maps`: the
-    completion's `lsc.CompletionMaps` (its order, constraint rows and their forcing map)."""
+    completion's `lsc.CompletionMaps` (its order, constraint rows and their forcing map). `input_orders`: the
+    highest derivative of each input the completion uses (-1: none), from which the estimates' degrees."""
     import sympy
+
+    from .._model import _input_degree, _input_window
 
     n = spec.n
     P = maps.order
@@ -195,7 +204,9 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, maps, lam_tunable, fpars
     nu, no, nk = len(spec.inputs), len(spec.outputs), len(kpars)
     npar = len(fpars)
     Cpinv = maps.C_pinv[0] if nc else np.zeros((n, 1))
-    udeg = min(P + 3, 8)  # the history polynomial's degree: derivatives for g and its Taylor terms
+    orders = [int(input_orders.get(u["name"], -1)) for u in spec.inputs]
+    degrees = [_input_degree(order) for order in orders]
+    udeg = max(degrees, default=0)  # the largest degree of an input's estimate (lsc_model.c)
     vr = {"LAMBDA": 0, "PAR": 1}
     vr["X0"] = 1 + npar
     vr["U"] = vr["X0"] + n
@@ -229,6 +240,11 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, maps, lam_tunable, fpars
         _c_array("PAR_TUNABLE", [int(next(p["tunable"] for p in spec.parameters if p["name"] == q)) for q in fpars], "int"),
         _c_array("X_START", [s["start"] for s in spec.states]),
         _c_array("U_START", [u["start"] for u in spec.inputs]),
+        "/* the inputs' estimates: highest derivative used (-1: none), polynomial degree, least-squares window (s) */",
+        _c_array("U_ORDER", orders, "int"), _c_array("U_DEGREE", degrees, "int"),
+        _c_array("U_WINDOW", [_input_window(spec, u) for u in spec.inputs]),
+        "static const char *const U_NAME[{}] = {{{}}};".format(
+            max(len(spec.inputs), 1), ", ".join(_c_string(u["name"]) for u in spec.inputs) or '""'),
         _c_array("K_VALUE", [values[spec.symbols[q]] for q in kpars]),
     ]
     # f and its derivatives, inputs' derivatives (named by the builder's `_mangled`) read from u[i * NFE + j]
@@ -336,7 +352,7 @@ def _compile(src_dir, out_path, compiler, extra_flags=(), main="fmi2Functions.c"
 
 def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=False, fmi_version=2):
     """Build the native FMU of a resolved `ModelSpec` (see `fmu_build.build_fmu`, ``target='native'``)."""
-    from .._model import _numeric_dae
+    from .._model import _needed_input_orders, _numeric_dae
 
     if type(fmi_version) is not int or fmi_version not in (2, 3):
         raise ValueError(f"`fmi_version` must be 2 or 3; found {fmi_version!r}.")
@@ -363,7 +379,8 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     # the fixed sources) and of the variables the model description declares: any change gives another GUID
     placeholder = "{00000000-0000-0000-0000-000000000000}"
     header, info = _model_header(spec, ident=ident, guid=placeholder, G0=G0, G1=G1, W0=W0, W1=W1, maps=maps,
-                                 lam_tunable=lam_tunable, fpars=fpars, kpars=kpars, f_jet=tv is None)
+                                 lam_tunable=lam_tunable, fpars=fpars, kpars=kpars, f_jet=tv is None,
+                                 input_orders=_needed_input_orders(spec, dae, comp.k))
     fixed_note = (f" Parameters in A or B fixed at their spec values: {', '.join(kpars)}." if kpars else "")
     lam_note = {"alternative": "lambda tunable (G and the forcing map are affine in lambda, checked at build time)",
                 "stabilized": "lambda fixed at build time (the stabilized completion is not affine in lambda)",

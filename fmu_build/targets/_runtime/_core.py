@@ -44,7 +44,9 @@ class LscRuntime(CallSequence, Stepping, Snapshot):
         self._dense = None  # _Interpolant of the solver's last step
 
         order_max = M.get("f_order_max", M["k"] + 2)
-        self.inputs = {u["name"]: _InputSignal(M["input_orders"].get(u["name"], -1), u["start"], order_max)
+        windows = M.get("input_windows", {})
+        self.inputs = {u["name"]: _InputSignal(M["input_orders"].get(u["name"], -1), u["start"], order_max,
+                                               window=windows.get(u["name"], 0.3))
                        for u in M.get("inputs", [])}
         # value reference -> input name (the fast set_real), -> state index (the fast get_real)
         self._input_of_vr, self._state_of_vr = register_variables(self, slave, solver_start)
@@ -122,6 +124,11 @@ class LscRuntime(CallSequence, Stepping, Snapshot):
 
     def _log_error(self, msg):
         self._log(msg)
+
+    def _log_info(self, msg):
+        from pythonfmu.enums import Fmi2Status
+
+        self.slave.log(msg, status=Fmi2Status.ok, category="logAll")
 
     def _log(self, msg, warning=False):
         from pythonfmu.enums import Fmi2Status
