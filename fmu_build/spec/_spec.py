@@ -51,12 +51,14 @@ import re
 import tomllib
 import unicodedata
 
+from lsc import COMPLETIONS
+
 from ._expressions import ExpressionError, evaluate, parse_expression
 from ._limits import MAX_K, MAX_MODEL_NAME, MAX_NAME, MAX_TEXT, MIN_RELATIVE_STEP, lam_problem
 
 __all__ = ["SpecError", "ModelSpec", "load_spec", "parse_spec", "model_name_problems"]
 
-METHODS = ("standard", "stabilized", "alternative")
+METHODS = tuple(COMPLETIONS)  # lsc's completions: the FMU's `method` values are their positions here
 # Names the FMU itself defines.
 RESERVED = {"t", "time", "lambda", "method", "constraint_residual", "project_initial", "rtol", "atol", "solver"}
 # The keys of every table; entries of [states], [parameters], [inputs], [outputs] are tables too.
