@@ -15,8 +15,7 @@ own unit (`Component.set_start`).
 import os
 import zipfile
 
-import numpy as np
-
+from .._values import FMIValueError, fmi_value
 from . import _units
 from ._system import IDENTIFIER, unzip
 
@@ -25,7 +24,7 @@ WIRE = {"Real": "Real", "Integer": "Integer", "Enumeration": "Integer", "Boolean
 
 
 def convert(value, kind, what):
-    """``value`` as an FMI ``kind`` value, or ValueError naming ``what``.
+    """``value`` as an FMI ``kind`` value (the rules of `fmu_build._values.fmi_value`), or ValueError naming ``what``.
 
     Examples
     --------
@@ -36,43 +35,10 @@ def convert(value, kind, what):
     ...
     ValueError: b: a Boolean must be True/False, 1/0 or 'true'/'false'; found 0.3.
     """
-    if kind == "Boolean":
-        if isinstance(value, (bool, np.bool_)):
-            return bool(value)
-        if isinstance(value, str) and value.strip().lower() in ("true", "false", "1", "0"):
-            return value.strip().lower() in ("true", "1")
-        if isinstance(value, (int, float, np.integer, np.floating)) and value in (0, 1):
-            return bool(value)
-        raise ValueError(f"{what}: a Boolean must be True/False, 1/0 or 'true'/'false'; found {value!r}.")
-    if kind in ("Integer", "Enumeration"):
-        if isinstance(value, (bool, np.bool_)):
-            raise ValueError(f"{what}: an {kind} must be an integer; found the Boolean {value!r}.")
-        try:
-            number = float(value) if isinstance(value, str) else value
-            if float(number) == int(float(number)) and abs(float(number)) < 2 ** 31:
-                return int(float(number))
-        except (TypeError, ValueError, OverflowError):
-            pass
-        raise ValueError(f"{what}: an {kind} must be a whole number within 32 bits; found {value!r}.")
-    if kind == "Real":
-        if isinstance(value, (bool, np.bool_)):
-            raise ValueError(f"{what}: a Real must be a number; found the Boolean {value!r}.")
-        try:
-            return float(value)
-        except (TypeError, ValueError):
-            raise ValueError(f"{what}: a Real must be a number; found {value!r}.") from None
-    if kind == "String":
-        if not isinstance(value, str):
-            raise ValueError(f"{what}: a String must be a str; found {type(value).__name__}.")
-        if "\0" in value:
-            raise ValueError(f"{what}: a String cannot hold a NUL character (a C string would end there); "
-                             f"found {value!r}.")
-        try:
-            value.encode("utf-8")
-        except UnicodeEncodeError as exc:
-            raise ValueError(f"{what}: a String must be encodable as UTF-8; found {value!r} ({exc.reason}).") from None
-        return value
-    raise ValueError(f"{what}: variables of type {kind} cannot be set.")
+    try:
+        return fmi_value(value, kind)
+    except FMIValueError as exc:
+        raise ValueError(f"{what}: {exc}; found {value!r}.") from None
 
 
 # pythonfmu FMUs import their model module by name into the one Python of the process, where the

@@ -9,6 +9,7 @@ import tempfile
 
 import numpy as np
 
+from .._values import steps_over
 from . import _callbacks
 from ._exchange import Component, check_types
 from ._result import CosimResult, _Progress, _Stop
@@ -204,7 +205,6 @@ def _check_numbers(**values):
 def _check_horizon(start_time, stop_time, step_size):
     """A fixed-step run: a whole number of steps, at most MAX_STEPS, each of which advances time."""
     span = stop_time - start_time
-    n_steps = round(span / step_size)
     if span / step_size > MAX_STEPS:
         raise ValueError(f"`step_size` {step_size!r} over [{start_time!r}, {stop_time!r}] makes {span / step_size:.3g} "
                          f"macro steps; at most {MAX_STEPS:.0e} are taken (a larger `step_size`, or step_control).")
@@ -213,9 +213,7 @@ def _check_horizon(start_time, stop_time, step_size):
         raise ValueError(f"`step_size` {step_size!r} is below 1000 times the resolution of time at "
                          f"{max(abs(start_time), abs(stop_time))!r} ({resolution!r}): the communication points "
                          "cannot be represented.")
-    if abs(n_steps * step_size - span) > 1e-9 * span + 4 * resolution:
-        raise ValueError(f"`stop_time` - `start_time` must be a multiple of `step_size`; found {span!r} and "
-                         f"{step_size!r}.")
+    steps_over(start_time, stop_time, step_size, "`step_size`")
 
 
 def _bound(comps, system):

@@ -51,12 +51,14 @@ import re
 import tomllib
 import unicodedata
 
+from lsc import COMPLETIONS
+
 from ._expressions import ExpressionError, evaluate, parse_expression
 from ._limits import MAX_K, MAX_MODEL_NAME, MAX_NAME, MAX_TEXT, MIN_RELATIVE_STEP, lam_problem
 
 __all__ = ["SpecError", "ModelSpec", "load_spec", "parse_spec", "model_name_problems"]
 
-METHODS = ("standard", "stabilized", "alternative")
+METHODS = tuple(COMPLETIONS)  # lsc's completions: the FMU's `method` values are their positions here
 # An input's derivative estimate averages over a window of this many experiment steps unless the spec says
 # `window` (docs/guide/inputs.md): 30 steps of a table at the experiment step make the least-squares fit of
 # degree 5 differentiate the table's linear interpolation to ~1e-4 in the second derivative (sin t, 0.01 s).

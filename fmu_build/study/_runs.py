@@ -12,6 +12,8 @@ from functools import partial
 
 import numpy as np
 
+from .._values import FMIValueError, fmi_value as _fmi_value, steps_over
+from ..targets._runtime._variables import SOLVERS
 from ..cosim._callbacks import attach, callbacks as process_callbacks
 
 # Names of the grid that set how a run is computed rather than the model.
@@ -307,10 +309,9 @@ def _fmu_values(point, var, states):
         if fmi_name not in var:
             raise ValueError(f"the FMU has no variable {fmi_name!r} to set from the grid's `{name}`")
         if fmi_name == "solver" and isinstance(value, str):
-            solvers = ("RK45", "DOP853", "Radau", "BDF", "exact", "Magnus4")
-            if value not in solvers:
-                raise ValueError(f"`method` must be one of {solvers}; found {value!r}")
-            value = solvers.index(value)
+            if value not in SOLVERS:
+                raise ValueError(f"`method` must be one of {SOLVERS}; found {value!r}")
+            value = SOLVERS.index(value)
         values[fmi_name] = fmi_value(name, value, var[fmi_name].type, enumeration_items(var[fmi_name]))
     offset = float(point.get("offset", 0.0))
     states = [s for s in states if _start_name(s) in var]  # an FMU without start values is refused up front
@@ -321,89 +322,21 @@ def _fmu_values(point, var, states):
     return values
 
 
-def steps_over(t0, t1, h):
-    """The number of steps `h` from `t0` to `t1`; a ValueError if they do not end on `t1`."""
-    n = int(round((t1 - t0) / h))
-    if n < 1 or abs(t0 + n * h - t1) > 1e-9 * max(abs(t1 - t0), abs(t1), 1e-300):
-        raise ValueError(f"`step` {h!r} does not divide the horizon [{t0!r}, {t1!r}]: the run would end at "
-                         f"{t0 + max(n, 1) * h!r}; choose a step that divides it")
-    return n
-
-
-_TRUE, _FALSE = ("true", "1"), ("false", "0")
-
-
 def fmi_value(name, value, kind, items=None):
     """`value` of the grid's `name` as the FMI type `kind`, or a TypeError naming `name`.
 
     `kind` is 'Real', 'Integer', 'Boolean', 'String' or 'Enumeration' (then
     `items` lists the type's ``(name, value)`` pairs, and `value` is an item's
-    name or value). Texts are read, never passed through ``bool()``: "false"
-    and "0" are False; a String takes only a text (a number is not guessed to
-    be one).
+    name or value); the rules are `fmu_build._values.fmi_value`'s.
     """
     article = "an" if kind[0] in "AEIOU" else "a"
-    if kind == "Enumeration":
-        items = list(items or [])
-        listed = ", ".join(f"{n!r} = {v}" for n, v in items)
-
-        def refuse():
-            raise TypeError(f"`{name}` sets an Enumeration variable (items {listed}); found {value!r} "
-                            f"({type(value).__name__}).")
-
-        names = dict(items)
-        if isinstance(value, str):
-            text = value.strip()
-            if text in names:
-                return int(names[text])
-            try:
-                number = int(text)
-            except ValueError:
-                refuse()
-        elif isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-            refuse()
-        else:
-            number = value
-        if not (math.isfinite(number) and float(number) == int(number) and int(number) in names.values()):
-            refuse()
-        return _int32(name, int(number))
-
-    def refuse():
-        raise TypeError(f"`{name}` sets {article} {kind} variable; found {value!r} ({type(value).__name__}).")
-
-    if kind == "String":
-        if not isinstance(value, str):
-            refuse()
-        return value
-    if kind not in ("Real", "Integer", "Boolean"):
-        raise TypeError(f"`{name}` sets a variable of type {kind}, which a study cannot set.")
-    if isinstance(value, str):
-        text = value.strip().lower()
-        if kind == "Boolean" and text in _TRUE + _FALSE:
-            return text in _TRUE
-        try:
-            value = int(text) if kind == "Integer" else float(text)
-        except ValueError:
-            refuse()
-    if kind == "Boolean":
-        if isinstance(value, (bool, np.bool_)) or (isinstance(value, (int, np.integer)) and value in (0, 1)):
-            return bool(value)
-        refuse()
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-        refuse()
-    if kind == "Integer":
-        if not math.isfinite(value) or float(value) != int(value):
-            refuse()
-        return _int32(name, int(value))
-    return float(value)
-
-
-def _int32(name, value):
-    """An FMI 2.0 Integer is 32 bits: ctypes would silently wrap a larger one (2**32 + 3 reaches the FMU as 3)."""
-    if not -2 ** 31 <= value < 2 ** 31:
-        raise TypeError(f"`{name}` sets an FMI Integer, a 32-bit integer; found {value!r}, outside "
-                        f"[{-2 ** 31}, {2 ** 31 - 1}].")
-    return value
+    items = list(items or []) if kind == "Enumeration" else None
+    listed = f" (items {', '.join(f'{n!r} = {v}' for n, v in items)})" if items is not None else ""
+    try:
+        return _fmi_value(value, kind, items)
+    except FMIValueError as exc:
+        raise TypeError(f"`{name}` sets {article} {kind} variable{listed}; found {value!r} "
+                        f"({type(value).__name__}): {exc}.") from None
 
 
 def enumeration_items(variable):

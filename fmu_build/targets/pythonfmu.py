@@ -19,9 +19,9 @@ import numpy as np
 
 import lsc
 
+from .._description import model_structure, unit_definitions
 from .._model import _complete_at_start, _numeric_dae
 from ._pythonfmu_source import _BUILD_PLACEHOLDER, _SLAVE, _model_source
-from ._runtime import start_name
 from ._vendor import _vendor_ivp
 
 __all__ = ["build_pythonfmu"]
@@ -45,7 +45,7 @@ def build_pythonfmu(spec, dest):
     folder = final.parent
     folder.mkdir(parents=True, exist_ok=True)
     _remove_stale_work_dirs(folder)
-    model_text = _model_source(spec, k_used, dae)
+    model_text, interface = _model_source(spec, k_used, dae)
     build = _build_id(name, model_text)
     prefix = f"lscfmu_{build}"
     script_module, model_module, package = prefix, f"{prefix}_model", f"{prefix}_lsc"
@@ -76,7 +76,7 @@ def build_pythonfmu(spec, dest):
             # description: drop those modules, and only those (their names are this build's own)
             for mod in [m for m in sys.modules if (m == prefix or m.startswith(prefix + "_")) and m not in own_modules]:
                 del sys.modules[mod]
-        _complete_model_description(Path(fmu), spec)
+        _complete_model_description(Path(fmu), interface)
         with open(fmu, "rb") as fh:
             os.fsync(fh.fileno())
         os.replace(fmu, final)
@@ -142,47 +142,33 @@ def _requirements():
 
 
 
-def _complete_model_description(fmu, spec):
-    """Add units, UnitDefinitions, InitialUnknowns and output dependencies."""
+def _complete_model_description(fmu, interface):
+    """Add what pythonfmu does not write from the interface table: units, UnitDefinitions, ModelStructure.
+
+    pythonfmu wrote the variables from their registration, which follows the
+    table (`fmu_build.targets._runtime._variables.register_variables`); each
+    is checked against its row, so a description never declares what the FMU
+    does not do.
+    """
     with zipfile.ZipFile(fmu) as zf:
         contents = {n: zf.read(n) for n in zf.namelist()}
     root = ET.fromstring(contents["modelDescription.xml"])
-    units = {s["name"]: s["unit"] for s in spec.states if s["unit"]}
-    units.update({p["name"]: p["unit"] for p in spec.parameters if p["unit"]})
-    units.update({start_name(s["name"]): s["unit"] for s in spec.states if s["unit"]})
-    units.update({u["name"]: u["unit"] for u in spec.inputs if u["unit"]})
-    units.update({o["name"]: o["unit"] for o in spec.outputs if o["unit"]})
-    # a custom output that reads an input depends on it directly (feedthrough)
-    reads = {o["name"]: sorted(str(s) for s in o["expr"].free_symbols if str(s) in spec.input_symbols)
-             for o in spec.outputs}
-    all_units = sorted(set(units.values()) | {"1/s"})
-    units["lambda"] = "1/s"
-    variables = root.find("ModelVariables")
-    outputs, index_of = [], {}
-    for i, sv in enumerate(variables.findall("ScalarVariable"), start=1):
-        index_of[sv.get("name")] = i
-        real = sv.find("Real")
-        if real is not None and sv.get("name") in units:
-            real.set("unit", units[sv.get("name")])
-        if sv.get("causality") == "output":
-            outputs.append((i, sv.get("name")))
+    rows = interface.rows()
+    written = root.find("ModelVariables").findall("ScalarVariable")
+    found = [(sv.get("name"), int(sv.get("valueReference")), sv.get("causality"), sv.get("variability"), sv[0].tag)
+             for sv in written]
+    declared = [(v["name"], v["vr"], v["causality"], v["variability"], v["type"]) for v in rows]
+    if found != declared:
+        raise RuntimeError(f"pythonfmu wrote the variables {found}; the interface table declares {declared}")
+    for sv, v in zip(written, rows):
+        if v["unit"]:
+            sv[0].set("unit", v["unit"])
     # UnitDefinitions goes right after CoSimulation (FMI 2.0 element order).
-    unit_defs = ET.Element("UnitDefinitions")
-    for u in all_units:
-        ET.SubElement(unit_defs, "Unit", name=u)
-    cs_index = list(root).index(root.find("CoSimulation"))
-    root.insert(cs_index + 1, unit_defs)
+    root.insert(list(root).index(root.find("CoSimulation")) + 1, unit_definitions(rows))
     structure = root.find("ModelStructure")
     for child in list(structure):
         structure.remove(child)
-    outs = ET.SubElement(structure, "Outputs")
-    for i, name in outputs:
-        # states and the residual have no direct feedthrough; custom outputs list the inputs they read
-        depends = " ".join(str(index_of[u]) for u in reads.get(name, []))
-        ET.SubElement(outs, "Unknown", index=str(i), dependencies=depends)
-    init = ET.SubElement(structure, "InitialUnknowns")
-    for i, _ in outputs:
-        ET.SubElement(init, "Unknown", index=str(i))  # depends on the parameters (start values, lambda, ...)
+    model_structure(structure, rows, {v["name"]: i for i, v in enumerate(rows, start=1)}, model_exchange=False)
     ET.indent(root)
     contents["modelDescription.xml"] = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
     with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zf:

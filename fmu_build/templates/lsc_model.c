@@ -436,17 +436,12 @@ static void changed(Instance *c) {
 
 /* ---- value references ----------------------------------------------------- */
 
+/* The block of a Real value reference, -1 beyond them: 0 lambda, 1 parameter in f, 2 start value, 3 input,
+ * 4 state, 5 custom output, 6 constraint residual, 7 derivative of a state, 8 constant (a parameter of A or B,
+ * fixed). model.h gives each value reference's block (VR_KIND) and each block's first (VR_LAMBDA ... VR_K),
+ * both written from the build's one table of the FMU's variables. */
 static int vr_kind(fmi2ValueReference vr) {
-    if (vr >= NR) return -1;
-    if (vr == VR_LAMBDA) return 0;
-    if (vr < VR_X0) return 1;      /* parameter in f */
-    if (vr < VR_U) return 2;       /* start value */
-    if (vr < VR_X) return 3;       /* input */
-    if (vr < VR_Y) return 4;       /* state */
-    if (vr < VR_RES) return 5;     /* custom output */
-    if (vr == VR_RES) return 6;    /* constraint residual */
-    if (vr < VR_K) return 7;       /* derivative of a state */
-    return 8;                      /* constant (a parameter of A or B, fixed) */
+    return vr < NR ? VR_KIND[vr] : -1;
 }
 
 static double get_one(Instance *c, fmi2ValueReference vr) {

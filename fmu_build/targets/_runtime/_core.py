@@ -26,10 +26,8 @@ class LscRuntime(CallSequence, Stepping, Snapshot):
         M = model.MODEL
         self.n = len(M["states"])
         # exact stepping for constant coefficients A, B (the default there); scipy's solvers otherwise
-        self.exact_capable = "exact_degree" in M and not (M["A_varies"] or M["B_varies"])
-        solver_start = EXACT if self.exact_capable else 0
-        self.values = {"lambda": M["lam"], "method": METHODS.index(M["method"]), "project_initial": False,
-                       "rtol": 1e-6, "atol": 1e-9, "solver": solver_start}
+        self.exact_capable = M["exact_capable"]
+        self.values = {}  # every setting, parameter and start value, from its variable's start (register_variables)
         self._exact = None  # _ExactStepper of the current completion
         self._t_start = M["start"]  # the experiment's start (set again at exitInitializationMode)
         self._magnus_history, self._magnus_key = [], None  # (t, A) at the last step ends of the Magnus step
@@ -49,7 +47,7 @@ class LscRuntime(CallSequence, Stepping, Snapshot):
                                                window=windows.get(u["name"], 0.3))
                        for u in M.get("inputs", [])}
         # value reference -> input name (the fast set_real), -> state index (the fast get_real)
-        self._input_of_vr, self._state_of_vr = register_variables(self, slave, solver_start)
+        self._input_of_vr, self._state_of_vr = register_variables(self, slave)
         self._good_values = self._model_values()  # the build checked that these run
         self._fastest_rate = None
 
