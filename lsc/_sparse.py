@@ -38,7 +38,6 @@ import scipy.sparse.linalg
 from ._completion import SETUPS, AlternativeCompletion
 from ._exceptions import DimensionError, IndexDeterminationError
 from ._linalg import validate_rcond
-from ._sparse_integrate import solve_sparse
 from ._sparse_lu import DiagonalSolver, diagonal_of, factorize
 from ._sparse_problem import DENSE_MAX, SparseLinearDAE, input_forcing_of, is_sparse_dae, sparse_equilibration
 from ._sparse_structure import HessenbergForm, SparseStructureError, cols, hessenberg_form, rows
@@ -315,6 +314,8 @@ class SparseCompletion:
         -------
         CompletionResult
         """
+        from ._sparse_integrate import solve_sparse  # scipy.integrate: not loaded by a completion that is not integrated here
+
         return solve_sparse(self, t_span, x0, method=method, t_eval=t_eval, rtol=rtol, atol=atol, project=project,
                             **options)
 

@@ -88,17 +88,25 @@ def build_pythonfmu(spec, dest):
 _WORK_PREFIX = ".lsc-build-"
 
 
-def _copy_runtime(dest):
-    """Copy lsc (its solver parts only), scipy's solvers and the runtime package to the package `dest`."""
+_SPARSE_IMPORTS = ("from ._sparse_problem import", "from ._sparse import")
+
+
+def _copy_runtime(dest, sparse=False):
+    """Copy lsc (its solver parts only), scipy's solvers and the runtime package to the package `dest`.
+
+    `sparse`: keep lsc's sparse set-up (a model of scipy.sparse coefficients); otherwise the copy never imports
+    scipy.sparse.
+    """
     shutil.copytree(Path(lsc.__file__).parent, dest, ignore=shutil.ignore_patterns("__pycache__", "gallery"))
     # The runtime needs neither the gallery (sympy) nor solve_ivp: importing
     # scipy.integrate in an embedded interpreter loads scipy._lib._uarray,
     # whose finalization crashes native hosts at exit (see _vendor_ivp).
+    # A dense model needs no sparse set-up either (scipy.sparse.linalg aborted a native host at exit once).
     lines = (dest / "__init__.py").read_text().splitlines(keepends=True)
-    dropped = ("from . import gallery", "from ._integrate import")
+    dropped = ("from . import gallery", "from ._integrate import") + (() if sparse else _SPARSE_IMPORTS)
     kept = [line for line in lines if not line.startswith(dropped)]
     if len(lines) - len(kept) != len(dropped):  # lsc's __init__ changed shape: fail at build, not in the FMU
-        raise RuntimeError("fmu_build could not strip the gallery and _integrate imports from lsc/__init__.py")
+        raise RuntimeError(f"fmu_build could not strip the imports {dropped} from lsc/__init__.py")
     (dest / "__init__.py").write_text("".join(kept))
     # inside the FMU the runtime is a subpackage of the lsc copy (its `_lsc` imports lsc's public names from there),
     # with scipy's solvers in a subpackage of its own
