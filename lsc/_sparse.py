@@ -38,13 +38,15 @@ import scipy.sparse.linalg
 from ._completion import SETUPS, AlternativeCompletion
 from ._exceptions import DimensionError, IndexDeterminationError
 from ._linalg import validate_rcond
+from ._maps import CompletionMaps, LamAffine
 from ._sparse_lu import DiagonalSolver, diagonal_of, factorize
 from ._sparse_problem import DENSE_MAX, SparseLinearDAE, input_forcing_of, is_sparse_dae, sparse_equilibration
 from ._sparse_structure import HessenbergForm, SparseStructureError, cols, hessenberg_form, rows
 from ._timefunc import TimeFunction, _shape_str
-from ._validate import check_k, check_lam_value
+from ._validate import check_k, check_lam_value, check_times
 
-__all__ = ["HessenbergForm", "SparseCompletion", "SparseStructureError", "complete_sparse", "hessenberg_form"]
+__all__ = ["HessenbergForm", "SparseCompletion", "SparseCompletionMaps", "SparseStructureError", "complete_sparse",
+           "hessenberg_form"]
 
 
 class SparseCompletion:
@@ -67,6 +69,11 @@ class SparseCompletion:
         'alternative'.
     setup : str
         'sparse'.
+    setup_note : str
+        Why the sparse set-up was taken: the structure recognised and the factorizations made.
+    order : int
+        ``p = k + 1``: the forcing jet ``[f; f'; ...; f^(p)]`` the maps (`maps`, `lam_affine`) act on, as for
+        `lsc.AlternativeCompletion` (the blocks beyond the index are zero).
     n_constraints : int
         Number of constraint rows (the dimension of the added dynamics).
     structure : HessenbergForm
@@ -97,10 +104,14 @@ class SparseCompletion:
                 raise IndexDeterminationError(
                     f"`k`={k} is below the differentiation index {s.index} ({s.describe()}). Use k=None.")
         self.k = s.index if k is None else k  # k above the index spans the same constraints: the same completion
+        self.order = self.k + 1  # the forcing jet the maps act on, as the dense alternative completion's
         self.n_constraints = s.n_constraints
         r, _ = sparse_equilibration(A, B)  # column scales cancel from the completion (docs/guide/sparse.md)
         self.row_scales = r
         self._build()
+        made = ", ".join(f"{name} {size} x {size}" for name, (size, _) in self.factorizations.items())
+        self.setup_note = (f"scipy.sparse coefficients, n = {self.n}: {s.describe()}; the alternative completion "
+                           f"through sparse factorizations ({made}), G never formed")
         self._setup_forcing()
         self._step_cache = {}
         self._projector = None
@@ -250,9 +261,119 @@ class SparseCompletion:
         """``(G, g)`` at `t`: ``G`` as a LinearOperator, ``g`` a vector."""
         return self.operator(), self.forcing(t)
 
-    def maps(self, t):
-        """What a consumer needs at `t`: ``G`` (LinearOperator), ``g``, the constraint rows ``C`` and ``cg``."""
-        return SparseMaps(G=self.operator(), g=self.forcing(t), C=self.structure.C, cg=self._cg(t))
+    # -- the public contract (`lsc.CompletionMaps`, `lsc.LamAffine`) -------------------------------------------
+    def _jet_terms(self, v):
+        """``(W f_d, cg, cg')`` of forcing jets ``v = [f; f'; ...; f^(p)]`` (shape (n (p + 1),) or (n (p + 1), r))."""
+        s = self.structure
+        F = v.reshape((self.order + 1, self.n) + v.shape[1:])
+        a = s.n_constraints
+        rhs = self._times_W(F[0][s.diff_rows])
+        cg = sum((G @ F[i] for i, G in enumerate(s.Gamma)), np.zeros((a,) + v.shape[1:]))
+        dcg = sum((G @ F[i + 1] for i, G in enumerate(s.Gamma)), np.zeros((a,) + v.shape[1:]))
+        return rhs, cg, dcg
+
+    def _operators(self, lam):
+        """``(G, W)`` at the rate `lam` as LinearOperators (``W`` on the forcing jet ``[f; ...; f^(p)]``)."""
+        s, n, w = self.structure, self.n, self.n * (self.order + 1)
+
+        def G(x):
+            return self._solve(-self._times_W(self._B_d @ x), -lam * (s.C @ x))
+
+        def W(v):
+            rhs, cg, dcg = self._jet_terms(v)
+            return self._solve(rhs, lam * cg + dcg)
+
+        return (scipy.sparse.linalg.LinearOperator((n, n), matvec=G, matmat=G, dtype=float),
+                scipy.sparse.linalg.LinearOperator((n, w), matvec=W, matmat=W, dtype=float))
+
+    def _maps_of(self, ts, G, W):
+        s, p = self.structure, self.order
+        blocks = list(s.Gamma) + [scipy.sparse.csr_matrix((s.n_constraints, self.n))] * (p + 1 - len(s.Gamma))
+        Wc = scipy.sparse.hstack(blocks, format="csr")
+        return SparseCompletionMaps(ts, G, W, s.C, Wc, p, self.k, np.full(ts.shape, self.lam), self.method)
+
+    def maps(self, t=None):
+        """The completion at the time(s) `t` as operators acting on ``x`` and the forcing's jet (`CompletionMaps`).
+
+        The public contract of every completion (`lsc.Completion.maps`), with
+        the sparse completion's kinds of arrays: ``G`` and the forcing map
+        ``W`` are `scipy.sparse.linalg.LinearOperator` (each product: the
+        set-up's factorizations), the constraint rows ``C`` and their forcing
+        map ``Wc`` are sparse matrices, all the same at every time (constant
+        coefficients) and without the leading time axis. ``t`` and ``lam``
+        have it.
+
+        Parameters
+        ----------
+        t : float or array_like, shape (m,), optional
+            Times (default 0).
+
+        Returns
+        -------
+        SparseCompletionMaps
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from lsc import complete, gallery
+        >>> p = gallery.msd_ind3(50)
+        >>> c = complete(p.dae, "alternative", lam=1.0)
+        >>> m = c.maps([0.5, 1.0])
+        >>> m.G.shape, m.W.shape, m.order
+        ((101, 101), (101, 505), 4)
+        >>> x = p.exact(0.5)
+        >>> bool(np.allclose(m.G @ x + m.forcing(p.dae.f_jet(0.5, m.order))[0], c.rhs(0.5, x)))
+        True
+        """
+        ts = check_times("t", 0.0 if t is None else t)
+        return self._maps_of(ts, *self._operators(self.lam))
+
+    def lam_affine(self, t=None, rtol=1e-10):
+        """The maps split as ``G = G0 + lam G1``, ``W = W0 + lam W1`` (`LamAffine`), as LinearOperators.
+
+        ``lam`` enters the least-squares data only through the constraint
+        rows' target ``-lam (C x - cg) + cg'``, so the split is exact:
+        ``G0``, ``W0`` are the maps at ``lam = 0`` and ``G1 x``, ``W1 v`` the
+        solves of the target ``-C x``, ``cg`` alone. It is checked on a
+        random vector against the maps at the rates 0.3, 7 and the
+        completion's own (`residual`, relative to the size of the terms).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from lsc import complete, gallery
+        >>> p = gallery.stokes_ind2(4)
+        >>> a = complete(p.dae, "alternative", lam=3.0).lam_affine()
+        >>> x = np.ones(p.dae.n)
+        >>> G7 = complete(p.dae, "alternative", lam=7.0).operator()
+        >>> bool(np.allclose(a.G0 @ x + 7.0 * (a.G1 @ x), G7 @ x)), a.residual < 1e-12
+        (True, True)
+        """
+        ts = check_times("t", 0.0 if t is None else t)
+        G0, W0 = self._operators(0.0)
+        s, n, w = self.structure, self.n, self.n * (self.order + 1)
+
+        def G1(x):
+            return self._solve(np.zeros((s.diff_rows.size,) + x.shape[1:]), -(s.C @ x))
+
+        def W1(v):
+            return self._solve(np.zeros((s.diff_rows.size,) + v.shape[1:]), self._jet_terms(v)[1])
+
+        G1 = scipy.sparse.linalg.LinearOperator((n, n), matvec=G1, matmat=G1, dtype=float)
+        W1 = scipy.sparse.linalg.LinearOperator((n, w), matvec=W1, matmat=W1, dtype=float)
+        rng = np.random.default_rng(0)
+        x, v = rng.standard_normal(n), rng.standard_normal(w)
+        residual, rates = 0.0, (0.3, 7.0, self.lam)
+        for rate in rates:
+            G, W = self._operators(rate)
+            for M0, M1, M, y in ((G0, G1, G, x), (W0, W1, W, v)):
+                a, b, ref = M0 @ y, M1 @ y, M @ y
+                size = max(np.abs(ref).max(initial=0.0), 1.0, np.abs(a).max(initial=0.0) + rate * np.abs(b).max(initial=0.0))
+                residual = max(residual, float(np.abs(a + rate * b - ref).max(initial=0.0) / size))
+        if not residual <= rtol:
+            raise ValueError(f"the sparse completion is not affine in lambda here (relative misfit {residual:.1e}): "
+                             "its factorizations are too ill-conditioned to split it")
+        return LamAffine(G0, G1, W0, W1, residual, rates, self.maps(ts))
 
     # -- constraints ------------------------------------------------------------------------------------------
     def _cg(self, t):
@@ -405,11 +526,37 @@ class _StepSolver:
         return self.comp.structure.E_solver.solve(v, trans="T") / self.comp._W_weights
 
 
-class SparseMaps:
-    """A sparse completion's maps at one time: ``G`` (LinearOperator), ``g``, constraint rows ``C``, ``cg``."""
+class SparseCompletionMaps(CompletionMaps):
+    """`CompletionMaps` of a sparse completion (`SparseCompletion.maps`): operators and sparse matrices.
 
-    def __init__(self, G, g, C, cg):
-        self.G, self.g, self.C, self.cg = G, g, C, cg
+    ``G`` (n x n) and ``W`` (n x n (p + 1)) are LinearOperators, ``C`` and
+    ``Wc`` sparse matrices, the same at every time and without the leading
+    time axis (constant coefficients); ``t`` and ``lam`` have it. `forcing`
+    and `C_pinv` work as for dense maps, without forming an n x n array.
+    """
+
+    def forcing(self, fjet):
+        """``g = W fjet`` at each time from the forcing jets `fjet`, shape (m, p + 1, n) or (p + 1, n): (m, n)."""
+        fjet = np.asarray(fjet, dtype=float).reshape(-1, self.W.shape[1])
+        return (self.W @ fjet.T).T
+
+    @property
+    def C_pinv(self):
+        """``C^+`` as a LinearOperator (n x a): ``C^T (C C^T)^-1`` through one sparse factorization."""
+        if self._C_pinv is None:
+            C = self.C
+            gram = factorize(scipy.sparse.csc_matrix(C @ C.T), "C C^T (the constraint rows' Gram matrix)")
+
+            def apply(c):
+                return C.T @ gram.solve(c)
+
+            self._C_pinv = scipy.sparse.linalg.LinearOperator((C.shape[1], C.shape[0]), matvec=apply, matmat=apply,
+                                                              dtype=float)
+        return self._C_pinv
+
+    def __repr__(self):
+        return (f"SparseCompletionMaps(method={self.method!r}, times={self.t.size}, n={self.G.shape[0]}, "
+                f"constraints={self.C.shape[0]}, order={self.order})")
 
 
 def complete_sparse(cls, dae, *, lam=None, k=None, rcond=None, t_span=None, setup="auto"):
