@@ -153,9 +153,11 @@ def run_ida(family, size):
     b_data = _on_pattern(B1, pattern)
     f = p.dae.f
 
+    zero = np.zeros(p.dae.n)
+
     def forcing(t):
         v = f(t).copy()
-        v[s.alg_rows] = c._forcing_terms(t)[1][term]
+        v[s.alg_rows] = -c.constraint_residual(t, zero)[term]  # cg(t): the residual of x = 0 is -cg
         return v
 
     def res_fn(t, y, yp, res):

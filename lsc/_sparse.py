@@ -38,7 +38,8 @@ import scipy.sparse.linalg
 from ._completion import SETUPS, AlternativeCompletion
 from ._exceptions import DimensionError, IndexDeterminationError
 from ._linalg import validate_rcond
-from ._maps import CompletionMaps, LamAffine
+from ._sparse_maps import SparseCompletionMaps, forcing_terms, setup_forcing, sparse_lam_affine, sparse_maps
+from ._sparse_step import step_solver
 from ._sparse_lu import DiagonalSolver, diagonal_of, factorize
 from ._sparse_problem import DENSE_MAX, SparseLinearDAE, input_forcing_of, is_sparse_dae, sparse_equilibration
 from ._sparse_structure import HessenbergForm, SparseStructureError, cols, hessenberg_form, rows
@@ -112,7 +113,7 @@ class SparseCompletion:
         made = ", ".join(f"{name} {size} x {size}" for name, (size, _) in self.factorizations.items())
         self.setup_note = (f"scipy.sparse coefficients, n = {self.n}: {s.describe()}; the alternative completion "
                            f"through sparse factorizations ({made}), G never formed")
-        self._setup_forcing()
+        setup_forcing(self)
         self._step_cache = {}
         self._projector = None
 
@@ -161,36 +162,6 @@ class SparseCompletion:
                 "uniquely solvable, or its constraint rows are dependent."
             ) from None
 
-    def _setup_forcing(self):
-        """The forcing's contributions, mapped once: ``W f_d`` and ``cg = sum Gamma_i f^(i)``."""
-        s, f = self.structure, self.dae.f
-        self._order = s.index  # cg' needs f^(index)
-        self._input = input_forcing_of(self.dae) if f is not None else None
-        if self._input is not None:
-            Bu = self._input.input_map
-            Bu_d = Bu[s.diff_rows]
-            self._Wu = self._W @ Bu_d
-            self._Gu = [g @ Bu for g in s.Gamma]
-
-    def _forcing_terms(self, t, d=0):
-        """``(W f_d^(d), cg^(d), cg^(d+1))`` at `t`: the forcing parts of the least-squares data."""
-        s, f = self.structure, self.dae.f
-        a = s.n_constraints
-        if f is None:
-            return np.zeros(s.diff_rows.size), np.zeros(a), np.zeros(a)
-        order = self._order + d
-        if self._input is not None:
-            U = self._input.u.jet(t, order)
-            rhs = np.asarray(self._Wu @ U[d]).ravel()
-            cg = sum((np.asarray(G @ U[i + d]).ravel() for i, G in enumerate(self._Gu)), np.zeros(a))
-            dcg = sum((np.asarray(G @ U[i + d + 1]).ravel() for i, G in enumerate(self._Gu)), np.zeros(a))
-            return rhs, cg, dcg
-        F = f.jet(t, order)
-        rhs = self._W @ F[d][s.diff_rows]
-        cg = sum((G @ F[i + d] for i, G in enumerate(s.Gamma)), np.zeros(a))
-        dcg = sum((G @ F[i + d + 1] for i, G in enumerate(s.Gamma)), np.zeros(a))
-        return rhs, cg, dcg
-
     # -- the operator -----------------------------------------------------------------------------------------
     def _times_W(self, v):
         if self._w_diag is None:
@@ -236,7 +207,7 @@ class SparseCompletion:
     def rhs(self, t, x):
         """Right-hand side ``G x + g(t)`` in `scipy.integrate.solve_ivp` form (x: (n,) or (n, m))."""
         x = np.asarray(x, dtype=float)
-        rhs_f, cg, dcg = self._forcing_terms(float(t))
+        rhs_f, cg, dcg = forcing_terms(self, float(t))
         if x.ndim == 2:
             rhs_f, cg, dcg = rhs_f[:, None], cg[:, None], dcg[:, None]
         rhs_d = rhs_f - self._times_W(self._B_d @ x)
@@ -245,7 +216,7 @@ class SparseCompletion:
 
     def forcing(self, t, d=0):
         """``g^(d)(t)``: the d-th derivative of the completion's forcing ``g`` (exact, from f's jets)."""
-        rhs_f, cg, dcg = self._forcing_terms(float(t), d)
+        rhs_f, cg, dcg = forcing_terms(self, float(t), d)
         return self._solve(rhs_f, self.lam * cg + dcg)
 
     def operator(self):
@@ -262,55 +233,11 @@ class SparseCompletion:
         return self.operator(), self.forcing(t)
 
     # -- the public contract (`lsc.CompletionMaps`, `lsc.LamAffine`) -------------------------------------------
-    def _jet_terms(self, v):
-        """``(W f_d, cg, cg')`` of forcing jets ``v = [f; f'; ...; f^(p)]`` (shape (n (p + 1),) or (n (p + 1), r))."""
-        s = self.structure
-        F = v.reshape((self.order + 1, self.n) + v.shape[1:])
-        a = s.n_constraints
-        rhs = self._times_W(F[0][s.diff_rows])
-        cg = sum((G @ F[i] for i, G in enumerate(s.Gamma)), np.zeros((a,) + v.shape[1:]))
-        dcg = sum((G @ F[i + 1] for i, G in enumerate(s.Gamma)), np.zeros((a,) + v.shape[1:]))
-        return rhs, cg, dcg
-
-    def _operators(self, lam):
-        """``(G, W)`` at the rate `lam` as LinearOperators (``W`` on the forcing jet ``[f; ...; f^(p)]``)."""
-        s, n, w = self.structure, self.n, self.n * (self.order + 1)
-
-        def G(x):
-            return self._solve(-self._times_W(self._B_d @ x), -lam * (s.C @ x))
-
-        def W(v):
-            rhs, cg, dcg = self._jet_terms(v)
-            return self._solve(rhs, lam * cg + dcg)
-
-        return (scipy.sparse.linalg.LinearOperator((n, n), matvec=G, matmat=G, dtype=float),
-                scipy.sparse.linalg.LinearOperator((n, w), matvec=W, matmat=W, dtype=float))
-
-    def _maps_of(self, ts, G, W):
-        s, p = self.structure, self.order
-        blocks = list(s.Gamma) + [scipy.sparse.csr_matrix((s.n_constraints, self.n))] * (p + 1 - len(s.Gamma))
-        Wc = scipy.sparse.hstack(blocks, format="csr")
-        return SparseCompletionMaps(ts, G, W, s.C, Wc, p, self.k, np.full(ts.shape, self.lam), self.method)
-
     def maps(self, t=None):
         """The completion at the time(s) `t` as operators acting on ``x`` and the forcing's jet (`CompletionMaps`).
 
-        The public contract of every completion (`lsc.Completion.maps`), with
-        the sparse completion's kinds of arrays: ``G`` and the forcing map
-        ``W`` are `scipy.sparse.linalg.LinearOperator` (each product: the
-        set-up's factorizations), the constraint rows ``C`` and their forcing
-        map ``Wc`` are sparse matrices, all the same at every time (constant
-        coefficients) and without the leading time axis. ``t`` and ``lam``
-        have it.
-
-        Parameters
-        ----------
-        t : float or array_like, shape (m,), optional
-            Times (default 0).
-
-        Returns
-        -------
-        SparseCompletionMaps
+        `lsc.Completion.maps` with the sparse kinds of arrays (`SparseCompletionMaps`): ``G``, ``W`` are
+        LinearOperators, ``C``, ``Wc`` sparse matrices, without the time axis that ``t`` (default 0) and ``lam`` have.
 
         Examples
         --------
@@ -325,18 +252,13 @@ class SparseCompletion:
         >>> bool(np.allclose(m.G @ x + m.forcing(p.dae.f_jet(0.5, m.order))[0], c.rhs(0.5, x)))
         True
         """
-        ts = check_times("t", 0.0 if t is None else t)
-        return self._maps_of(ts, *self._operators(self.lam))
+        return sparse_maps(self, check_times("t", 0.0 if t is None else t))
 
     def lam_affine(self, t=None, rtol=1e-10):
         """The maps split as ``G = G0 + lam G1``, ``W = W0 + lam W1`` (`LamAffine`), as LinearOperators.
 
-        ``lam`` enters the least-squares data only through the constraint
-        rows' target ``-lam (C x - cg) + cg'``, so the split is exact:
-        ``G0``, ``W0`` are the maps at ``lam = 0`` and ``G1 x``, ``W1 v`` the
-        solves of the target ``-C x``, ``cg`` alone. It is checked on a
-        random vector against the maps at the rates 0.3, 7 and the
-        completion's own (`residual`, relative to the size of the terms).
+        Exact: ``lam`` enters only the constraint rows' target ``-lam (C x - cg) + cg'``. Checked on a random
+        vector against the maps at the rates 0.3, 7 and the completion's own (`residual`, relative).
 
         Examples
         --------
@@ -349,35 +271,11 @@ class SparseCompletion:
         >>> bool(np.allclose(a.G0 @ x + 7.0 * (a.G1 @ x), G7 @ x)), a.residual < 1e-12
         (True, True)
         """
-        ts = check_times("t", 0.0 if t is None else t)
-        G0, W0 = self._operators(0.0)
-        s, n, w = self.structure, self.n, self.n * (self.order + 1)
-
-        def G1(x):
-            return self._solve(np.zeros((s.diff_rows.size,) + x.shape[1:]), -(s.C @ x))
-
-        def W1(v):
-            return self._solve(np.zeros((s.diff_rows.size,) + v.shape[1:]), self._jet_terms(v)[1])
-
-        G1 = scipy.sparse.linalg.LinearOperator((n, n), matvec=G1, matmat=G1, dtype=float)
-        W1 = scipy.sparse.linalg.LinearOperator((n, w), matvec=W1, matmat=W1, dtype=float)
-        rng = np.random.default_rng(0)
-        x, v = rng.standard_normal(n), rng.standard_normal(w)
-        residual, rates = 0.0, (0.3, 7.0, self.lam)
-        for rate in rates:
-            G, W = self._operators(rate)
-            for M0, M1, M, y in ((G0, G1, G, x), (W0, W1, W, v)):
-                a, b, ref = M0 @ y, M1 @ y, M @ y
-                size = max(np.abs(ref).max(initial=0.0), 1.0, np.abs(a).max(initial=0.0) + rate * np.abs(b).max(initial=0.0))
-                residual = max(residual, float(np.abs(a + rate * b - ref).max(initial=0.0) / size))
-        if not residual <= rtol:
-            raise ValueError(f"the sparse completion is not affine in lambda here (relative misfit {residual:.1e}): "
-                             "its factorizations are too ill-conditioned to split it")
-        return LamAffine(G0, G1, W0, W1, residual, rates, self.maps(ts))
+        return sparse_lam_affine(self, check_times("t", 0.0 if t is None else t), rtol)
 
     # -- constraints ------------------------------------------------------------------------------------------
     def _cg(self, t):
-        return self._forcing_terms(float(t))[1]
+        return forcing_terms(self, float(t))[1]
 
     def constraint_residual(self, t, x):
         """The constraint residual ``C x - cg(t)`` of the structural constraint rows.
@@ -417,28 +315,19 @@ class SparseCompletion:
         return x - self.structure.C.T @ self._projector.solve(c)
 
     def solve(self, t_span, x0, *, method="auto", t_eval=None, rtol=1e-3, atol=1e-6, project=False, **options):
-        """Integrate ``x' = G x + g(t)``: `lsc.solve_completion` (which calls this) for a sparse completion.
+        """Integrate ``x' = G x + g(t)``: what `lsc.solve_completion` runs for a sparse completion.
 
-        ``method``: 'auto' (default) estimates the fastest decay rate of
-        ``G`` (ARPACK, the eigenvalues of largest magnitude) and takes
-        'Rodas4' when that rate times the interval exceeds 100, 'DOP853'
-        otherwise; 'Rodas4' (stiff:
-        a Rosenbrock method whose solves are sparse saddle-point solves,
-        factorizations reused); or an explicit solve_ivp method ('RK23',
-        'RK45', 'DOP853') through the operator. ``t_eval``,
-        ``dense_output``, ``max_step``, ``first_step`` as for solve_ivp. The
-        result's ``method`` and message say what ran and why; a failed run
-        returns ``success=False`` with the reason and the trajectory computed
-        before it.
-
-        Returns
-        -------
-        CompletionResult
+        ``method``: 'auto' (DOP853, or Rodas4 when the fastest decay rate of ``G`` times the interval exceeds
+        100), 'Rodas4' (stiff: its solves are sparse saddle-point solves) or 'RK23', 'RK45', 'DOP853' through
+        the operator (docs/guide/sparse.md). Returns a `CompletionResult`; a failed run has ``success=False``.
         """
-        from ._sparse_integrate import solve_sparse  # scipy.integrate: not loaded by a completion that is not integrated here
+        from ._sparse_integrate import solve_sparse  # scipy.integrate only when integrating (not in an FMU)
 
         return solve_sparse(self, t_span, x0, method=method, t_eval=t_eval, rtol=rtol, atol=atol, project=project,
                             **options)
+
+    def clear_cache(self):
+        """As `lsc.Completion.clear_cache`: nothing to forget (the forcing is read afresh at every evaluation)."""
 
     @property
     def added_eigenvalue(self):
@@ -447,116 +336,12 @@ class SparseCompletion:
 
     # -- implicit steps ---------------------------------------------------------------------------------------
     def step_solver(self, c):
-        """A solver of ``(I - c G) k = r`` (``c > 0``), cached by `c` (`_StepSolver` states how it solves)."""
-        c = float(c)
-        hit = self._step_cache.get(c)
-        if hit is not None:
-            return hit
-        solver = _StepSolver(self, c)
-        self._step_cache[c] = solver
-        while len(self._step_cache) > _STEP_CACHE:
-            self._step_cache.pop(next(iter(self._step_cache)))
-        return solver
+        """A solver of ``(I - c G) k = r`` (``c > 0``), cached by `c` (`lsc._sparse_step.StepSolver` states how)."""
+        return step_solver(self, c)
 
     def __repr__(self):
         return (f"SparseCompletion(n={self.n}, k={self.k}, lam={self.lam:g}, constraints={self.n_constraints}, "
                 f"{self.structure.describe()})")
-
-
-_STEP_CACHE = 4
-
-
-class _StepSolver:
-    """``(I - c G)^-1`` (``c > 0``) through the set-up's Schur factorization and one sparse LU of the pencil
-    ``A + c B`` (rows scaled).
-
-    With ``v = (k - r) / c`` in the least-squares conditions
-    ``H v_d + C_c^T mu = -W B_d k`` (``W = E^T R_d^2``, ``H = W E``) and
-    ``C v = -lam C k``: a row ``i`` of level >= 1 is ``C_i = -C_p^d E^-1 B_d``
-    (``p`` its parent), so ``C_i k = -lam C_p k + S_p mu`` with ``S = C_c H^-1 C_c^T``,
-    and every constraint row gives ``(1 + c lam) C_i k = C_i r``. Hence
-
-        S mu = m,   m_p = (C_i r + lam C_p r) / (1 + c lam)      (one row per parent)
-
-        [E + c B_dd   c B_da] [k_d]   [E r_d - c W^-1 C_c^T mu   ]
-        [B_ad         B_aa  ] [k_a] = [B_a r / (1 + c lam)       ]
-
-    The second matrix is ``A + c B`` with its algebraic rows divided by
-    ``c``: the DAE's own sparsity (for Stokes the implicit-Euler saddle
-    point ``[[I - c L, c A12], [A12^T, 0]]``).
-    """
-
-    def __init__(self, comp, c):
-        s = comp.structure
-        self.comp, self.c = comp, c
-        B_a = rows(comp.dae.B_sparse, s.alg_rows)
-        P = scipy.sparse.bmat([[s.E + c * cols(s.B_d, s.diff_cols), c * cols(s.B_d, s.alg_cols)],
-                               [cols(B_a, s.diff_cols), cols(B_a, s.alg_cols)]], format="csc")
-        self.size = P.shape[0]
-        self.lu = factorize(P, f"A + c B at c = {c:g} (the implicit step's matrix)")
-        self.nnz = self.lu.nnz
-        child = np.flatnonzero(s.parent >= 0)
-        self._child, self._parent_pos = child, np.searchsorted(comp._cont, s.parent[child])
-
-    def solve(self, r):
-        comp, s, c = self.comp, self.comp.structure, self.c
-        scale = 1.0 + c * comp.lam
-        Cr = s.C @ r
-        r_d, _ = comp._split(r)
-        rhs_d = s.E @ r_d
-        if comp._cont.size:
-            m = np.empty(comp._cont.size)
-            m[self._parent_pos] = (Cr[self._child] + comp.lam * Cr[s.parent[self._child]]) / scale
-            rhs_d = rhs_d - c * self._times_W_inverse(comp._C_cT @ self._mu(m))
-        sol = self.lu.solve(np.concatenate([rhs_d, Cr[: s.alg_rows.size] / scale]))
-        nd = s.diff_cols.size
-        return comp._join(sol[:nd], sol[nd:])
-
-    def _mu(self, m):
-        """``mu = S^-1 m`` (``S = C_c H^-1 C_c^T``), through the Schur factorization or the saddle-point one."""
-        if self.comp._schur is not None:
-            return self.comp._schur.solve(m)
-        sol = self.comp._kkt.solve(np.concatenate([np.zeros(self.comp.structure.diff_cols.size), m]))
-        return -sol[self.comp.structure.diff_cols.size:]
-
-    def _times_W_inverse(self, v):
-        if self.comp._w_diag is not None:
-            return v / self.comp._w_diag
-        # W^-1 = R_d^-2 E^-T
-        return self.comp.structure.E_solver.solve(v, trans="T") / self.comp._W_weights
-
-
-class SparseCompletionMaps(CompletionMaps):
-    """`CompletionMaps` of a sparse completion (`SparseCompletion.maps`): operators and sparse matrices.
-
-    ``G`` (n x n) and ``W`` (n x n (p + 1)) are LinearOperators, ``C`` and
-    ``Wc`` sparse matrices, the same at every time and without the leading
-    time axis (constant coefficients); ``t`` and ``lam`` have it. `forcing`
-    and `C_pinv` work as for dense maps, without forming an n x n array.
-    """
-
-    def forcing(self, fjet):
-        """``g = W fjet`` at each time from the forcing jets `fjet`, shape (m, p + 1, n) or (p + 1, n): (m, n)."""
-        fjet = np.asarray(fjet, dtype=float).reshape(-1, self.W.shape[1])
-        return (self.W @ fjet.T).T
-
-    @property
-    def C_pinv(self):
-        """``C^+`` as a LinearOperator (n x a): ``C^T (C C^T)^-1`` through one sparse factorization."""
-        if self._C_pinv is None:
-            C = self.C
-            gram = factorize(scipy.sparse.csc_matrix(C @ C.T), "C C^T (the constraint rows' Gram matrix)")
-
-            def apply(c):
-                return C.T @ gram.solve(c)
-
-            self._C_pinv = scipy.sparse.linalg.LinearOperator((C.shape[1], C.shape[0]), matvec=apply, matmat=apply,
-                                                              dtype=float)
-        return self._C_pinv
-
-    def __repr__(self):
-        return (f"SparseCompletionMaps(method={self.method!r}, times={self.t.size}, n={self.G.shape[0]}, "
-                f"constraints={self.C.shape[0]}, order={self.order})")
 
 
 def complete_sparse(cls, dae, *, lam=None, k=None, rcond=None, t_span=None, setup="auto"):

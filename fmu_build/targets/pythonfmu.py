@@ -150,9 +150,6 @@ def _requirements():
 
 def _complete_model_description(fmu, spec):
     """Add units, UnitDefinitions, InitialUnknowns and output dependencies."""
-    with zipfile.ZipFile(fmu) as zf:
-        contents = {n: zf.read(n) for n in zf.namelist()}
-    root = ET.fromstring(contents["modelDescription.xml"])
     units = {s["name"]: s["unit"] for s in spec.states if s["unit"]}
     units.update({p["name"]: p["unit"] for p in spec.parameters if p["unit"]})
     units.update({start_name(s["name"]): s["unit"] for s in spec.states if s["unit"]})
@@ -161,6 +158,16 @@ def _complete_model_description(fmu, spec):
     # a custom output that reads an input depends on it directly (feedthrough)
     reads = {o["name"]: sorted(str(s) for s in o["expr"].free_symbols if str(s) in spec.input_symbols)
              for o in spec.outputs}
+    _finish_description(fmu, units, reads)
+
+
+def _finish_description(fmu, units, reads):
+    """Add `units` ({variable: unit}; lambda's is 1/s), UnitDefinitions, InitialUnknowns and the outputs'
+    dependencies (`reads`: {output: inputs it reads}; no other output has direct feedthrough)."""
+    with zipfile.ZipFile(fmu) as zf:
+        contents = {n: zf.read(n) for n in zf.namelist()}
+    root = ET.fromstring(contents["modelDescription.xml"])
+    units = dict(units)
     all_units = sorted(set(units.values()) | {"1/s"})
     units["lambda"] = "1/s"
     variables = root.find("ModelVariables")
