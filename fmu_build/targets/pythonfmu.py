@@ -88,17 +88,25 @@ def build_pythonfmu(spec, dest):
 _WORK_PREFIX = ".lsc-build-"
 
 
-def _copy_runtime(dest):
-    """Copy lsc (its solver parts only), scipy's solvers and the runtime package to the package `dest`."""
+_SPARSE_IMPORTS = ("from ._sparse_problem import", "from ._sparse import")
+
+
+def _copy_runtime(dest, sparse=False):
+    """Copy lsc (its solver parts only), scipy's solvers and the runtime package to the package `dest`.
+
+    `sparse`: keep lsc's sparse set-up (a model of scipy.sparse coefficients); otherwise the copy never imports
+    scipy.sparse.
+    """
     shutil.copytree(Path(lsc.__file__).parent, dest, ignore=shutil.ignore_patterns("__pycache__", "gallery"))
-    # The runtime needs neither the gallery (sympy) nor solve_ivp nor the sparse set-up: importing
-    # scipy.integrate in an embedded interpreter loads scipy._lib._uarray, whose finalization crashes
-    # native hosts at exit (see _vendor_ivp); the sparse modules import it and scipy.sparse.
+    # The runtime needs neither the gallery (sympy) nor solve_ivp: importing
+    # scipy.integrate in an embedded interpreter loads scipy._lib._uarray,
+    # whose finalization crashes native hosts at exit (see _vendor_ivp).
+    # A dense model needs no sparse set-up either (scipy.sparse.linalg aborted a native host at exit once).
     lines = (dest / "__init__.py").read_text().splitlines(keepends=True)
-    dropped = ("from . import gallery", "from ._integrate import", "from ._sparse_problem import", "from ._sparse import")
+    dropped = ("from . import gallery", "from ._integrate import") + (() if sparse else _SPARSE_IMPORTS)
     kept = [line for line in lines if not line.startswith(dropped)]
     if len(lines) - len(kept) != len(dropped):  # lsc's __init__ changed shape: fail at build, not in the FMU
-        raise RuntimeError("fmu_build could not strip the gallery, _integrate and sparse imports from lsc/__init__.py")
+        raise RuntimeError(f"fmu_build could not strip the imports {dropped} from lsc/__init__.py")
     (dest / "__init__.py").write_text("".join(kept))
     # inside the FMU the runtime is a subpackage of the lsc copy (its `_lsc` imports lsc's public names from there),
     # with scipy's solvers in a subpackage of its own
@@ -169,6 +177,52 @@ def _complete_model_description(fmu, interface):
     for child in list(structure):
         structure.remove(child)
     model_structure(structure, rows, {v["name"]: i for i, v in enumerate(rows, start=1)}, model_exchange=False)
+    ET.indent(root)
+    contents["modelDescription.xml"] = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zf:
+        for n, data in contents.items():
+            zf.writestr(n, data)
+
+
+def _finish_description(fmu, units, reads):
+    """Add `units` ({variable: unit}; lambda's is 1/s), UnitDefinitions, InitialUnknowns and the outputs'
+    dependencies (`reads`: {output: inputs it reads}; no other output has direct feedthrough).
+
+    For the sparse target (`fmu_build.targets.sparse_pythonfmu`), whose variables are not in an interface
+    table (`_complete_model_description` does the same from the table for the dense one).
+    """
+    with zipfile.ZipFile(fmu) as zf:
+        contents = {n: zf.read(n) for n in zf.namelist()}
+    root = ET.fromstring(contents["modelDescription.xml"])
+    units = dict(units)
+    all_units = sorted(set(units.values()) | {"1/s"})
+    units["lambda"] = "1/s"
+    variables = root.find("ModelVariables")
+    outputs, index_of = [], {}
+    for i, sv in enumerate(variables.findall("ScalarVariable"), start=1):
+        index_of[sv.get("name")] = i
+        real = sv.find("Real")
+        if real is not None and sv.get("name") in units:
+            real.set("unit", units[sv.get("name")])
+        if sv.get("causality") == "output":
+            outputs.append((i, sv.get("name")))
+    # UnitDefinitions goes right after CoSimulation (FMI 2.0 element order).
+    unit_defs = ET.Element("UnitDefinitions")
+    for u in all_units:
+        ET.SubElement(unit_defs, "Unit", name=u)
+    cs_index = list(root).index(root.find("CoSimulation"))
+    root.insert(cs_index + 1, unit_defs)
+    structure = root.find("ModelStructure")
+    for child in list(structure):
+        structure.remove(child)
+    outs = ET.SubElement(structure, "Outputs")
+    for i, name in outputs:
+        # states and the residual have no direct feedthrough; custom outputs list the inputs they read
+        depends = " ".join(str(index_of[u]) for u in reads.get(name, []))
+        ET.SubElement(outs, "Unknown", index=str(i), dependencies=depends)
+    init = ET.SubElement(structure, "InitialUnknowns")
+    for i, _ in outputs:
+        ET.SubElement(init, "Unknown", index=str(i))  # depends on the parameters (start values, lambda, ...)
     ET.indent(root)
     contents["modelDescription.xml"] = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
     with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zf:

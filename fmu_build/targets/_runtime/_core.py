@@ -104,8 +104,14 @@ class LscRuntime(CallSequence, Stepping, Snapshot):
         self.inputs[name].value = float(value)
 
     def _check(self, name, value):
+        sparse = self.model.MODEL.get("sparse", False)
         if name == "method":
+            if sparse and value != METHODS.index("alternative"):
+                return "a sparse model has the alternative completion only (method 2)"
             return None if value in (0, 1, 2) else "method must be 0 (standard), 1 (stabilized) or 2 (alternative)"
+        if name == "solver" and sparse and value not in (SOLVERS.index("RK45"), SOLVERS.index("DOP853")):
+            return (f"a sparse model (n = {self.n}) takes solver 0 (RK45) or 1 (DOP853): its completion is an operator "
+                    "applied through sparse factorizations, and solvers 2..5 need G as an n x n matrix")
         if name == "solver":
             if value == EXACT and not self.exact_capable:
                 return "solver 4 (exact) needs constant coefficients A and B; use 0..3 or 5"
@@ -176,10 +182,13 @@ class LscRuntime(CallSequence, Stepping, Snapshot):
                 # the generated code takes the input jets [u, u', ...] estimated at t as a 4th argument
                 return JetCallable(lambda t, order: jet_fn(t, params, order, {n: s.jet(t) for n, s in inputs.items()}))
 
-            A = with_inputs(model.A_jet) if M.get("A_inputs") else coefficient(model.A_jet, M["A_varies"])
-            B = with_inputs(model.B_jet) if M.get("B_inputs") else coefficient(model.B_jet, M["B_varies"])
-            f = with_inputs(model.f_jet) if inputs else coefficient(model.f_jet, M["f_varies"])
-            dae = LinearDAE(A, B, f)
+            if M.get("sparse"):
+                dae = self._sparse_dae()
+            else:
+                A = with_inputs(model.A_jet) if M.get("A_inputs") else coefficient(model.A_jet, M["A_varies"])
+                B = with_inputs(model.B_jet) if M.get("B_inputs") else coefficient(model.B_jet, M["B_varies"])
+                f = with_inputs(model.f_jet) if inputs else coefficient(model.f_jet, M["f_varies"])
+                dae = LinearDAE(A, B, f)
             span = (M["start"], M["stop"]) if not dae.is_constant else None
             if M.get("A_inputs") or M.get("B_inputs"):
                 # Inputs are known only up to now (beyond, the estimate is an extrapolation), so
@@ -192,6 +201,23 @@ class LscRuntime(CallSequence, Stepping, Snapshot):
         self._dirty = False
         self._good_values = self._model_values()
         return self._completion
+
+    def _sparse_dae(self):
+        """The sparse model's DAE: scipy.sparse ``A``, ``B``; ``f = f0 + B_u u`` with the inputs' estimated jets."""
+        A, B, B_u, f0 = self.model.sparse_data()
+        if B_u is None:
+            return LinearDAE(A, B, f0)
+        inputs = list(self.inputs.values())  # in the order of B_u's columns (u[1], u[2], ...)
+
+        def jet(t, order):
+            U = np.array([s.jet(t)[: order + 1] for s in inputs]).reshape(len(inputs), -1)
+            out = np.zeros((order + 1, A.shape[0]))
+            out[: U.shape[1]] = (B_u @ U).T
+            if f0 is not None:
+                out[0] += f0
+            return out
+
+        return LinearDAE(A, B, JetCallable(jet))
 
     def _output(self, function):
         """A custom output at the current time, state, parameters and latest input values."""
