@@ -17,7 +17,8 @@ import scipy.sparse.linalg
 from scipy.integrate import OdeSolver, solve_ivp
 from scipy.integrate._ivp.base import DenseOutput
 
-from ._integrate import CompletionResult, _backward_refusal, _failed, _ForcingFailed, _partial_run, _recording
+from ._integrate import CompletionResult, _backward_refusal, _failed
+from ._ivp import ForcingFailed as _ForcingFailed, _recorded, _recording
 from ._validate import check_state, check_t_eval, check_t_span, check_tolerances
 
 __all__ = ["Rodas4", "SPARSE_METHODS", "fastest_rate", "solve_sparse"]
@@ -244,8 +245,10 @@ def solve_sparse(completion, t_span, x0, *, method="auto", t_eval=None, rtol=1e-
         note = (f"; method='auto' chose {method!r} (estimated fastest decay rate {rate:.3g} x length "
                 f"{abs(t1 - t0):.3g} = {stiffness:.3g} {'>' if stiffness > _STIFF else '<='} {_STIFF:g})")
     rhs = completion.rhs
+    nfev = [0]
 
     def fun(t, x):
+        nfev[0] += 1
         try:
             out = rhs(t, x)
         except Exception as exc:  # noqa: BLE001 - anything from the forcing ends the run with what it has
@@ -257,15 +260,19 @@ def solve_sparse(completion, t_span, x0, *, method="auto", t_eval=None, rtol=1e-
     base = Rodas4 if method == "Rodas4" else method
     if method == "Rodas4":
         options["completion"] = completion
-    solvers = []
+    steps, solvers = [], []
+    recording = _recording(base, steps, t_eval)
+    if isinstance(recording, type):  # keep the solver, for its count of factorizations
+        def __init__(self, *args, _init=recording.__init__, **kwargs):
+            _init(self, *args, **kwargs)
+            solvers.append(self)
+
+        recording = type(recording.__name__, (recording,), {"__init__": __init__})
     try:
-        sol = solve_ivp(fun, (t0, t1), x0, method=_recording(base, solvers), t_eval=t_eval, rtol=rtol, atol=atol,
-                        **options)
+        sol = solve_ivp(fun, (t0, t1), x0, method=recording, t_eval=t_eval, rtol=rtol, atol=atol, **options)
     except _ForcingFailed as exc:
-        t_ok = getattr(solvers[-1], "t", t0) if solvers else t0
-        opts = dict(options, rtol=rtol, atol=atol)
-        partial = _partial_run(fun, t0, t_ok, x0, base, t_eval, opts)
-        return _failed(completion, exc.t, exc.exc, partial)
+        ts, xs = _recorded(steps, t0, x0, t_eval)
+        return _failed(completion, exc, ts, xs, nfev[0], t1, note)
     nlu = getattr(solvers[-1], "nlu", 0) if solvers else 0
     return CompletionResult(
         t=sol.t, x=sol.y, success=bool(sol.success), status=sol.status, message=sol.message + note,
