@@ -95,12 +95,14 @@ def _copy_runtime(dest):
     # scipy.integrate in an embedded interpreter loads scipy._lib._uarray,
     # whose finalization crashes native hosts at exit (see _vendor_ivp).
     lines = (dest / "__init__.py").read_text().splitlines(keepends=True)
-    dropped = ("from . import gallery", "from ._integrate import")
+    # (the sparse completions import _integrate too; the runtime builds dense ones)
+    dropped = ("from . import gallery", "from ._integrate import", "from ._sparse import",
+               "from ._sparse_problem import")
     kept = [line for line in lines if not line.startswith(dropped)]
     if len(lines) - len(kept) != len(dropped):  # lsc's __init__ changed shape: fail at build, not in the FMU
         raise RuntimeError("fmu_build could not strip the gallery and _integrate imports from lsc/__init__.py")
     (dest / "__init__.py").write_text("".join(kept))
-    _vendor_ivp(dest / "_ivp")
+    _vendor_ivp(dest / "_scipy_ivp")  # (lsc's own _ivp is another module)
     # inside the FMU the runtime is a subpackage of the lsc copy (its `_lsc` imports from there)
     shutil.copytree(_RUNTIME, dest / "_fmu_runtime", ignore=shutil.ignore_patterns("__pycache__"))
 

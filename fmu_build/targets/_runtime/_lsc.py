@@ -2,13 +2,13 @@
 
 Inside a built FMU this package is ``<lsc copy>._fmu_runtime``: the parent
 package is the FMU's own copy of lsc, with scipy's solvers copied into its
-``_ivp`` (see `fmu_build.targets._vendor`), so the FMU never imports
+``_scipy_ivp`` (see `fmu_build.targets._vendor`), so the FMU never imports
 ``scipy.integrate``. Imported from fmu_build itself (documentation, tests),
 the parent is ``fmu_build.targets`` and the installed lsc and scipy are used.
 """
 
 try:  # inside a built FMU: scipy's solvers without importing scipy.integrate
-    from .._ivp import BDF, DOP853, RK45, Radau
+    from .._scipy_ivp import BDF, DOP853, RK45, Radau
 except ImportError:
     from scipy.integrate import BDF, DOP853, RK45, Radau
 
