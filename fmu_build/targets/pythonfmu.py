@@ -95,16 +95,15 @@ def _copy_runtime(dest):
     # scipy.integrate in an embedded interpreter loads scipy._lib._uarray,
     # whose finalization crashes native hosts at exit (see _vendor_ivp).
     lines = (dest / "__init__.py").read_text().splitlines(keepends=True)
-    # (the sparse completions import _integrate too; the runtime builds dense ones)
-    dropped = ("from . import gallery", "from ._integrate import", "from ._sparse import",
-               "from ._sparse_problem import")
+    dropped = ("from . import gallery", "from ._integrate import")
     kept = [line for line in lines if not line.startswith(dropped)]
     if len(lines) - len(kept) != len(dropped):  # lsc's __init__ changed shape: fail at build, not in the FMU
         raise RuntimeError("fmu_build could not strip the gallery and _integrate imports from lsc/__init__.py")
     (dest / "__init__.py").write_text("".join(kept))
-    _vendor_ivp(dest / "_scipy_ivp")  # (lsc's own _ivp is another module)
-    # inside the FMU the runtime is a subpackage of the lsc copy (its `_lsc` imports from there)
+    # inside the FMU the runtime is a subpackage of the lsc copy (its `_lsc` imports lsc's public names from there),
+    # with scipy's solvers in a subpackage of its own
     shutil.copytree(_RUNTIME, dest / "_fmu_runtime", ignore=shutil.ignore_patterns("__pycache__"))
+    _vendor_ivp(dest / "_fmu_runtime" / "_scipy_ivp")
 
 
 def _remove_stale_work_dirs(folder):
