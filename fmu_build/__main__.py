@@ -428,7 +428,8 @@ def _add_cosim(sub):
 
 
 def _write_csv(path, result):
-    """The result as CSV: numbers with 17 digits, Booleans as 0/1, Strings quoted where needed."""
+    """The result as CSV: numbers with 17 digits, integers exact, Booleans as 0/1, Strings quoted where needed,
+    Binary values as hexadecimal text."""
     import csv
 
     import numpy as np
@@ -436,6 +437,8 @@ def _write_csv(path, result):
     def cell(x):
         if isinstance(x, str):
             return x
+        if isinstance(x, (bytes, bytearray)):
+            return bytes(x).hex()
         if isinstance(x, (bool, np.bool_)) or isinstance(x, (int, np.integer)):
             return str(int(x))
         return format(float(x), ".17g")
@@ -499,7 +502,8 @@ def _run_cosim(args):
 
         fig, ax = plt.subplots(figsize=(7, 4))
         for n in names[1:]:
-            ax.plot(result["time"], result[n], label=n)
+            if result.dtype[n].kind in "biuf":  # Strings and Binary values are in the CSV only
+                ax.plot(result["time"], result[n], label=n)
         ax.set_xlabel("time")
         ax.legend(fontsize=7)
         fig.tight_layout()
