@@ -334,3 +334,34 @@ print(json.dumps(rows))
 """)
     assert out["3"] == out["2"]
     assert all(out["3"]["success"]) and max(out["3"]["error"]) < 1e-8
+
+
+@pytest.mark.parametrize("value, kind, expected", [
+    ("255", "UInt8", 255), ("18446744073709551615", "UInt64", 2 ** 64 - 1), (-2 ** 63, "Int64", -2 ** 63),
+    ("0.5", "Float32", 0.5), (1e300, "Float64", 1e300),
+    (300, "Int8", r"`n` sets an FMI Int8; found 300, outside \[-128, 127\]"),
+    (-1, "UInt16", r"`n` sets an FMI UInt16; found -1, outside \[0, 65535\]"),
+    (2.5, "Int16", r"`n` sets an Int16 variable; found 2.5"),
+    (2.0 ** 60, "UInt64", r"`n` sets a UInt64 variable; found 1.15\d*e\+18 \(float\)"),
+    (1e39, "Float32", "`n` sets a Float32 variable, magnitudes up to"),
+    ("x", "UInt32", "`n` sets a UInt32 variable; found 'x'"),
+])
+def test_a_study_grid_value_is_checked_against_its_fmi3_type(value, kind, expected):
+    """A grid value for an FMI 3.0 variable: read by its type (an integer never through a float beyond 2^53), or a
+    TypeError naming the grid's name, the type and its range."""
+    from fmu_build.study._runs import fmi_value
+
+    if isinstance(expected, str):
+        with pytest.raises(TypeError, match=expected):
+            fmi_value("n", value, kind)
+    else:
+        assert fmi_value("n", value, kind) == expected
+
+
+def test_a_study_refuses_array_outputs_and_clocks(ref):
+    """StateSpace 3.0 (array output y) and Clocks 3.0 (Scheduled Execution only) are refused before anything runs."""
+    from fmu_build import sweep
+
+    for name, message in (("StateSpace", r"has array outputs \(y\).*refused"), ("Clocks", "no Co-Simulation interface")):
+        with pytest.raises(ValueError, match=message):
+            sweep(ref["3.0"][name], {"step": [0.1]}, t_span=(0.0, 1.0), n_workers=1, progress=False)

@@ -354,7 +354,7 @@ def fmi_value(name, value, kind, items=None):
     and "0" are False; a String takes only a text (a number is not guessed to
     be one).
     """
-    article = "an" if kind[0] in "AEIOU" else "a"
+    article = "an" if kind[0] in "AEIOU" and not kind.startswith("UInt") else "a"  # a UInt8 ("you-int")
     if kind == "Enumeration":
         items = list(items or [])
         listed = ", ".join(f"{n!r} = {v}" for n, v in items)
