@@ -407,8 +407,8 @@ def _gallery(text):
 def _add_cosim(sub):
     cosim = sub.add_parser(
         "cosim", help="co-simulate FMUs connected by an SSP file (.ssp/.ssd)",
-        description="Co-simulate the FMUs of an SSP system (an .ssp archive or a SystemStructure.ssd) with a "
-                    "fixed macro step in fmpy, and write the recorded variables as CSV (columns 'time' and "
+        description="Co-simulate the FMUs (FMI 2.0 and 3.0 Co-Simulation) of an SSP system (an .ssp archive or a "
+                    "SystemStructure.ssd) with a fixed macro step in fmpy, and write the recorded variables as CSV (columns 'time' and "
                     "'component.variable'). A run that stops early writes what it computed and exits 1.",
         epilog="example: lsc-fmu cosim out/path_control.ssp --stop-time 10 --step-size 0.01 -o out/result.csv --plot")
     cosim.add_argument("system", help="the .ssp or .ssd file")
