@@ -446,8 +446,8 @@ def _gallery(text):
 def _add_cosim(sub):
     cosim = sub.add_parser(
         "cosim", help="co-simulate FMUs connected by an SSP file (.ssp/.ssd)",
-        description="Co-simulate the FMUs of an SSP system (an .ssp archive or a SystemStructure.ssd) with a "
-                    "fixed macro step in fmpy, and write the recorded variables as CSV (columns 'time' and "
+        description="Co-simulate the FMUs (FMI 2.0 and 3.0 Co-Simulation) of an SSP system (an .ssp archive or a "
+                    "SystemStructure.ssd) with a fixed macro step in fmpy, and write the recorded variables as CSV (columns 'time' and "
                     "'component.variable'). A run that stops early writes what it computed and exits 1.",
         epilog="example: lsc-fmu cosim out/path_control.ssp --stop-time 10 --step-size 0.01 -o out/result.csv --plot")
     cosim.add_argument("system", help="the .ssp or .ssd file")
@@ -467,7 +467,8 @@ def _add_cosim(sub):
 
 
 def _write_csv(path, result):
-    """The result as CSV: numbers with 17 digits, Booleans as 0/1, Strings quoted where needed."""
+    """The result as CSV: numbers with 17 digits, integers exact, Booleans as 0/1, Strings quoted where needed,
+    Binary values as hexadecimal text."""
     import csv
 
     import numpy as np
@@ -475,6 +476,8 @@ def _write_csv(path, result):
     def cell(x):
         if isinstance(x, str):
             return x
+        if isinstance(x, (bytes, bytearray)):
+            return bytes(x).hex()
         if isinstance(x, (bool, np.bool_)) or isinstance(x, (int, np.integer)):
             return str(int(x))
         return format(float(x), ".17g")
@@ -538,7 +541,8 @@ def _run_cosim(args):
 
         fig, ax = plt.subplots(figsize=(7, 4))
         for n in names[1:]:
-            ax.plot(result["time"], result[n], label=n)
+            if result.dtype[n].kind in "biuf":  # Strings and Binary values are in the CSV only
+                ax.plot(result["time"], result[n], label=n)
         ax.set_xlabel("time")
         ax.legend(fontsize=7)
         fig.tight_layout()

@@ -14,10 +14,21 @@ import numbers
 
 import numpy as np
 
-__all__ = ["FMIValueError", "fmi_value", "steps_over"]
+__all__ = ["FMIValueError", "fmi_value", "steps_over", "article", "RANGES", "FLOAT32_MAX"]
 
 INT32 = (-2 ** 31, 2 ** 31 - 1)  # an FMI Integer: ctypes would silently wrap a larger one (2**32 + 3 reaches 3)
+# FMI 3.0's sized integers, each within its range (FMI 2.0's Integer is Int32)
+RANGES = {"Integer": INT32, "Int8": (-2 ** 7, 2 ** 7 - 1), "UInt8": (0, 2 ** 8 - 1),
+          "Int16": (-2 ** 15, 2 ** 15 - 1), "UInt16": (0, 2 ** 16 - 1), "Int32": INT32,
+          "UInt32": (0, 2 ** 32 - 1), "Int64": (-2 ** 63, 2 ** 63 - 1), "UInt64": (0, 2 ** 64 - 1)}
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+EXACT_IN_DOUBLE = 2 ** 53  # integers up to this magnitude are exact in a double
 _TRUE, _FALSE = ("true", "1"), ("false", "0")
+
+
+def article(kind):
+    """'an' or 'a' before an FMI type's name: an Int8, an Integer, an Enumeration; a UInt8 ("you-int")."""
+    return "an" if kind[0] in "AEIOU" and not kind.startswith("UInt") else "a"
 
 
 class FMIValueError(ValueError):
@@ -43,6 +54,32 @@ def _whole(value, kind):
     return int(value)
 
 
+def _sized(value, kind):
+    """`value` as an FMI 3.0 integer of type `kind` (Int8 ... UInt64) within its range, or FMIValueError."""
+    lo, hi = RANGES[kind]
+    bad = FMIValueError(f"{article(kind)} {kind} must be a whole number in [{lo}, {hi}]")
+    if isinstance(value, str):
+        text = value.strip()
+        try:
+            value = int(text, 10)
+        except ValueError:
+            try:
+                value = float(text)
+            except ValueError:
+                raise bad from None
+    if not _number(value):
+        raise bad
+    if not isinstance(value, (int, np.integer)):
+        if not (math.isfinite(value) and float(value) == math.floor(value)):
+            raise bad
+        if abs(value) > EXACT_IN_DOUBLE:
+            raise FMIValueError(f"a float beyond 2^53 (where floats skip integers) is no {kind}: give it as an "
+                                "int or a text")
+    if not lo <= int(value) <= hi:
+        raise bad
+    return int(value)
+
+
 def fmi_value(value, kind, items=None):
     """`value` as the value of an FMI variable of type `kind`, or FMIValueError saying what `kind` takes.
 
@@ -50,7 +87,11 @@ def fmi_value(value, kind, items=None):
     ----------
     value : object
         A bool, a number or a text.
-    kind : {'Real', 'Integer', 'Boolean', 'String', 'Enumeration'}
+    kind : {'Real', 'Integer', 'Boolean', 'String', 'Enumeration'} or an FMI 3.0 type
+        FMI 3.0's 'Float64', 'Float32' (a finite value beyond its range is
+        refused) and 'Int8' ... 'UInt64' (each within its range; an integer
+        is never read through a float beyond 2^53: a text is read as an
+        integer, a float must be whole and at most 2^53 in magnitude).
     items : sequence of (str, int), optional
         An Enumeration's items; `value` is then an item's name or value
         (without items an Enumeration value is a 32-bit Integer).
@@ -61,6 +102,8 @@ def fmi_value(value, kind, items=None):
     (False, True, 3, 2.5)
     >>> fmi_value("Option 2", "Enumeration", items=[("Option 1", 1), ("Option 2", 2)])
     2
+    >>> fmi_value("18446744073709551615", "UInt64")
+    18446744073709551615
     >>> fmi_value(0.3, "Boolean")
     Traceback (most recent call last):
     ...
@@ -87,7 +130,14 @@ def fmi_value(value, kind, items=None):
         return number
     if kind in ("Integer", "Enumeration"):
         return _whole(value, kind)
-    if kind == "Real":
+    if kind in RANGES:
+        return _sized(value, kind)
+    if kind == "Float32":
+        number = fmi_value(value, "Real")
+        if math.isfinite(number) and abs(number) > FLOAT32_MAX:
+            raise FMIValueError(f"a Float32 holds magnitudes up to {FLOAT32_MAX!r}")
+        return number
+    if kind in ("Real", "Float64"):
         if isinstance(value, str):
             try:
                 return float(value.strip())
@@ -95,7 +145,7 @@ def fmi_value(value, kind, items=None):
                 pass
         elif _number(value):
             return float(value)
-        raise FMIValueError("a Real must be a number")
+        raise FMIValueError(f"a {kind} must be a number")
     if kind == "String":
         if not isinstance(value, str):
             raise FMIValueError("a String must be a str")
@@ -106,6 +156,15 @@ def fmi_value(value, kind, items=None):
         except UnicodeEncodeError as exc:
             raise FMIValueError(f"a String must be encodable as UTF-8 ({exc.reason})") from None
         return value
+    if kind == "Binary":  # FMI 3.0
+        if isinstance(value, (bytes, bytearray)):
+            return bytes(value)
+        if isinstance(value, str):  # the hexadecimal text of a model description's start value
+            try:
+                return bytes.fromhex(value)
+            except ValueError:
+                pass
+        raise FMIValueError("a Binary must be bytes or a hexadecimal text")
     raise FMIValueError(f"variables of type {kind} cannot be set")
 
 
