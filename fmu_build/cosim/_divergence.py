@@ -10,7 +10,12 @@ the connection graph (a feed-forward coupling cannot diverge: each FMU only inte
 and calls a value divergent when, over the last ``WINDOW`` steps, its defect exceeded the largest
 magnitude it had before in all but two of them, it changed sign, and it grew ``GROWTH``-fold. A root above
 +1 makes an exponential like any physical one and cannot be told from the values; the loops that make one
-(an algebraic loop cut with gain above 1) are checked at the start (``LoopSolver.start``).
+(an algebraic loop cut with gain above 1) are checked at the start (``LoopSolver.start``). What can be told
+is whether the step resolves the growth: a value along a cycle that grew ``GROWTH``-fold over the window
+while its defect stayed above ``UNRESOLVED`` of its size in all but two steps changes faster than the
+extrapolation follows (for ``e^(mu t)`` the relative defect of a degree-q extrapolation is about
+``(mu H)^(q + 1)``): the run stops, naming it, whether the growth is the coupling's own instability (a
+root ``r > 1`` gives ``(r - 1)^(q + 1) / r``) or a physical one the macro step is too long for.
 """
 
 import math
@@ -24,6 +29,7 @@ RECOMMENDED = ("docs/cosimulation.md recommends, for a loop through a differenti
                "lambda_per_step=1.0 (or a smaller loop gain; see 'Divergence')")
 WINDOW = 8  # consecutive steps of a value off its extrapolation by more than its size that mean divergence
 GROWTH = 2.0  # growth of the value over those steps
+UNRESOLVED = 0.05  # a defect above this fraction of the value, step after step: the step does not resolve it
 
 
 class DivergenceMonitor:
@@ -36,6 +42,7 @@ class DivergenceMonitor:
         n = len(layout.sources)
         self.peak = np.zeros(n)
         self.off, self.values = np.zeros((0, n), dtype=bool), np.zeros((0, n))
+        self.fast = np.zeros((0, n), dtype=bool)
         self.scale = 1.0
 
     def start(self, value):
@@ -55,8 +62,10 @@ class DivergenceMonitor:
             raise _Stop(f"|{self.layout.name(s)}| = {mag[s]:.3g} exceeds max_growth ({self.max_growth:.3g}) times "
                         f"the start scale ({self.scale:.3g}) at t = {t!r}")
         off = self.watch & (defect > self.peak) & (self.peak > 0)
+        fast = self.watch & (defect > UNRESOLVED * mag) & (mag > 0)
         self.peak = np.maximum(self.peak, mag)
         self.off = np.vstack([self.off, off])[-WINDOW:]
+        self.fast = np.vstack([self.fast, fast])[-WINDOW:]
         self.values = np.vstack([self.values, value])[-(WINDOW + 1):]
         if len(self.off) < WINDOW:
             return
@@ -68,6 +77,14 @@ class DivergenceMonitor:
             self._diverged(s, t, f"{self.layout.name(s)} left its extrapolation by more than the largest magnitude "
                                  f"it had before in {int(self.off[:, s].sum())} of the last {WINDOW} steps, swinging "
                                  f"through zero and growing {mag[s] / first[s]:.3g}-fold (to {value[s]:.3g})")
+        grows = np.flatnonzero((self.fast.sum(axis=0) >= WINDOW - 2) & (mag > GROWTH * first))
+        if grows.size:
+            s = int(grows[0])
+            self._diverged(s, t, f"{self.layout.name(s)} grew {mag[s] / first[s]:.3g}-fold (to {value[s]:.3g}) over the "
+                                 f"last {WINDOW} steps, off its extrapolation by more than {UNRESOLVED:.0%} of its size "
+                                 f"in {int(self.fast[:, s].sum())} of them: the macro step does not resolve a growth "
+                                 "that fast (a physical one needs a shorter step; one the components do not have is "
+                                 "the coupling's own instability)")
 
     def _diverged(self, s, t, what):
         name = self.layout.name(s)
