@@ -78,7 +78,8 @@ def build_loop_system(dest, g=0.2, plant="pythonfmu", method="alternative", lam=
                                         (1.0, 1.0 / (1.0 + g)), output_names=("x1", "x2"), input_name="w",
                                         follower=True)
     if plant == "pythonfmu":
-        lag = plants.build_lag_plant(dest / "fmus", g=g)
+        # a model name per g: pythonfmu runs one model module per name in a process (the master refuses a second)
+        lag = plants.build_lag_plant(dest / "fmus", name="LagPlant_g" + f"{g:g}".replace(".", "_").replace("-", "m"), g=g)
         w, u = "w", "u"
     else:
         lag = plants.build_linear_plant(dest / "fmus", "Lag", [[-1.0, 0.0], [0.0, 0.0]], [g, 0.0], (1.0, 0.0),
