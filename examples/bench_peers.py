@@ -216,7 +216,7 @@ def _ca_entries(tf, t, shape):
         import sympy
 
         flat = list(sympy.Matrix(tf.expr).reshape(1, size))
-        fn = sympy.lambdify(tf._t, flat, modules=[_ca_functions(), "math"])
+        fn = sympy.lambdify(tf.symbol, flat, modules=[_ca_functions(), "math"])
         values = fn(t)
         return [None if (e == 0) is True or e.is_zero else v for e, v in zip(flat, values)], None
     if isinstance(getattr(tf, "fn", None), CanonicalForcing):

@@ -41,15 +41,16 @@ def main(n=200):
         t0 = time.perf_counter()
         c = lsc.complete(p.dae, method, lam=lam)
         setup = time.perf_counter() - t0
-        G, g = c._G, c._W
-        order = c._order
+        maps = c.maps()
+        G, g = maps.G[0], maps.W[0]
+        order = maps.order
         f_jet = p.dae.f.jet
 
         def hand(t, x):
             return G @ x + g @ f_jet(t, order).reshape(-1)
 
         c0 = lsc.complete(homogeneous, method, lam=lam, k=k)
-        G0 = c0._G
+        G0 = c0.maps().G[0]
 
         def hand0(t, x):
             return G0 @ x

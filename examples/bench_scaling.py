@@ -67,8 +67,9 @@ def differences(dae):
         d = lsc.complete(dae, method, lam=lam, setup="dense")
         s = lsc.complete(dae, method, lam=lam)
         assert s.setup == "structured", s.setup_note
-        got = [rel(d._G, s._G), rel(d._W, s._W), rel(d._std.C.T @ d._std.C, s._std.C.T @ s._std.C),
-               rel(d._std.C.T @ d._W_c, s._std.C.T @ s._W_c)]
+        md, ms = d.maps(), s.maps()
+        Cd, Cs = md.C[0], ms.C[0]
+        got = [rel(md.G, ms.G), rel(md.W, ms.W), rel(Cd.T @ Cd, Cs.T @ Cs), rel(Cd.T @ md.Wc[0], Cs.T @ ms.Wc[0])]
         worst = np.maximum(worst, got)
     return worst
 

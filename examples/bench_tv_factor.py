@@ -71,12 +71,12 @@ def per_evaluation(p, repeats=3, m=4):
         fact_t["svd"].append(cpu(lambda: np.linalg.svd(J)))
 
         def warm():
-            from lsc._dense_factors import _Factors
-            f = _Factors.__new__(_Factors)
+            from lsc._dense_factors import DenseFactors
+            f = DenseFactors.__new__(DenseFactors)
             f.n, f.block = p.dae.n, None
             assert f._warm(J, ref, None)
             f._first_rows = None
-            f.first_rows, f.times_pinv(np.ones((3, J.shape[0])))
+            f.first_rows, f.times_pinv(np.ones((1, 3, J.shape[0])))
 
         def block():
             b = BlockQR(J, p.dae.n)

@@ -1,7 +1,8 @@
 """The module import graph of lsc and fmu_build, read from the code (ast, nothing imported).
 
 For every module: its lines, its longest function (lines from ``def`` to its
-last line, docstring excluded) and the project modules it imports, at module
+last line, docstring excluded), its longest class (likewise from ``class``) and
+the project modules it imports, at module
 level or inside a function (marked ``*``: imported when called). Cycles
 between modules are listed (package ``__init__`` files are left out of the
 cycle search: importing a package from inside a function of its own
@@ -96,15 +97,40 @@ def _functions(tree):
     return out
 
 
+def _classes(tree):
+    """``(qualified name, lines)`` of every class, docstring lines not counted."""
+    out = []
+
+    def visit(node, prefix):
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.ClassDef):
+                lines = child.end_lineno - child.lineno + 1
+                doc = child.body[0] if child.body else None
+                if isinstance(doc, ast.Expr) and isinstance(doc.value, ast.Constant) and isinstance(doc.value.value, str):
+                    lines -= doc.end_lineno - doc.lineno + 1
+                out.append((prefix + child.name, lines))
+                visit(child, prefix + child.name + ".")
+            elif isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                visit(child, prefix + child.name + ".")
+            else:
+                visit(child, prefix)
+
+    visit(tree, "")
+    return out
+
+
 def graph(root=ROOT, packages=PACKAGES):
-    """One dict per module: name, lines, functions, the longest, imports ``{module: lazy}``."""
+    """One dict per module: name, lines, functions and classes, the longest of each, imports ``{module: lazy}``."""
     known = modules(root, packages)
     rows = []
     for name, path in known.items():
         text = path.read_text()
-        functions = _functions(ast.parse(text))
+        tree = ast.parse(text)
+        functions, classes = _functions(tree), _classes(tree)
         longest = max(functions, key=lambda f: f[1], default=("", 0))
+        largest = max(classes, key=lambda c: c[1], default=("", 0))
         rows.append({"module": name, "lines": len(text.splitlines()), "longest": longest, "functions": functions,
+                     "largest": largest, "classes": classes,
                      "imports": _imports(name, path, known), "package": path.name == "__init__.py"})
     return rows
 
@@ -122,20 +148,25 @@ def markdown(rows, title):
     """The table, a summary and the cycles as Markdown text."""
     found = cycles(rows)
     lines = [f"## Module graph: {title}", "",
-             "`python examples/module_graph.py`: lines per module, its longest function (docstring not counted) "
-             "and the project modules it imports (`*`: only inside a function).", "",
-             "| module | lines | longest function | imports |", "|---|---:|---|---|"]
+             "`python examples/module_graph.py`: lines per module, its longest function and its largest class "
+             "(docstrings not counted) and the project modules it imports (`*`: only inside a function).", "",
+             "| module | lines | longest function | largest class | imports |", "|---|---:|---|---|---|"]
     for r in rows:
         name, length = r["longest"]
+        cname, clength = r["largest"]
         imports = ", ".join(f"{m}{'*' if lazy else ''}" for m, lazy in sorted(r["imports"].items()))
-        lines.append(f"| `{r['module']}` | {r['lines']} | {f'`{name}` ({length})' if name else ''} | {imports} |")
+        lines.append(f"| `{r['module']}` | {r['lines']} | {f'`{name}` ({length})' if name else ''} | "
+                     f"{f'`{cname}` ({clength})' if cname else ''} | {imports} |")
     biggest = sorted(rows, key=lambda r: -r["lines"])[:5]
     longest = sorted(rows, key=lambda r: -r["longest"][1])[:5]
+    largest = sorted(rows, key=lambda r: -r["largest"][1])[:5]
     lines += ["", f"{len(rows)} modules, {sum(r['lines'] for r in rows)} lines; "
               f"over 600 lines: {sum(r['lines'] > 600 for r in rows)}; "
-              f"functions over 80 lines: {sum(n > 80 for r in rows for _, n in r['functions'])}.", "",
+              f"functions over 80 lines: {sum(n > 80 for r in rows for _, n in r['functions'])}; "
+              f"classes over 300 lines: {sum(n > 300 for r in rows for _, n in r['classes'])}.", "",
               "Largest modules: " + ", ".join(f"`{r['module']}` {r['lines']}" for r in biggest) + ".", "",
               "Longest functions: " + ", ".join(f"`{r['module']}.{r['longest'][0]}` {r['longest'][1]}" for r in longest) + ".",
+              "", "Largest classes: " + ", ".join(f"`{r['module']}.{r['largest'][0]}` {r['largest'][1]}" for r in largest) + ".",
               "", "Import cycles: " + ("; ".join(" <-> ".join(c) for c in found) if found else "none") + "."]
     return "\n".join(lines) + "\n"
 

@@ -12,10 +12,10 @@ import warnings
 import numpy as np
 
 import lsc
-import lsc._completion
+import lsc._index
 from lsc import gallery
 
-lsc._completion.K_ABOVE_INDEX = 100  # measure beyond the accepted range
+lsc._index.K_ABOVE_INDEX = 100  # measure beyond the accepted range
 warnings.simplefilter("ignore")  # close rank calls at large k are part of what is measured
 
 PROBLEMS = {

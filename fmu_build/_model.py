@@ -134,8 +134,7 @@ def _needed_input_orders(spec, dae, k):
     if dae.is_constant and not in_coefficients:
         used[:] = False
         for method in METHODS:
-            c = lsc.complete(dae, method, lam=None if method == "standard" else spec.lam, k=k)
-            W = c._W
+            W = lsc.complete(dae, method, lam=None if method == "standard" else spec.lam, k=k).maps().W[0]
             scale = np.abs(W).max() or 1.0
             for d in range(W.shape[1] // n):
                 used[d] |= np.abs(W[:, d * n:(d + 1) * n]).max(axis=0) > 1e-13 * scale
@@ -227,7 +226,7 @@ def _entries_failing(tf, d, t0, label, vector):
     if not hasattr(tf, "expr"):
         return ""
     M = sympy.Matrix(tf.expr).reshape(*((tf.shape[0], 1) if vector else tf.shape))
-    t = getattr(tf, "_t", sympy.Symbol("t"))  # the coefficient's time symbol
+    t = getattr(tf, "symbol", sympy.Symbol("t"))  # the coefficient's time symbol
     names = []
     for i in range(M.rows):
         for j in range(M.cols):

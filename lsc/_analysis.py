@@ -222,21 +222,21 @@ def eigenanalysis(completion, rtol=1e-10):
         raise ValueError("`completion` must have constant coefficients: eigenvalues do not decide stability otherwise.")
     std = completion._std
     G, _ = completion.matrices(0.0)
-    C, T2 = std.C, std.T2
+    C, T2 = std.C[0], std.T2[0]
     a = C.shape[0]
     A, B = completion.dae.A(0.0), completion.dae.B(0.0)
     pencil = pencil_finite_eigenvalues(A, B, T2.shape[1])
     kept = _match(pencil, np.linalg.eigvals(T2.T @ G @ T2)) if T2.shape[1] else np.zeros(0)
     if a == 0:
         return Eigenanalysis(pencil, kept, np.linalg.eigvals(G), 0.0, 0, (), 0.0, np.zeros((0, 0)), np.inf)
-    H = C @ G @ std.C_pinv
+    H = C @ G @ std.C_pinv[0]
     mu = float(np.trace(H).real) / a
     M = H - mu * np.eye(a)
     norm_M = np.linalg.norm(M, 2)
     # The scale H is computed at: G is built from J^+ F, so entries that
     # cancel to zero are left at rounding relative to ||F|| / sigma_min(J)
     # (the standard LSC of an index-1 DAE has H = 0, G may be 0 too).
-    scale = max(np.linalg.norm(H, 2), np.linalg.norm(G, 2), abs(mu), std.rounding_scale / completion._sigma)
+    scale = max(np.linalg.norm(H, 2), np.linalg.norm(G, 2), abs(mu), std.rounding_scale / completion._scaling.sigma)
     if norm_M <= 1e-9 * scale:
         # H = mu I to rounding: a diagonal added part (no Jordan blocks).
         residual = norm_M / scale if scale else 0.0

@@ -31,9 +31,14 @@ right as a step-size controller would, for about `_TARGET` degrees by the
 slowest decay seen so far, each started at its predicted degree.
 
 The times of a degree are known before any of them is evaluated: they are
-evaluated together (`lsc._batch`, the linear algebra of all of them stacked,
-each rank decided as at one time), and a time that needs a decision of its
-own is evaluated alone.
+evaluated together (the linear algebra of all of them stacked, each rank
+decided as at one time: chain 3 of `lsc._factors`), and a time that needs a
+decision of its own is evaluated alone.
+
+`chebyshev_points` and `chebyshev_coefficients` are the two pieces every
+piecewise Chebyshev table in the project is built from (the native FMU's
+tables too): the points of a piece, placed from its ends, and the
+interpolant through the values at the times actually sampled.
 
 A piece that is still unresolved at 1e-6 of the interval's length (a jump in
 the forcing, say), or left when the budget of evaluations is spent, is
@@ -45,11 +50,10 @@ import bisect
 import math
 
 import numpy as np
-import scipy.fft
 
-from ._batch import matrices_many
+from ._setup import stacked
 
-__all__ = []
+__all__ = ["chebyshev_coefficients", "chebyshev_points"]
 
 _FIRST_DEGREE = 8  # the whole interval at 8 and 16 first: most smooth G, g stop there
 _PROBE = 32  # the first piece doubles up to this degree, whatever the prediction
@@ -72,8 +76,40 @@ def _extreme_points(m):
     return np.sin(np.pi * (m - 2 * np.arange(m + 1)) / (2 * m))
 
 
+def chebyshev_points(m, interval=None):
+    """The ``m + 1`` Chebyshev extreme points, from the right end to the left.
+
+    Parameters
+    ----------
+    m : int
+        The degree (at least 1).
+    interval : pair of float, optional
+        ``(lo, hi)``; default ``(-1, 1)``, where the points ``cos(pi j / m)`` are exactly symmetric. On an
+        interval the ends are exactly ``hi`` and ``lo`` and the inner points are rounded to doubles.
+
+    Returns
+    -------
+    ndarray, shape (m + 1,)
+
+    Examples
+    --------
+    >>> from lsc import chebyshev_points
+    >>> chebyshev_points(2).tolist(), chebyshev_points(2, (0.0, 4.0)).tolist()
+    ([1.0, 0.0, -1.0], [4.0, 2.0, 0.0])
+    """
+    x = _extreme_points(m)
+    if interval is None:
+        return x
+    lo, hi = map(float, interval)
+    ts = 0.5 * (hi + lo) + 0.5 * (hi - lo) * x
+    ts[0], ts[-1] = hi, lo
+    return ts
+
+
 def _coefficients(values):
     """Chebyshev coefficients of the interpolant through values at `_extreme_points`."""
+    import scipy.fft  # here, not at import: the FMUs lsc builds load no scipy beyond scipy.linalg
+
     m = values.shape[0] - 1
     c = scipy.fft.dct(values, type=1, axis=0) / m
     c[0] /= 2
@@ -91,27 +127,57 @@ def _positions(ts, lo, hi):
     return np.clip(((ts - lo) - (hi - ts)) / (hi - lo), -1.0, 1.0)
 
 
-def _coefficients_at(values, x):
-    """Chebyshev coefficients of the polynomial through `values` at the positions `x` (near `_extreme_points`).
+def chebyshev_coefficients(values, times=None, interval=None):
+    """Chebyshev coefficients of the polynomial through `values` at the extreme points of degree m.
 
-    The times sampled are the Chebyshev points rounded to doubles: near t = 1e5 on a piece of length 2 they
-    are off by ~1e-11 of the piece, and the DCT (exact at the points themselves) would read that as
-    noise in the values, ~1e-11 of their rate, which no degree resolves. Iterative refinement of the DCT
-    solves the interpolation at the points actually sampled (it contracts by about ``m^2`` times their
-    offset, 2e-4 at t = 1e8 and degree 128): the coefficients are those of the smooth function again.
+    Parameters
+    ----------
+    values : ndarray, shape (m + 1, ...)
+        Values at the points of `chebyshev_points` (first axis), any number of entries each.
+    times, interval : ndarray and pair of float, optional
+        The times actually sampled on ``interval = (lo, hi)``. The inner points on an interval are rounded
+        to doubles: near t = 1e5 on a piece of length 2 they are off by ~1e-11 of the piece, and the DCT
+        (exact at the points themselves) would read that as noise in the values, ~1e-11 of their rate,
+        which no degree resolves. Iterative refinement of the DCT solves the interpolation at the times
+        sampled (it contracts by about ``m^2`` times their offset, 2e-4 at t = 1e8 and degree 128).
+
+    Returns
+    -------
+    ndarray, shape (m + 1, ...)
+        ``c`` with ``p(x) = sum_j c[j] T_j(x)``, ``x`` in [-1, 1] across the interval.
+
+    Examples
+    --------
+    ``(t - t0)^2`` on ``[t0, t0 + 2]`` is ``(x + 1)^2 = 1.5 T_0 + 2 T_1 + 0.5 T_2``. At ``t0 = 1e8`` the
+    points are rounded to doubles: a DCT alone reads that as coefficients of 1e-8 up to degree 8.
+
+    >>> import numpy as np
+    >>> from lsc import chebyshev_coefficients, chebyshev_points
+    >>> ts = chebyshev_points(8, (1e8, 1e8 + 2.0))
+    >>> c = chebyshev_coefficients((ts - 1e8) ** 2, ts, (1e8, 1e8 + 2.0))
+    >>> np.round(c[:3], 12).tolist(), bool(np.abs(c[3:]).max() < 1e-14)
+    ([1.5, 2.0, 0.5], True)
+    >>> bool(np.abs(chebyshev_coefficients((ts - 1e8) ** 2)[3:]).max() > 1e-10)
+    True
     """
+    values = np.asarray(values, dtype=float)
     c = _coefficients(values)
+    if times is None:
+        return c
+    x = _positions(times, *interval)
     m = values.shape[0] - 1
     if np.array_equal(x, _extreme_points(m)):
         return c
     T = np.cos(np.outer(np.arccos(x), np.arange(m + 1)))
     size = np.abs(values).max(initial=0.0)
+    flat = values.reshape(m + 1, -1)
+    c = c.reshape(m + 1, -1)
     for _ in range(6):
-        r = values - T @ c
+        r = flat - T @ c
         if not np.abs(r).max(initial=0.0) > 1e-15 * size:
             break
         c = c + _coefficients(r)
-    return c
+    return c.reshape(values.shape)
 
 
 class _Decay:
@@ -274,11 +340,11 @@ class ChebyshevCoefficients:
         return v
 
     def _sample_many(self, ts):
-        """The values at `ts`; the new times evaluated together (`lsc._batch`), any it leaves one by one."""
+        """The values at `ts`; the new times evaluated together (stacked), any that leaves out one by one."""
         new = [t for t in dict.fromkeys(ts) if t not in self._values]
-        for t, res in zip(new, matrices_many(self.completion, new)):
+        for t, res in zip(new, stacked(self.completion, new)):
             if res is not None:
-                self._store(t, *res)
+                self._store(t, res[0], res[1][:, 0])
         return np.array([self._sample(t) for t in ts])
 
     def _fit(self, lo, hi, m, probing):
@@ -289,9 +355,8 @@ class ChebyshevCoefficients:
         """
         nn = self._nn
         while True:
-            ts = 0.5 * (hi + lo) + 0.5 * (hi - lo) * _extreme_points(m)
-            ts[0], ts[-1] = hi, lo
-            coef = _coefficients_at(self._sample_many([float(t) for t in ts]), _positions(ts, lo, hi))
+            ts = chebyshev_points(m, (lo, hi))
+            coef = chebyshev_coefficients(self._sample_many([float(t) for t in ts]), ts, (lo, hi))
             size = np.abs(coef[:, :nn]).max(axis=1, initial=0.0) / self._scale[0]
             if self._scale[1] > 0:
                 size = np.maximum(size, np.abs(coef[:, nn:]).max(axis=1, initial=0.0) / self._scale[1])

@@ -1,6 +1,6 @@
 """ODE completions ``x' = G(t) x + g(t)`` of a linear DAE ``A x' + B x = f``.
 
-Three methods (thesis chapters 2-6):
+Three methods (thesis chapters 2-6), their maps written once in `lsc._methods`:
 
 - ``'standard'``: the least squares completion (LSC), first block row of
   ``J^+ (-F x + g)`` for the standard derivative array. For constant
@@ -16,353 +16,260 @@ Three methods (thesis chapters 2-6):
 For constant coefficients every completion is computed once, at
 construction: ``rhs`` then costs one matrix-vector product plus the forcing
 ``W @ [f; f'; ...]``. For time-varying ones the completion is computed at
-each time it is asked for (one factorization of the derivative array), and the last few
-times are cached so `matrices`, `rhs`, `constraint_residual` and `project`
-at one time share one factorization.
+each time it is asked for (one factorization of the derivative array,
+`lsc._setup`), and the last few times are cached so `matrices`, `rhs`,
+`constraint_residual` and `project` at one time share one factorization.
 """
 
 from collections import OrderedDict
 
 import numpy as np
-import scipy.linalg
 
-from ._batch import alternative_maps, stabilized_maps, standard_maps
-from ._dense_factors import WARM_MIN_ROWS, _Factors
-from ._derivative_array import stabilization_jets
-from ._exceptions import DimensionError, IndexDeterminationError
-from ._forcing import Forcing
-from ._index import check_solvability, determine_index, k_works
+from . import _setup
+from ._exceptions import DimensionError
+from ._forcing import forcing_of
 from ._linalg import validate_rcond
-from ._problem import balance, check_dae, unscale_columns, varying_view
-from ._rate import as_rate, lam_at
-from ._structured import StructuredFactors, StructuredFallback
+from ._maps import CompletionMaps, LamAffine
+from ._methods import alternative_maps, stabilized_maps, standard_maps
+from ._problem import balance, check_dae, varying_view
+from ._rate import check_rate, lam_at
 from ._threads import blas_threads
 from ._timefunc import TimeFunction, _shape_str
-from ._validate import check_k, check_t_span
+from ._validate import check_t_span, check_times
 
-__all__ = [
-    "Completion",
-    "StandardCompletion",
-    "StabilizedCompletion",
-    "AlternativeCompletion",
-    "COMPLETIONS",
-    "complete",
-]
+__all__ = ["Completion", "StandardCompletion", "StabilizedCompletion", "AlternativeCompletion", "COMPLETIONS",
+           "complete"]
 
-# The largest k - index accepted: measured on the gallery's constant problems (docs/reliability_library.md),
-# the error stays at the k = index level up to index + 12 at least and grows beyond index + 15.
-K_ABOVE_INDEX = 10
 _CACHE_SIZE = 4
+# `lam_affine`: rates of order one in the DAE's own unit of time (`lsc._problem.balance`), whatever the completion's
+# rate: from rates lam and 2 lam, (G(2 lam) - G(lam)) / lam cancels all digits for lam near 1e-12 and amplifies
+# G0's rounding for lam near 1e12
+_FIT_RATES, _CHECK_RATES = (1.0, 2.0), (0.3, 7.0)
 
 
 class Completion:
     """Base class of the ODE completions ``x' = G x + g(t)`` of a linear DAE.
 
-    Use `complete` to build one. A subclass must provide (the numbered
-    contract):
+    Use `complete` to build one. A subclass must provide (the numbered contract):
 
-    1. ``method``: its key in `COMPLETIONS` (the class name, lower case,
-       without ``Completion``).
-    2. ``uses_lam``: True if the stabilization rate ``lam`` is required,
-       False if it must be None.
-    3. ``extra_order``: how many derivatives of the arrays beyond ``k`` it
-       needs (the alternative completion differentiates the constraints once
-       more: 1; the others 0).
-    4. ``_maps(self, fac, t)``: from the standard array factors `fac` at `t`
-       (a `_Factors`), return ``(G, W)``: ``x' = G x + W`` where ``W`` is
-       built from ``fac.Lg`` and ``fac.f0`` only linearly, so it is the
-       forcing map (constant coefficients) or the forcing value at `t`.
-       The built-in methods use only ``fac.times_F``, ``fac.times_L`` and the
-       basis attributes, so for constant coefficients they also accept a
-       `lsc._structured.StructuredFactors` (no dense ``J``).
-    5. ``added_eigenvalue``: the value theory assigns to the added dynamics
-       of a constant-coefficient completion.
-
-    Everything else (validation, index determination, evaluation, caching,
-    ``rhs``, ``jac``, ``matrices``, ``constraint_residual``, ``project``)
-    lives here, once.
+    1. ``method``: its key in `COMPLETIONS` (the class name, lower case, without ``Completion``).
+    2. ``uses_lam``: True if the stabilization rate ``lam`` is required, False if it must be None.
+    3. ``extra_order``: derivatives of the arrays beyond ``k`` it needs (1 for the alternative completion).
+    4. ``_maps(self, fac, lam)``: from the factors `fac` of the standard array at ``m`` times (the
+       `lsc._factors.Factors` protocol) and the rate's jets ``lam`` there (shape (m, k + 1), in the
+       equilibrated DAE's time; None without a rate), return ``(G, W)``, shapes (m, n, n) and (m, n, w):
+       ``x' = G x + W``, ``W`` linear in the forcing quantities (``fac.times_L``, ``fac.cg``, ``fac.f0``),
+       so the forcing map or its value, as `fac` holds it. A subclass's own ``_maps`` gets the dense
+       factors at one time (`lsc._dense_factors.DenseFactors`, which also hold the array's jets).
+    5. ``added_eigenvalue``: the value theory assigns to the added dynamics (constant coefficients).
 
     Attributes
     ----------
     dae : LinearDAE
-        The DAE; for a time-varying ``lam`` on constant coefficients a copy
-        of it with ``is_constant = False``, so every consumer evaluates the
-        completion where it varies.
-    n : int
-        Number of unknowns.
-    k : int
-        Differentiations used (the differentiation index unless given).
+        The DAE; for a time-varying ``lam`` on constant coefficients a copy of it with
+        ``is_constant = False``, so every consumer evaluates the completion where it varies.
+    n, k, order : int
+        Unknowns; differentiations (the index unless given); the highest derivative of ``f`` used.
     lam : float, TimeFunction or None
-        Stabilization rate (a TimeFunction for time-varying rates).
+        Stabilization rate.
     method : str
         Registry key.
     n_constraints : int
-        Number of independent constraints (``a`` = corank of J): the
-        dimension of the added dynamics.
+        Number of independent constraints (the corank of J): the dimension of the added dynamics.
     t_span : tuple or None
         Interval over which ``k`` was decided (time-varying DAEs).
     setup : {'structured', 'dense'}
-        How the constant-coefficient set-up was computed (see `complete`).
-    setup_note : str or None
-        Why the structured set-up declined, when it did.
+        How the set-up was computed (`lsc._setup`); ``setup_note``: why the structured one declined.
     """
 
     method = None
     uses_lam = False
     extra_order = 0
-    # Time-varying, arrays of 100 rows and more: factor J by an LU warm-started from the last time's null spaces
-    # (_Factors._warm); False forces the SVD at every time. `block_qr = True` tries the block-column QR
-    # (lsc._structured_tv.BlockQR) first: 1.5x faster than the warm LU with one BLAS thread, not shown faster
-    # with two (examples/bench_tv_factor.py), so not the default.
+    # Time-varying, arrays of 100 rows and more: factor J by an LU warm-started from the last time's null spaces;
+    # False forces the SVD at every time. `block_qr = True` tries the block-column QR (lsc._structured_tv) first:
+    # 1.5x faster than the warm LU with one BLAS thread, not shown faster with two (examples/bench_tv_factor.py).
     warm_start = True
     block_qr = False
     _fastest_rate = None  # max |Re eig(G)| for constant coefficients, cached by lsc.stiffness_ratio
-    _stacked_maps = None  # ``(st, times) -> (Gs, gs)`` on many times at once (lsc._batch), where defined
 
     def __init__(self, dae, *, lam=None, k=None, rcond=None, t_span=None, setup="auto"):
         check_dae(dae)
-        self.dae = dae
-        self.n = dae.n
+        self.dae, self.n = dae, dae.n
         self.rcond = validate_rcond(rcond)
         self.t_span = None if t_span is None else check_t_span(t_span)
         self._t_ref = 0.0 if self.t_span is None else min(self.t_span)
-        self.lam = self._check_lam(lam)
+        self.lam = check_rate(lam, self.uses_lam, self.method, self.t_span or [self._t_ref])
         if dae.is_constant and isinstance(self.lam, TimeFunction):
             # G(t) follows lam(t): evaluate it where it is asked for, like time-varying coefficients.
             self.dae = dae = varying_view(dae)
         # Badly scaled rows, unknowns (x = diag(c) y) and a pencil written in a time unit far from its rate
-        # (t = sigma tau) are equilibrated once (constant scales, so the solutions map one to one); the arrays
-        # (dense or structured) are built from the equilibrated DAE, and `_unscaled` maps what they give back.
+        # (t = sigma tau) are equilibrated once (constant scales, so the solutions map one to one); the factors
+        # are those of the equilibrated DAE, and `_given` maps what they give back.
         self._scaling = balance(dae, self._t_ref)
-        self._row_scales, self._col_scales, self._sigma = self._scaling.r, self._scaling.c, self._scaling.sigma
         self._eq = self._scaling.apply(dae)
-        self.setup, self.setup_note, self._structured = self._check_setup(setup), None, None
-        self.k = self._structured_k(k) if self.setup == "structured" else self._check_k(k)
-        self._order = self.k + self.extra_order
-        self._cache = OrderedDict()
-        self._last_factors = None
+        self._cache, self._last_factors = OrderedDict(), None
+        # only the library's own maps may be computed by the structured or stacked set-ups (`lsc._setup`): a
+        # subclass's own `_maps` may read the dense factors' jets
+        self._builtin = type(self)._maps in (StandardCompletion._maps, StabilizedCompletion._maps,
+                                             AlternativeCompletion._maps)
+        self.k, fac, maps, self.setup, self.setup_note = _setup.setup(self, setup, k)
+        self.order = self.k + self.extra_order
+        self._rank, self.n_constraints = fac.rank, fac.n_constraints
         if dae.is_constant:
-            fac, (G, W) = self._constant_maps()
-            self._std = fac
-            self._rank = fac.rank
-            self._G, self._W, self._W_c = self._unscaled(fac, G, W)
-            self._setup_forcing()
-        else:
-            fac = self._factors(self._t_ref, check=False)
-            self._rank = fac.rank
-        self.n_constraints = fac.C.shape[0]
+            self._factors0, (self._std, Wc) = fac, self._given_factors(fac)
+            G, W = self._given(*maps, fac)
+            self._G, self._W, self._Wc = G[0], W[0], Wc[0]
+            self._g = forcing_of(self._W, dae.f, self.order)  # compiled once (lsc._forcing)
+            self._g_const = self._g.g if self._g.is_constant else None
+            self._c_const = None if self._g_const is None else self._Wc @ self._fjet(0.0)
 
-    # -- set-up (constant coefficients) --------------------------------------
-    def _check_setup(self, setup):
-        if setup not in ("auto", "dense"):
-            raise ValueError(f"`setup` must be 'auto' or 'dense'; found {setup!r}.")
-        # a user's subclass may read the dense factors (`fac.jets`) in its `_maps`: it keeps them
-        return "structured" if setup == "auto" and self.dae.is_constant and self._builtin_maps() else "dense"
+    # -- the equilibrated DAE's factors and maps in the given unknowns, equations and time (`Scaling`) --------
+    def _given(self, G, W, fac):
+        return self._scaling.maps_given(G, W, self.n, self.order, fac.fstack is None)
 
-    def _builtin_maps(self):
-        """Whether `_maps` is the library's own: only then may the structured or stacked set-ups stand in for it."""
-        return type(self)._maps in (StandardCompletion._maps, StabilizedCompletion._maps, AlternativeCompletion._maps)
+    def _given_factors(self, fac):
+        return self._scaling.factors_given(fac, self.n, self.order)
 
-    def _structured_k(self, k):
-        """k from the structured set-up (lsc._structured); on a declined problem the dense path decides."""
-        t, eq = self._t_ref, self._eq  # the equilibrated equations, as the dense path uses them
-        k = None if k is None else check_k(k)
-        try:
-            fac = StructuredFactors(eq.A(t), eq.B(t), k, self.extra_order, self.rcond)
-        except StructuredFallback as exc:
-            self.setup, self.setup_note = "dense", f"structured set-up declined: {exc}"
-            return self._check_k(k)
-        if k is not None and k > K_ABOVE_INDEX and k > fac.index + K_ABOVE_INDEX:
-            return self._check_k(k)  # the dense path's refusal, with its message
-        self._structured = fac
-        return fac.k
-
-    def _constant_maps(self):
-        """``(fac, (G, W))`` at construction; a structured set-up that declines here hands over to the dense one."""
-        fac = self._structured
-        if fac is not None:
-            try:
-                return fac, self._maps(fac, self._t_ref)
-            except StructuredFallback as exc:
-                self.setup, self.setup_note = "dense", f"structured set-up declined: {exc}"
-        fac = _Factors(self._eq, self.k, self._t_ref, self.extra_order, self.rcond)
-        return fac, self._maps(fac, self._t_ref)
-
-    # -- validation ---------------------------------------------------------
-    def _check_lam(self, lam):
-        if not self.uses_lam:
-            if lam is not None:
-                raise ValueError(
-                    f"`lam` must be None for the {self.method!r} completion, which has no stabilization; found {lam!r}."
-                )
+    def _lam_jets(self, ts, k=None, value=None):
+        """The rate's derivatives ``0..k`` at `ts` in the equilibrated time ``tau = t / sigma``, shape (m, k + 1);
+        `value`: a constant rate instead of the completion's."""
+        if self.lam is None and value is None:
             return None
-        if lam is None:
-            raise ValueError(
-                f"`lam` is required for the {self.method!r} completion: a positive finite rate "
-                "(e.g. lam=1.0), a sympy expression in t or a callable lam(t, d); found None."
-            )
-        lam = as_rate(lam)
-        if isinstance(lam, TimeFunction):
-            self._check_rate_on([self._t_ref] if self.t_span is None else self.t_span, lam)
-        return lam
+        k = self.k if k is None else k
+        jets = np.zeros((len(ts), k + 1))
+        if value is None and isinstance(self.lam, TimeFunction):
+            jets[:] = [lam_at(self.lam, float(t), k) for t in ts]
+        else:  # a constant rate (checked positive when given)
+            jets[:, 0] = self.lam if value is None else value
+        sigma = self._scaling.sigma
+        return jets if sigma == 1.0 else jets * sigma ** np.arange(1.0, k + 2)
 
-    def _check_rate_on(self, t_span, lam=None):
-        """Refuse a time-varying rate that is not positive at 101 points of `t_span` (or at one time)."""
-        lam = self.lam if lam is None else lam
-        if not isinstance(lam, TimeFunction):
-            return
-        times = np.linspace(t_span[0], t_span[-1], 101 if len(t_span) == 2 else 1)
-        for t in times:
-            lam_at(lam, float(t))
+    def _fjet(self, t):
+        return self.dae.f_jet(t, self.order).reshape(-1)
 
-    def _check_k(self, k):
-        dae, t = self.dae, self._t_ref
-        if k is None:
-            if not dae.is_constant and self.t_span is not None:
-                return check_solvability(dae, self.t_span, rcond=self.rcond).k
-            k, _ = determine_index(dae, t, 10, self.rcond)
-            return k
-        k = check_k(k)
-        if not dae.is_constant and self.t_span is not None:
-            check_solvability(dae, self.t_span, k=k, rcond=self.rcond)
-        else:
-            ok, ranks, nxt = k_works(dae, k, t, self.rcond)
-            if not ok:
-                raise IndexDeterminationError(
-                    f"`k`={k} is too small at t={t:g}: the derivative array does not determine x' "
-                    f"({ranks}; next: {nxt}). Use k=None for the differentiation index."
-                )
-        if k > K_ABOVE_INDEX:
-            index, _ = determine_index(dae, t, k, self.rcond)
-            if k > index + K_ABOVE_INDEX:
-                raise ValueError(
-                    f"`k`={k} is {k - index} above the differentiation index {index} (at t={t:g}); at most "
-                    f"index + {K_ABOVE_INDEX} = {index + K_ABOVE_INDEX} is accepted. More differentiations gain "
-                    "nothing in exact arithmetic (the solutions are those of k = index), but the derivative "
-                    "array's entries grow like binomial coefficients and f's derivatives of order up to k + 1, "
-                    "so rounding grows: "
-                    "on gallery.prescribed_path (index 3) the error is 8e-9 up to k = 15, then 7e-8 at k = 18, "
-                    "4e-3 at k = 28 and 2 at k = 33. Use k=None."
-                )
-        return k
-
-    # -- evaluation ---------------------------------------------------------
-    def _factors(self, t, check=True):
-        """The standard-array factors at `t`, with the forcing as values at `t`."""
-        fstack = self._eq.f_jet(t, self._order).reshape(-1)
-        # Warm start from the factors last computed (a nearby time, for a solver or an interpolant's
-        # nested points); the first and any doubtful time take the SVD.
-        ref = self._last_factors if check and self.warm_start else None
-        fac = _Factors(self._eq, self.k, t, self.extra_order, self.rcond, fmap=fstack,
-                       expected_rank=self._rank if check else None, reference=ref,
-                       block=self.block_qr and self.warm_start)
-        if check and fac.Z2.shape[0] >= WARM_MIN_ROWS:
-            self._last_factors = fac
-        return fac
-
+    # -- evaluation (time-varying) ------------------------------------------------------------------------
     def _evaluate(self, t):
-        """``(fac, G, g)`` at `t` for a time-varying completion, cached."""
+        """``(factors, G, g)`` at `t` for a time-varying completion (factors in the given unknowns), cached."""
         t = float(t)
         hit = self._cache.get(t)
         if hit is not None:
             self._cache.move_to_end(t)
             return hit
-        fac = self._factors(t)
-        G, g, _ = self._unscaled(fac, *self._maps(fac, t))
-        self._cache[t] = (fac, G, g)
+        fstack = self._eq.f_jet(t, self.order)  # the forcing first: its errors are reported before the array's
+        fac = _setup.factors_at(self, t, fstack)
+        G, g = self._given(*self._maps(fac, self._lam_jets(fac.t)), fac)
+        hit = self._cache[t] = (self._given_factors(fac)[0], G[0], g[0, :, 0])
         if len(self._cache) > _CACHE_SIZE:
             self._cache.popitem(last=False)
-        return self._cache[t]
+        return hit
 
-    def _lam_jet(self, t, order=0):
-        """The rate's derivatives ``0..order`` at `t` in the equilibrated DAE's time ``tau = t / sigma``."""
-        jet = lam_at(self.lam, t, order)
-        return jet if self._sigma == 1.0 else jet * self._sigma ** np.arange(1.0, order + 2)
+    def _maps_at(self, ts):
+        """``(G, W, C, Wc)`` stacked over the times `ts` (time-varying): the stacked factors where `lsc._setup`
+        may use them, one time at a time elsewhere."""
+        out = _setup.stacked(self, ts, values=False)
+        for i, t in enumerate(ts):
+            if out[i] is None:
+                fac = _setup.factors_at(self, float(t))
+                G, W = self._given(*self._maps(fac, self._lam_jets(fac.t)), fac)
+                given, Wc = self._given_factors(fac)
+                out[i] = (G[0], W[0], given.C[0], Wc[0])
+        n, w, a = self.n, self.n * (self.order + 1), self.n_constraints
+        empty = (np.zeros((0, n, n)), np.zeros((0, n, w)), np.zeros((0, a, n)), np.zeros((0, a, w)))
+        return [np.array(X) for X in zip(*out)] if out else empty
 
-    def _unscaled(self, fac, G, W):
-        """``(G, W, W_c)`` in the given unknowns, equations and time from the equilibrated DAE's (`_eq`).
+    # -- public evaluation ----------------------------------------------------------------------------------
+    def maps(self, t=None):
+        """The completion at the time(s) `t` as matrices acting on the forcing's jet (`CompletionMaps`).
 
-        ``W`` is the forcing map on the equilibrated jet ``[f~; f~'; ...]`` (constant coefficients; then ``W_c``
-        is the constraints' map ``fac.cg`` on the given jet) or the forcing's value (time-varying; ``W_c`` None).
-        With ``x = diag(c) y`` and ``t = sigma tau``: ``x' = diag(c) (G_y diag(c)^-1 x + g_y) / sigma``, and the
-        equilibrated jet is the given one times `lsc._problem.Scaling.fstack_scales`.
-        """
-        if self._col_scales is not None:
-            G, W = unscale_columns(fac, G, W, self._col_scales)
-        W_c = None
-        if np.ndim(W) == 2:
-            W_c = fac.cg
-            if self._row_scales is not None or self._sigma != 1.0:  # (no copies of the wide maps when not needed)
-                columns = self._scaling.fstack_scales(self.n, self._order)
-                W, W_c = W * columns, W_c * columns
-        if self._sigma != 1.0:
-            G, W = G / self._sigma, W / self._sigma
-        return G, W, W_c
-
-    # -- forcing (constant coefficients) -------------------------------------
-    def _setup_forcing(self):
-        f = self.dae.f
-        if f is None:
-            self._g_const = np.zeros(self.n)
-            self._c_const = np.zeros(self._W_c.shape[0])
-        elif f.is_constant:
-            fstack = f.jet(0.0, self._order).reshape(-1)
-            self._g_const = self._W @ fstack
-            self._c_const = self._W_c @ fstack
-        else:
-            self._g_const = None
-            self._c_const = None
-            self._forcing = Forcing(self._W, f, self._order)  # g(t) compiled once (lsc._forcing)
-
-    def _fstack(self, t):
-        return self.dae.f.jet(t, self._order).reshape(-1)
-
-    # -- public evaluation --------------------------------------------------
-    def matrices(self, t):
-        """``(G, g)`` with ``x' = G x + g`` at time `t`.
+        Parameters
+        ----------
+        t : float or array_like, shape (m,), optional
+            Times (default: the start of `t_span`, or 0). The result has a leading axis of length m (1 for a
+            single time). Constant coefficients give the same matrices at every time.
 
         Returns
         -------
-        G : ndarray, shape (n, n)
-        g : ndarray, shape (n,)
+        CompletionMaps
+            ``G``, the forcing map ``W``, the constraint rows ``C`` and their forcing map ``Wc``, in the DAE's
+            own unknowns, equations and unit of time.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from lsc import complete, gallery
+        >>> p = gallery.rotating_canonical(2)
+        >>> c = complete(p.dae, "alternative", lam=1.0)
+        >>> m = c.maps(np.linspace(0.0, 1.0, 5))
+        >>> m.G.shape[0], bool(np.allclose(m.G[2], c.matrices(0.5)[0]))
+        (5, True)
         """
+        ts = check_times("t", self._t_ref if t is None else t)
+        lam = None if self.lam is None else np.array([float(lam_at(self.lam, t)[0]) for t in ts])
+        if self.dae.is_constant:
+            parts = [np.broadcast_to(X, (ts.size,) + X.shape) for X in (self._G, self._W, self._std.C[0], self._Wc)]
+        else:
+            parts = self._maps_at(ts)
+        return CompletionMaps(ts, *parts, self.order, self.k, lam, self.method)
+
+    def lam_affine(self, t=None, rtol=1e-10):
+        """The maps split as ``G = G0 + lam G1``, ``W = W0 + lam W1`` at the time(s) `t` (`LamAffine`).
+
+        Fitted at the rates 1 and 2 (in the DAE's own unit of time, see `complete`) from the factors of the
+        completion's own array (the alternative completion is affine in a constant ``lam``; the standard one
+        has ``G1 = W1 = 0``), and checked against the maps at the rates 0.3, 7 and the completion's own,
+        relative to the size of the terms at each.
+
+        Parameters
+        ----------
+        t : float or array_like, shape (m,), optional
+            Times, as for `maps`.
+        rtol : float, optional
+            The largest misfit accepted (the split is exact up to rounding where it holds).
+
+        Returns
+        -------
+        LamAffine
+
+        Raises
+        ------
+        ValueError
+            When the misfit exceeds `rtol` (the stabilized completion is not affine in ``lam``).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from lsc import complete, gallery
+        >>> c = complete(gallery.nilpotent_chain(3).dae, "alternative", lam=5.0)
+        >>> a = c.lam_affine()
+        >>> bool(np.allclose(a.G0 + 5.0 * a.G1, c.maps().G)), a.residual < 1e-12
+        (True, True)
+        """
+        return _lam_affine(self, check_times("t", self._t_ref if t is None else t), rtol)
+
+    def matrices(self, t):
+        """``(G, g)`` with ``x' = G x + g`` at time `t`: shapes (n, n) and (n,)."""
         if not self.dae.is_constant:
             _, G, g = self._evaluate(t)
             return G, g
-        if self._g_const is not None:
-            return self._G, self._g_const
-        return self._G, self._forcing.value(t)
+        return self._G, (self._g_const if self._g_const is not None else self._g.value(t))
 
     def rhs(self, t, x):
         """Right-hand side ``G x + g(t)`` in `scipy.integrate.solve_ivp` form."""
         if self.dae.is_constant:
-            if self._g_const is not None:
-                return self._G @ x + self._g_const
-            return self._G @ x + self._forcing.value(t)
+            return self._G @ x + (self._g_const if self._g_const is not None else self._g.value(t))
         _, G, g = self._evaluate(t)
         return G @ x + g
 
     def jac(self, t, x):
         """Jacobian ``G(t)`` of `rhs`."""
-        if self.dae.is_constant:
-            return self._G
-        return self._evaluate(t)[1]
+        return self._G if self.dae.is_constant else self._evaluate(t)[1]
 
     def constraint_residual(self, t, x):
-        """The constraint residual ``c = Z2^T (F x - g(t))``.
+        """The constraint residual ``c = Z2^T (F x - g(t))``: zero exactly on the solution manifold.
 
-        Zero exactly on the solution manifold. ``Z2`` is an orthonormal basis
-        of the left null space of the *standard* derivative array, so the
-        residuals of the three methods are comparable.
-
-        Parameters
-        ----------
-        t : float or ndarray, shape (m,)
-        x : ndarray, shape (n,) or (n, m)
-
-        Returns
-        -------
-        ndarray, shape (a,) or (a, m)
+        ``Z2`` is an orthonormal basis of the left null space of the *standard* derivative array, so the
+        residuals of the three methods are comparable. `t`: a time or (with `x` of shape (n, m)) m times;
+        returns shape (a,) or (a, m).
         """
         x = np.asarray(x, dtype=float)
         if x.shape[:1] != (self.n,) or x.ndim > 2:
@@ -370,24 +277,45 @@ class Completion:
         if x.ndim == 2:
             t = np.broadcast_to(np.asarray(t, dtype=float), (x.shape[1],))
             if self.dae.is_constant and self._c_const is not None:
-                return self._std.C @ x - self._c_const[:, None]
-            return np.column_stack([self.constraint_residual(ti, xi) for ti, xi in zip(t, x.T)]) if x.shape[1] else np.zeros((self.n_constraints, 0))
+                return self._std.C[0] @ x - self._c_const[:, None]
+            return np.column_stack([self.constraint_residual(ti, xi) for ti, xi in zip(t, x.T)]) if x.shape[1] \
+                else np.zeros((self.n_constraints, 0))
         if self.dae.is_constant:
-            cg = self._c_const if self._c_const is not None else self._W_c @ self._fstack(t)
-            return self._std.C @ x - cg
+            cg = self._c_const if self._c_const is not None else self._Wc @ self._fjet(t)
+            return self._std.C[0] @ x - cg
         fac = self._evaluate(t)[0]
-        return fac.C @ x - fac.cg
+        return fac.C[0] @ x - fac.cg[0, :, 0]
 
     def project(self, t, x):
-        """The consistent point nearest to `x` (least squares) at time `t`.
-
-        Solves ``min ||y - x||`` subject to ``Z2^T (F y - g(t)) = 0``.
-        """
+        """The consistent point nearest to `x` (least squares) at time `t`: ``min ||y - x||`` subject to
+        ``Z2^T (F y - g(t)) = 0``."""
         x = np.asarray(x, dtype=float)
         if x.shape != (self.n,):
             raise DimensionError(f"`x` has the wrong shape: expected ({self.n},), got {_shape_str(x.shape)}.")
         fac = self._std if self.dae.is_constant else self._evaluate(t)[0]
-        return x - fac.C_pinv @ self.constraint_residual(t, x)
+        return x - fac.C_pinv[0] @ self.constraint_residual(t, x)
+
+    def clear_cache(self):
+        """Forget the evaluations kept for the last few times (time-varying completions).
+
+        Call it when the coefficients a completion reads changed behind its back (a callable coefficient
+        whose inputs were set anew): the next evaluation at a time computes it afresh.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from lsc import JetCallable, LinearDAE, complete
+        >>> gain = [1.0]  # a coefficient read from outside: x2 = gain sin t
+        >>> f = JetCallable(lambda t, order: np.array([[0.0, gain[0] * np.sin(t + d * np.pi / 2)]
+        ...                                            for d in range(order + 1)]))
+        >>> c = complete(LinearDAE([[0, 1], [0, 0]], np.eye(2), f), "alternative", lam=1.0)
+        >>> g1 = c.matrices(0.5)[1]
+        >>> gain[0] = 2.0
+        >>> c.clear_cache()
+        >>> bool(np.allclose(c.matrices(0.5)[1], 2 * g1))
+        True
+        """
+        self._cache.clear()
 
     @property
     def added_eigenvalue(self):
@@ -399,15 +327,10 @@ class Completion:
         return -self.lam
 
     def __repr__(self):
-        if self.lam is None:
-            lam = ""
-        elif isinstance(self.lam, TimeFunction):
-            lam = ", lam=lam(t)"
-        else:
-            lam = f", lam={self.lam:g}"
+        lam = "" if self.lam is None else ", lam=lam(t)" if isinstance(self.lam, TimeFunction) else f", lam={self.lam:g}"
         return f"{type(self).__name__}(n={self.n}, k={self.k}{lam}, constraints={self.n_constraints})"
 
-    def _maps(self, fac, t):  # pragma: no cover - abstract
+    def _maps(self, fac, lam):  # pragma: no cover - abstract
         raise NotImplementedError
 
 
@@ -424,12 +347,8 @@ class StandardCompletion(Completion):
     method = "standard"
     uses_lam = False
 
-    def _maps(self, fac, t):
-        P = fac.first_rows
-        return -fac.times_F(P, 0), fac.times_L(P, 0)
-
-    def _stacked_maps(self, st, times):
-        return standard_maps(st)
+    def _maps(self, fac, lam):
+        return standard_maps(fac)
 
 
 class StabilizedCompletion(StandardCompletion):
@@ -460,21 +379,8 @@ class StabilizedCompletion(StandardCompletion):
     method = "stabilized"
     uses_lam = True
 
-    def _maps(self, fac, t):
-        G, W = super()._maps(fac, t)
-        n, k = self.n, self.k
-        N, a = fac.Z2.shape
-        Lam = stabilization_jets(k, 0, self._lam_jet(t, k))[0]
-        Lam_inv = scipy.linalg.solve_triangular(Lam, np.eye(k + 1), lower=True, unit_diagonal=True)
-        # M = (Lam^-T kron I) Z2 and Y0 (Lam^-1 kron I), block by block.
-        M = np.einsum("ji,jba->iba", Lam_inv, fac.Z2.reshape(k + 1, n, a)).reshape(N, a)
-        Y0_Dinv = np.einsum("aib,ij->ajb", fac.first_rows.reshape(n, k + 1, n), Lam_inv).reshape(n, N)
-        Qm, Rm = scipy.linalg.qr(M, mode="economic")
-        K = scipy.linalg.solve_triangular(Rm, (Y0_Dinv @ Qm).T, lower=False).T
-        return G + K @ fac.C, W - K @ fac.cg
-
-    def _stacked_maps(self, st, times):
-        return stabilized_maps(st, [stabilization_jets(self.k, 0, self._lam_jet(t, self.k))[0] for t in times])
+    def _maps(self, fac, lam):
+        return stabilized_maps(fac, lam)
 
 
 class AlternativeCompletion(Completion):
@@ -494,20 +400,8 @@ class AlternativeCompletion(Completion):
     uses_lam = True
     extra_order = 1
 
-    def _maps(self, fac, t):
-        Z2, C = fac.Z2, fac.C
-        # c' = (Z2^T)' (F x - g) + Z2^T (F' x + F x' - g') = -lam c, with
-        # (Z2^T)' = -Z2^T J' J^+, so (Z2^T)' (F x - g) = -Y (F x - g); Y = 0 for constant coefficients.
-        lam = self._lam_jet(t)[0]
-        G_c = -lam * C - fac.times_F(Z2.T, 1)
-        W_c = lam * fac.cg + fac.times_L(Z2.T, 1)
-        if fac.has_Jd:
-            Y = fac.times_pinv(Z2.T @ fac.jets.J[1])
-            G_c, W_c = G_c + fac.times_F(Y, 0), W_c - fac.times_L(Y, 0)
-        return fac.index_one_solve(G_c, W_c, self.rcond, t)
-
-    def _stacked_maps(self, st, times):
-        return alternative_maps(st, [self._lam_jet(t)[0] for t in times], self.rcond, times)
+    def _maps(self, fac, lam):
+        return alternative_maps(fac, lam, self.rcond)
 
 
 # Set-ups for DAEs the classes above do not take whole: lsc._sparse registers 'sparse' (scipy.sparse DAEs) on import.
@@ -607,3 +501,45 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None, setup="a
         if setup == "sparse" or getattr(dae, "is_sparse", False):  # scipy.sparse coefficients: lsc._sparse decides
             return SETUPS["sparse"](cls, dae, lam=lam, k=k, rcond=rcond, t_span=t_span, setup=setup)
         return cls(dae, lam=lam, k=k, rcond=rcond, t_span=t_span, setup=setup)
+
+
+def _lam_affine(c, ts, rtol):
+    """`Completion.lam_affine` at the times `ts`."""
+    if not c.uses_lam:
+        maps = c.maps(ts)
+        return LamAffine(maps.G, np.zeros_like(maps.G), maps.W, np.zeros_like(maps.W), 0.0, (), maps)
+    facs = [c._factors0] if c.dae.is_constant else [_setup.factors_at(c, float(t)) for t in ts]
+    unit = c._scaling.sigma  # the DAE's own unit of time: rates r / unit are of order one there
+    rates = [r / unit for r in _FIT_RATES + _CHECK_RATES]
+    # at each time, the maps at the rates of the fit and the checks and at the completion's own rate, from one
+    # factorization and one evaluation of the maps (the rates along the leading axis)
+    parts = []
+    for f in facs:
+        jets = np.concatenate([c._lam_jets(f.t, value=r) for r in rates] + [c._lam_jets(f.t)])
+        parts.append(c._given(*c._maps(f, jets), f))
+    G, W = (np.broadcast_to(np.stack(X), (ts.size,) + X[0].shape) for X in zip(*parts))  # (m, rates + 1, ...)
+    if c.dae.is_constant:
+        maps = c.maps(ts)
+    else:
+        given = [c._given_factors(f) for f in facs]
+        maps = CompletionMaps(ts, G[:, -1], W[:, -1], np.concatenate([g.C for g, _ in given]),
+                              np.concatenate([Wc for _, Wc in given]), c.order, c.k,
+                              np.array([float(lam_at(c.lam, t)[0]) for t in ts]), c.method)
+    G1, W1 = (G[:, 1] - G[:, 0]) / (rates[1] - rates[0]), (W[:, 1] - W[:, 0]) / (rates[1] - rates[0])
+    G0, W0 = G[:, 0] - rates[0] * G1, W[:, 0] - rates[0] * W1
+    checks = [(rates[i], G[:, i], W[:, i]) for i in (2, 3)]
+    residual = 0.0
+    for rate, Gr, Wr in checks + [(maps.lam, maps.G, maps.W)]:
+        rate = np.broadcast_to(rate, ts.shape)
+        for name, M0, M1, M in (("G", G0, G1, Gr), ("W", W0, W1, Wr)):
+            # relative to the size of the terms at that rate: at lam = 1e12 the lam G1 part is all of G
+            size = [np.abs(X).max(axis=(1, 2), initial=0.0) for X in (M, M0, M1)]
+            err = np.abs(M0 + rate[:, None, None] * M1 - M).max(axis=(1, 2), initial=0.0) / np.maximum(
+                np.maximum(size[0], 1.0), size[1] + rate * size[2])
+            residual = max(residual, float(np.max(err)))
+            if not np.all(err <= rtol):
+                i = int(np.argmin(err <= rtol))
+                raise ValueError(f"{name}(lambda) of the {c.method} completion is not affine in lambda here "
+                                 f"(relative misfit {float(err[i]):.1e} at lambda = {float(rate[i]):g}, "
+                                 f"t = {float(ts[i]):g})")
+    return LamAffine(G0, G1, W0, W1, residual, tuple(rates[2:]) + tuple(sorted(set(maps.lam.tolist()))), maps)

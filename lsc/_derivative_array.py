@@ -73,16 +73,15 @@ def stabilization_jets(k, q, lj):
 
 
 class _ArrayJets:
-    """Derivatives ``0..q`` of J, F and of the forcing map L of one array.
+    """Derivatives ``0..q`` of J, F and of the forcing map L of one array, at one time or at several.
 
-    ``J[d]`` is the d-th time derivative of J (shape (N, N), N = (k+1) n),
-    ``F[d]`` of F (N, n) and ``L[d]`` of the forcing map (N, (k+q+1) n): the
-    d-th derivative of ``g`` is ``L[d] @ fstack`` with
-    ``fstack = [f, f', ..., f^(k+q)]``. ``Lam`` is `stabilization_jets`.
+    ``J[d]`` is the d-th time derivative of J (shape ``lead + (N, N)``, N = (k+1) n, ``lead`` the times'
+    axes: none for one time), ``F[d]`` of F (``lead + (N, n)``) and ``L[d]`` of the forcing map
+    (N, (k+q+1) n): the d-th derivative of ``g`` is ``L[d] @ fstack`` with ``fstack = [f, f', ...,
+    f^(k+q)]``. ``Lam`` is `stabilization_jets`.
 
     ``L[d]`` is ``Lam[d] kron I_n``: it is formed (lazily) only where the map
-    itself is wanted, for constant coefficients; applying it to values,
-    `forcing`, needs no dense matrix.
+    itself is wanted; applying it to values, `forcing`, needs no dense matrix.
     """
 
     def __init__(self, J, F, Lam, k, q, n):
@@ -103,45 +102,34 @@ class _ArrayJets:
 
 def array_jets(dae, k, t, lam=None, q=0):
     """Build the derivative array with k differentiations and its first q derivatives."""
-    n = dae.n
     order = k + q
-    lj = lam_jet(lam, t, order)
-    A_pow = _powers(dae.A.jet(t, order), k, lj)
-    B_pow = _powers(dae.B.jet(t, order), k, lj)
+    return assembled_jets(dae.A.jet(t, order), dae.B.jet(t, order), k, q, lam_jet(lam, t, order))
+
+
+def assembled_jets(A, B, k, q, lj=None):
+    """The `_ArrayJets` of coefficients given by their jets `A`, `B` to order ``k + q``.
+
+    The jets have the derivative order first and may hold several times after it: shape
+    ``(k + q + 1,) + lead + (n, n)``; ``J[d]`` and ``F[d]`` then have the same ``lead`` axes (the one
+    assembly for one time and for the stacked evaluation at many times, `lsc._dense_factors`).
+    """
+    n = A.shape[-1]
+    lead = A.shape[1:-2]
+    A_pow = _powers(A, k, lj)
+    B_pow = _powers(B, k, lj)
     Lam = stabilization_jets(k, q, lj)
     N = (k + 1) * n
-    J = np.zeros((q + 1, N, N))
-    F = np.zeros((q + 1, N, n))
+    J = np.zeros((q + 1,) + lead + (N, N))
+    F = np.zeros((q + 1,) + lead + (N, n))
     for i in range(k + 1):
         rows = slice(i * n, (i + 1) * n)
-        F[:, rows] = B_pow[i][: q + 1]
+        F[..., rows, :] = B_pow[i][: q + 1]
         for m in range(1, i + 2):
             block = comb(i, m - 1) * A_pow[i - m + 1][: q + 1]
             if m <= i:
                 block = block + comb(i, m) * B_pow[i - m][: q + 1]
-            J[:, rows, (m - 1) * n : m * n] = block
+            J[..., rows, (m - 1) * n : m * n] = block
     return _ArrayJets(J, F, Lam, k, q, n)
-
-
-def stacked_arrays(A, B, k, q):
-    """`array_jets`'s ``J`` and ``F`` (standard differentiation) at m times at once, same arithmetic.
-
-    `A`, `B`: the coefficients' jets to order ``k + q`` at each time, shape (m, k + q + 1, n, n).
-    Returns ``J`` (m, q + 1, N, N) and ``F`` (m, q + 1, N, n), ``N = (k + 1) n``.
-    """
-    m, n = A.shape[0], A.shape[-1]
-    N = (k + 1) * n
-    J = np.zeros((m, q + 1, N, N))
-    F = np.zeros((m, q + 1, N, n))
-    for i in range(k + 1):  # D^i u is u's jet from order i on
-        rows = slice(i * n, (i + 1) * n)
-        F[:, :, rows] = B[:, i : i + q + 1]
-        for mm in range(1, i + 2):
-            block = comb(i, mm - 1) * A[:, i - mm + 1 : i - mm + q + 2]
-            if mm <= i:
-                block = block + comb(i, mm) * B[:, i - mm : i - mm + q + 1]
-            J[:, :, rows, (mm - 1) * n : mm * n] = block
-    return J, F
 
 
 class DerivativeArray:

@@ -29,48 +29,69 @@ import math
 
 import numpy as np
 
+from ._forcing import taylor_map
 from ._validate import check_dense_times
 
-__all__ = ["ExactSolution", "Propagator", "integrate"]
+__all__ = ["ExactPropagator", "ExactSolution", "integrate"]
 
 _DEGREES = (1, 3, 5, 7)
 _SAFETY = 0.5
 _SAMPLES = 257
 
 
-class Propagator:
-    """``exp(M h)`` for the augmented system of a completion with Taylor degree ``q``.
+class ExactPropagator:
+    """Exact steps of ``x' = G x + g(t)``, with ``g`` its Taylor polynomial of degree `q` over each step.
+
+    Over a step from ``t`` the system together with that polynomial is ``z' = M z``, ``z = [x; u_0; ...;
+    u_q]`` (``u_j`` the j-th derivative of the polynomial), so ``x(t + h) = Phi x(t) + Psi [g; g'; ...;
+    g^(q)](t)`` with ``[Phi, Psi]`` the first ``n`` rows of ``exp(M h)``: exact when ``g`` is a polynomial
+    of degree <= q over the step, with the local error ``O(h^(q+2) max |g^(q+1)|)`` of the Taylor remainder
+    otherwise. Given the forcing map ``W`` of a completion (``g = W [f; f'; ...; f^(p)]``,
+    `CompletionMaps.W`), a step acts on the jet of ``f`` itself: ``x(t + h) = Phi x + K [f; f'; ...;
+    f^(p+q)](t)``, ``K = Psi Wbig`` (`step_matrices`). This is the step of ``solve_completion(...,
+    method='expm')`` and of the exact stepping of the FMUs lsc builds.
 
     Parameters
     ----------
     G : ndarray, shape (n, n)
     q : int
         Degree of the forcing's Taylor polynomial over a step.
+    W : ndarray, shape (n, n_f (p + 1)), optional
+        The forcing map on the jet of ``f`` (``n_f`` entries per derivative).
+    n_f : int, optional
+        Entries of ``f`` (default n).
 
     Examples
     --------
+    ``x' = -x + g`` with constant ``g``: ``x(h) = e^-h x(0) + (1 - e^-h) g``.
+
     >>> import numpy as np
-    >>> P = Propagator(np.array([[-1.0]]), 0)
-    >>> E = P.exponential(0.5)       # x(0.5) = e^-0.5 x(0) + (1 - e^-0.5) g for constant g
-    >>> bool(np.allclose(E[0], [np.exp(-0.5), 1 - np.exp(-0.5)]))
+    >>> from lsc import ExactPropagator
+    >>> P = ExactPropagator(np.array([[-1.0]]), 0)
+    >>> bool(np.allclose(P.step(np.array([2.0]), np.array([3.0]), 0.5), 2 * np.exp(-0.5) + 3 * (1 - np.exp(-0.5))))
     True
+    >>> Phi, K = ExactPropagator(np.array([[-1.0]]), 1, W=np.array([[1.0, 0.0]])).step_matrices(0.5)
+    >>> K.shape   # acting on [f, f', f''] at the step's start (g = f, so g' = f')
+    (1, 3)
     """
 
-    def __init__(self, G, q):
-        self.G, self.q = np.asarray(G, dtype=float), q
+    def __init__(self, G, q, W=None, n_f=None):
+        self.G, self.q = np.asarray(G, dtype=float), int(q)
         self.n = self.G.shape[0]
+        self.W = None if W is None else np.asarray(W, dtype=float)
+        self._Wbig = None if W is None else taylor_map(self.W, self.n if n_f is None else n_f, self.q)
         self._cache = {}
 
-    def exponential(self, h):
-        """``exp(M h)``, shape ``(n (q + 2), n (q + 2))``, cached per step length.
+    def exponential(self, h, cache=True):
+        """``exp(M h)``, shape ``(n (q + 2), n (q + 2))``.
 
-        Step lengths that agree to 13 significant digits (equal output
-        intervals differ in the last bits after linspace rounding) share one
-        exponential; a relative change of 1e-13 in ``h`` moves the result by
-        far less than the method's error. Different steps never share one.
+        Cached per step length (`cache`): lengths that agree to 13 significant digits (equal output
+        intervals differ in the last bits after linspace rounding) share one exponential; a relative change
+        of 1e-13 in ``h`` moves the result by far less than the method's error. Different steps never
+        share one.
         """
         key = float(f"{h:.13g}")
-        hit = self._cache.get(key)
+        hit = self._cache.get(key) if cache else None
         if hit is None:
             import scipy.linalg  # looked up per call: tests count the exponentials
 
@@ -79,11 +100,14 @@ class Propagator:
             M[:n, :n] = self.G * h
             for j in range(1, m):
                 M[(j - 1) * n : j * n, j * n : (j + 1) * n] = h * np.eye(n)
-            hit = self._cache[key] = scipy.linalg.expm(M)
+            hit = scipy.linalg.expm(M)
+            if cache:
+                self._cache[key] = hit
         return hit
 
     @property
     def n_exponentials(self):
+        """How many exponentials are cached."""
         return len(self._cache)
 
     def step(self, x, u, h):
@@ -91,26 +115,18 @@ class Propagator:
         E = self.exponential(h)
         return E[: self.n, : self.n] @ x + E[: self.n, self.n :] @ u
 
+    def step_matrices(self, h, cache=True):
+        """``(Phi, Psi)``: ``x(t + h) = Phi x + Psi [g; ...; g^(q)](t)``; with `W`, ``(Phi, K)``:
+        ``x(t + h) = Phi x + K [f; ...; f^(p+q)](t)``."""
+        E = self.exponential(h, cache)
+        n = self.n
+        Phi, Psi = np.ascontiguousarray(E[:n, :n]), E[:n, n:]
+        return Phi, (np.ascontiguousarray(Psi) if self._Wbig is None else np.ascontiguousarray(Psi @ self._Wbig))
 
-def _forcing_kind(completion):
-    f = completion.dae.f
-    if f is None:
-        return "none"
-    if f.is_constant:
-        return "constant"
-    return "varying"
 
-
-def _node_jets(completion, kind, ts, q):
+def _node_jets(completion, ts, q):
     """Stacked forcing jets ``[g; g'; ...; g^(q)]`` at every time of `ts`: shape ``(n (q + 1), len(ts))``."""
-    n = completion.n
-    if kind == "none":
-        return np.zeros((n * (q + 1), len(ts)))
-    if kind == "constant":
-        U = np.zeros((n * (q + 1), len(ts)))
-        U[:n] = completion._g_const[:, None]
-        return U
-    return completion._forcing.jets(ts, q).reshape(n * (q + 1), len(ts))
+    return completion._g.jets(ts, q).reshape(completion.n * (q + 1), len(ts))
 
 
 def choose_step(completion, t0, t1, x0, rtol, atol, taylor_degree=None):
@@ -126,8 +142,7 @@ def choose_step(completion, t0, t1, x0, rtol, atol, taylor_degree=None):
     matrix-vector product per step. Polynomial (or no) forcing gives
     ``H = inf``.
     """
-    kind = _forcing_kind(completion)
-    if kind != "varying":
+    if completion._g.is_constant:
         return (0 if taylor_degree is None else taylor_degree), math.inf
     T = abs(t1 - t0)
     tol = float(np.min(atol)) + float(np.min(rtol)) * float(np.max(np.abs(x0), initial=0.0))
@@ -137,7 +152,7 @@ def choose_step(completion, t0, t1, x0, rtol, atol, taylor_degree=None):
     degrees = _DEGREES if taylor_degree is None else (taylor_degree,)
     top = max(degrees)
     samples = np.linspace(t0, t1, _SAMPLES)
-    jets = completion._forcing.jets(samples, top)  # (top + 1, n, samples): the orders stepping needs anyway
+    jets = completion._g.jets(samples, top)  # (top + 1, n, samples): the orders stepping needs anyway
     sizes = list(np.max(np.abs(jets), axis=(1, 2)))
     # the next order from differences of the last (no symbolic derivative compiled for it)
     sizes.append(float(np.max(np.abs(np.diff(jets[top], axis=1)))) / abs(samples[1] - samples[0]) if T else 0.0)
@@ -164,15 +179,14 @@ def integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=None, max
     `t1` (if `t_out` ends before it) and ``sol`` is an `ExactSolution` on
     ``[t0, t1]``; otherwise it is None.
     """
-    kind = _forcing_kind(completion)
     if max_step is None:
         q, H = choose_step(completion, t0, t1, x0, rtol, atol, taylor_degree)
     else:
         q = 3 if taylor_degree is None else taylor_degree
         H = max_step
-    if kind != "varying":
+    if completion._g.is_constant:
         q = 0  # no or constant forcing: exact with the zeroth-order term alone
-    prop = Propagator(completion._G, q)
+    prop = ExactPropagator(completion._G, q)
     n = completion.n
     X = np.empty((n, t_out.size))
     x, nsteps = x0.copy(), 0
@@ -187,18 +201,18 @@ def integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=None, max
     uniform = rest.size >= 3 and np.all(np.abs(diffs - diffs.mean()) <= 1e-10 * abs(diffs.mean()))
     if uniform:
         # step from t0 to the grid's first point like any other interval, then the grid itself
-        x, steps = _march(completion, kind, prop, t0, x, np.array([rest[0]]), H, X[:, start : start + 1], knots)
+        x, steps = _march(completion, prop, t0, x, np.array([rest[0]]), H, X[:, start : start + 1], knots)
         nsteps += steps
-        x, steps = _uniform(completion, kind, prop, rest, x, H, X[:, start:], knots)
+        x, steps = _uniform(completion, prop, rest, x, H, X[:, start:], knots)
         nsteps += steps
     elif rest.size:
-        x, steps = _march(completion, kind, prop, t0, x, rest, H, X[:, start:], knots)
+        x, steps = _march(completion, prop, t0, x, rest, H, X[:, start:], knots)
         nsteps += steps
     sol = None
     if dense_output:
         t_last = rest[-1] if rest.size else t0
         if t_last != t1:  # the dense output covers t_span whatever the output times
-            x, steps = _march(completion, kind, prop, t_last, x, np.array([t1]), H, np.empty((n, 1)), knots)
+            x, steps = _march(completion, prop, t_last, x, np.array([t1]), H, np.empty((n, 1)), knots)
             nsteps += steps
         sol = ExactSolution(prop, knots, t0, t1)
     message = (f"exact stepping: {nsteps} steps (taylor_degree={q}), "
@@ -244,18 +258,11 @@ class ExactSolution:
         x, u = self._states[:, i], self._jets[:, i]
         if h == 0.0:
             return x.copy()
-        import scipy.linalg
-
-        n, m = self._prop.n, self._prop.q + 2
-        M = np.zeros((m * n, m * n))
-        M[:n, :n] = self._prop.G * h
-        for j in range(1, m):
-            M[(j - 1) * n : j * n, j * n : (j + 1) * n] = h * np.eye(n)
-        E = scipy.linalg.expm(M)[:n]
-        return E[:, :n] @ x + E[:, n:] @ u
+        Phi, Psi = self._prop.step_matrices(h, cache=False)
+        return Phi @ x + Psi @ u
 
 
-def _march(completion, kind, prop, t, x, targets, H, out, knots=None):
+def _march(completion, prop, t, x, targets, H, out, knots=None):
     """Step from `t` through each of `targets` (in equal substeps no longer than `H`), writing `out`.
 
     `knots` (a list, or None): gets ``(starts, states, jets)`` of the steps taken, for dense output."""
@@ -269,7 +276,7 @@ def _march(completion, kind, prop, t, x, targets, H, out, knots=None):
         t = target
         plan.append((None, target))  # an output marker
     starts = np.array([s for s, _ in plan if s is not None])
-    U = _node_jets(completion, kind, starts, prop.q) if starts.size else None
+    U = _node_jets(completion, starts, prop.q) if starts.size else None
     states = np.empty((prop.n, starts.size)) if knots is not None else None
     i = col = 0
     for s, h in plan:
@@ -286,7 +293,7 @@ def _march(completion, kind, prop, t, x, targets, H, out, knots=None):
     return x, int(starts.size)
 
 
-def _uniform(completion, kind, prop, grid, x, H, out, knots=None):
+def _uniform(completion, prop, grid, x, H, out, knots=None):
     """Dense output on an equally spaced grid from one exponential (see the module docstring)."""
     N = grid.size
     d = (grid[-1] - grid[0]) / (N - 1)
@@ -307,7 +314,7 @@ def _uniform(completion, kind, prop, grid, x, H, out, knots=None):
         powers.append(powers[-1] @ E)
     R_m = powers[m]
     starts = grid[0] + np.arange(K) * (m * h)
-    U = _node_jets(completion, kind, starts, prop.q)
+    U = _node_jets(completion, starts, prop.q)
     Z = np.empty((E.shape[0], K))
     Z[n:] = U
     Z[:n, 0] = x

@@ -25,7 +25,49 @@ import numpy as np
 
 from ._timefunc import ComplexValueError, SympyFunction, complex_entry_error
 
-__all__ = ["Forcing"]
+__all__ = ["ConstantForcing", "Forcing", "forcing_of", "taylor_map"]
+
+
+def taylor_map(W, n_f, order):
+    """``Wbig`` with ``[g; g'; ...; g^(order)] = Wbig @ [f; f'; ...; f^(p + order)]`` for ``g = W [f; ...; f^(p)]``.
+
+    ``g^(j) = W [f^(j); ...; f^(j + p)]``: block row j is `W` shifted by j blocks of ``n_f`` columns.
+    """
+    n = W.shape[0]
+    p = W.shape[1] // n_f - 1
+    Wbig = np.zeros(((order + 1) * n, (p + order + 1) * n_f))
+    for j in range(order + 1):
+        Wbig[j * n : (j + 1) * n, j * n_f : (j + p + 1) * n_f] = W
+    return Wbig
+
+
+def forcing_of(W, f, p):
+    """The forcing ``g(t) = W [f; ...; f^(p)](t)`` of a constant-coefficient completion: a `ConstantForcing`
+    when ``f`` is None or constant, else a compiled `Forcing`."""
+    if f is None or f.is_constant:
+        fjet = np.zeros(W.shape[1]) if f is None else f.jet(0.0, p).reshape(-1)
+        return ConstantForcing(W @ fjet)
+    return Forcing(W, f, p)
+
+
+class ConstantForcing:
+    """A constant forcing ``g``, with the interface of `Forcing` (its derivatives vanish)."""
+
+    is_constant = True
+
+    def __init__(self, g):
+        self.g = g
+        self.n = g.shape[0]
+
+    def value(self, t):
+        return self.g
+
+    __call__ = value
+
+    def jets(self, ts, order):
+        out = np.zeros((order + 1, self.n, np.size(ts)))
+        out[0] = self.g[:, None]
+        return out
 
 
 def _check_finite(values, name, t):
@@ -59,6 +101,8 @@ class Forcing:
     (2, 1, 2)
     """
 
+    is_constant = False
+
     def __init__(self, W, f, p):
         self.W = np.asarray(W, dtype=float)
         self.f, self.p = f, p
@@ -77,17 +121,13 @@ class Forcing:
 
     # -- the map from the stacked f-jet (orders 0..p+order) to [g; g'; ...; g^(order)] ------------
     def _stack_map(self, order):
-        """``Wbig`` with ``[g; ...; g^(order)] = Wbig @ [f; ...; f^(p+order)]``."""
-        n, m = self.n, self.n_f
-        Wbig = np.zeros(((order + 1) * n, (self.p + order + 1) * m))
-        for j in range(order + 1):
-            Wbig[j * n : (j + 1) * n, j * m : (j + self.p + 1) * m] = self.W
-        return Wbig
+        """``Wbig`` with ``[g; ...; g^(order)] = Wbig @ [f; ...; f^(p+order)]`` (`taylor_map`)."""
+        return taylor_map(self.W, self.n_f, order)
 
     def _derivative(self, d):
         f = self.f
         while len(f._derivs) <= d:
-            f._derivs.append(f._derivs[-1].diff(f._t))
+            f._derivs.append(f._derivs[-1].diff(f.symbol))
         return f._derivs[d]
 
     def _used(self, Wbig):
@@ -106,7 +146,7 @@ class Forcing:
 
         if not entries:
             return None
-        return sympy.lambdify(self.f._t, entries, modules=modules, cse=True)
+        return sympy.lambdify(self.f.symbol, entries, modules=modules, cse=True)
 
     # -- one time ----------------------------------------------------------------------------------
     def __call__(self, t):
@@ -187,22 +227,36 @@ class Forcing:
         fn = getattr(f, "fn", None)
         if top >= 1 and ts.size and not getattr(f, "_d_checked", True):
             f.jet(float(ts[0]), 1)  # the set-up check that the callable honours d (lsc._timefunc)
-        if self._callable_vectorizes is not False and fn is not None and not hasattr(fn, "jet") and ts.size > 1:
-            # A callable written with numpy ufuncs accepts an array t: one call per order.
-            try:
-                raw = [fn(ts, d) for d in range(top + 1)]
-            except Exception:  # noqa: BLE001 - any failure means: not vectorized; the loop below reports errors
-                raw = None
-            if raw is not None and any(np.iscomplexobj(r) for r in raw):
-                raise TypeError(f"`{f.name}(t, d)` must return real numbers of shape {shape}; got complex values "
-                                "for an array of times (their imaginary part would be lost).")
-            try:
-                rows = None if raw is None else [np.asarray(r, dtype=float) for r in raw]
-            except (TypeError, ValueError):
-                rows = None
-            if rows is not None and all(r.shape == shape + (ts.size,) for r in rows):
+        if self._callable_vectorizes is not False and fn is not None and ts.size > 1:
+            rows = self._vectorized(fn, ts, top)
+            if rows is not None:
                 self._callable_vectorizes = True
-                return np.concatenate([r.reshape(self.n_f, ts.size) for r in rows], axis=0)
+                return rows
             self._callable_vectorizes = False
         return np.column_stack([f.jet(float(t), top).reshape(-1) for t in ts]) if ts.size else \
             np.zeros(((top + 1) * self.n_f, 0))
+
+    def _vectorized(self, fn, ts, top):
+        """The stacked jets from one call with the array `ts`, or None when the callable does not take one.
+
+        A callable written with numpy ufuncs accepts an array t: one call of ``fn.jet(ts, top)`` when it
+        offers all orders at once (shape ``(top + 1,) + shape + (m,)``), else one call of ``fn(ts, d)`` per
+        order (``shape + (m,)``). Anything else (an exception, another shape) means: not vectorized, and the
+        one-time calls report what is wrong.
+        """
+        m, n_f, shape = ts.size, self.n_f, self.f.shape
+        try:
+            raw = [fn.jet(ts, top)] if hasattr(fn, "jet") else [fn(ts, d) for d in range(top + 1)]
+        except Exception:  # noqa: BLE001 - any failure means: not vectorized; the loop reports errors
+            return None
+        if any(np.iscomplexobj(r) for r in raw):
+            raise TypeError(f"`{self.f.name}(t, d)` must return real numbers of shape {shape}; got complex values "
+                            "for an array of times (their imaginary part would be lost).")
+        try:
+            rows = [np.asarray(r, dtype=float) for r in raw]
+        except (TypeError, ValueError):
+            return None
+        want = ((top + 1,) if hasattr(fn, "jet") else ()) + shape + (m,)
+        if not all(r.shape == want for r in rows):
+            return None
+        return np.concatenate([r.reshape(-1, n_f, m).reshape(-1, m) for r in rows], axis=0)

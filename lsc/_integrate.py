@@ -8,7 +8,8 @@ from ._chebyshev import ChebyshevCoefficients, EvaluationFailed
 from ._completion import Completion, complete
 from ._derivative_array import lam_jet
 from ._exceptions import IndexDeterminationError, RankDecisionWarning, StiffnessWarning
-from ._ivp import BoundedSolution, run, shifted_events
+from ._ivp import BoundedSolution, run as run_ivp, shifted_events
+from ._rate import check_rate_on
 from ._singular import _singular_time, find_stop
 from ._validate import check_state, check_t_eval, check_t_span, check_tolerances
 
@@ -74,7 +75,9 @@ def _is_implicit(method):
     return isinstance(method, type) and issubclass(method, (Radau, BDF, LSODA))
 
 
-def _solve_expm(completion, t0, t1, x0, t_eval, rtol, atol, options):
+def _solve_expm(run, options):
+    """``method='expm'``: exact stepping with the matrix exponential (`lsc._expm`)."""
+    completion = run.completion
     q = options.pop("taylor_degree", None)
     max_step = options.pop("max_step", None)
     dense = options.pop("dense_output", False)
@@ -89,9 +92,10 @@ def _solve_expm(completion, t0, t1, x0, t_eval, rtol, atol, options):
         raise ValueError(f"`taylor_degree` must be a non-negative int; found {q!r}.")
     if max_step is not None and not max_step > 0:
         raise ValueError(f"`max_step` must be positive; found {max_step!r}.")
-    t_out = np.linspace(t0, t1, 101) if t_eval is None else t_eval  # checked by solve_completion
-    X, message, sol = _expm.integrate(completion, t0, t1, x0, t_out, rtol, atol, taylor_degree=q, max_step=max_step,
-                                      dense_output=bool(dense))
+    t0, t1 = run.t_span
+    t_out = np.linspace(t0, t1, 101) if run.t_eval is None else run.t_eval
+    X, message, sol = _expm.integrate(completion, t0, t1, run.x0, t_out, run.rtol, run.atol, taylor_degree=q,
+                                      max_step=max_step, dense_output=bool(dense))
     return CompletionResult(
         t=t_out, x=X, success=True, status=0, message=message,
         nfev=0, njev=0, nlu=0, sol=sol, completion=completion,
@@ -237,77 +241,108 @@ def solve_completion(
     if getattr(completion, "setup", None) == "sparse":  # an operator, not a matrix: it integrates itself
         return completion.solve(t_span, x0, method="auto" if method is None else method, t_eval=t_eval, rtol=rtol,
                                 atol=atol, project=project, interpolate=interpolate, **options)
-    if not isinstance(completion, Completion):
-        raise TypeError(f"`completion` must be an lsc Completion (see lsc.complete); found {type(completion).__name__}.")
     method = "RK45" if method is None else method
-    t0, t1 = check_t_span(t_span)
-    x0 = check_state("x0", x0, completion.n)
-    t_eval = check_t_eval(t_eval, (t0, t1))
-    rtol, atol = check_tolerances(rtol, atol, completion.n)
-    if t1 < t0 and completion.uses_lam:
-        raise ValueError(_backward_refusal(completion, t0, t1))
-    tol = _interpolation_tol(interpolate, rtol)  # bad input fails here, whatever the method
-    completion._check_rate_on((t0, t1))  # a time-varying lam must be positive on the whole run
+    run = _Run(completion, t_span, x0, t_eval, rtol, atol, interpolate)
     if method == "expm":
+        run.start(project, interpolate=False)
+        return _solve_expm(run, dict(options))
+    method = run.choose(method)
+    run.start(project)
+    if run.t_end == run.t_span[0]:  # the completion cannot be evaluated clearly beyond t0
+        return _stopped(run, np.array([run.t_span[0]]), run.x0[:, None].copy(), 0, None)
+    return (_solve_cvode if method == "CVODE" else _solve_ivp)(run, method, options)
+
+
+class _Run:
+    """A run's set-up, validated: the arguments, the method's stiffness and, once started, what is
+    integrated (the completion or its interpolant, in the offsets ``t - origin``) and up to where."""
+
+    def __init__(self, completion, t_span, x0, t_eval, rtol, atol, interpolate):
+        if not isinstance(completion, Completion):
+            raise TypeError(f"`completion` must be an lsc Completion (see lsc.complete); found {type(completion).__name__}.")
+        self.completion = completion
+        self.t_span = t0, t1 = check_t_span(t_span)
+        self.x0 = check_state("x0", x0, completion.n)
+        self.t_eval = check_t_eval(t_eval, (t0, t1))
+        self.rtol, self.atol = check_tolerances(rtol, atol, completion.n)
+        if t1 < t0 and completion.uses_lam:
+            raise ValueError(_backward_refusal(completion, t0, t1))
+        self.tol = _interpolation_tol(interpolate, self.rtol)  # bad input fails here, whatever the method
+        check_rate_on(completion.lam, (t0, t1))  # a time-varying lam must be positive on the whole run
+        self.stiffness = None
+
+    def choose(self, method):
+        """The solve_ivp method ('auto': Radau when the completion is stiff on `t_span`, else DOP853)."""
+        self.stiffness = stiffness_ratio(self.completion, self.t_span)
+        if method == "auto":
+            method = "Radau" if self.stiffness > _STIFF else "DOP853"
+        if not (isinstance(method, str) or (isinstance(method, type) and issubclass(method, OdeSolver))):
+            raise TypeError(f"`method` must be a solve_ivp method name or OdeSolver class; found {method!r}.")
+        return method
+
+    def start(self, project, interpolate=True):
+        """Project `x0` if asked, evaluate once (bad forcing input raises here, with its own message) and, for a
+        time-varying completion, build its interpolant and find where the run must stop (`_interpolant`)."""
+        c, (t0, t1) = self.completion, self.t_span
         if project:
-            x0 = completion.project(t0, x0)
-        return _solve_expm(completion, t0, t1, x0, t_eval, rtol, atol, dict(options))
-    stiffness = stiffness_ratio(completion, (t0, t1))
-    if method == "auto":
-        method = "Radau" if stiffness > _STIFF else "DOP853"
-    if not (isinstance(method, str) or (isinstance(method, type) and issubclass(method, OdeSolver))):
-        raise TypeError(f"`method` must be a solve_ivp method name or OdeSolver class; found {method!r}.")
-    if project:
-        x0 = completion.project(t0, x0)
-    # Evaluate once before integrating: bad forcing input (wrong shape,
-    # non-finite values at t0) raises here, with its own message.
-    completion.rhs(t0, x0)
+            self.x0 = c.project(t0, self.x0)
+        self.coefficients, self.built, self.stop, self.t_end, self.origin = None, "", None, t1, 0.0
+        if not interpolate:
+            return
+        c.rhs(t0, self.x0)
+        if self.tol is not None and not c.dae.is_constant:
+            self.coefficients, self.built, self.stop = _interpolant(c, t0, t1, self.tol)
+        self.t_end = t1 if self.stop is None else self.stop.t_clear
+        # With an interpolant the integrator runs in the offset s = t - origin (the interpolant's own coordinate,
+        # `ChebyshevCoefficients.matrices_local`): its stage times are then exact to the rounding of s, not of t.
+        self.origin = 0.0 if self.coefficients is None else self.coefficients.origin
 
-    coefficients, built, stop = None, "", None
-    if tol is not None and not completion.dae.is_constant and t1 != t0:
-        coefficients, built, stop = _interpolant(completion, t0, t1, tol)
-    t_end = t1 if stop is None else stop.t_clear
-    if t_end == t0:  # the completion cannot be evaluated clearly beyond t0
-        return _stopped(completion, stop, np.array([t0]), x0[:, None].copy(), 0, None, built)
-    # With an interpolant the integrator runs in the offset s = t - origin (the interpolant's own coordinate,
-    # `ChebyshevCoefficients.matrices_local`): its stage times are then exact to the rounding of s, not of t.
-    origin = 0.0 if coefficients is None else coefficients.origin
-    if coefficients is None:
-        rhs, jac = completion.rhs, completion.jac
-    else:
-        rhs, jac = coefficients.rhs_local, coefficients.jac_local
-    span = (t0 - origin, t_end - origin)
-    t_eval_run = None if t_eval is None else t_eval[np.sign(t1 - t0) * (t_eval - t_end) <= 0] - origin
+    @property
+    def functions(self):
+        """``(rhs, jac)`` in the integrator's time (the offsets from `origin`)."""
+        if self.coefficients is None:
+            return self.completion.rhs, self.completion.jac
+        return self.coefficients.rhs_local, self.coefficients.jac_local
 
-    if method == "CVODE":
-        res = _solve_cvode(completion, _as_value_error(rhs), jac, span, x0, t_eval_run, rtol, atol, options, built,
-                           origin)
-        return res if stop is None else _stopped(completion, stop, res.t, res.x, res.nfev, None, built, res)
-    if _is_implicit(method) and "jac" not in options:
-        options["jac"] = completion.jac(t0, x0) if completion.dae.is_constant else jac
-    if not _is_implicit(method):
-        _warn_if_costly(method, stiffness, completion, t0, x0)
-    if "events" in options and origin != 0.0:
-        options["events"] = shifted_events(options["events"], origin)
-    result = run(rhs, (t0, t_end), x0, method, t_eval_run, rtol, atol, options, origin,
-                 None if t_eval is None else t_eval[: t_eval_run.size])
+    def t_eval_run(self):
+        """The output times up to where the run ends, as offsets from `origin` (or None)."""
+        if self.t_eval is None:
+            return None
+        t0, t1 = self.t_span
+        return self.t_eval[np.sign(t1 - t0) * (self.t_eval - self.t_end) <= 0] - self.origin
+
+
+def _solve_ivp(run, method, options):
+    """`scipy.integrate.solve_ivp` on the run (`lsc._ivp.run`: offsets, recorded steps, bounded dense output)."""
+    c, (t0, t1), x0 = run.completion, run.t_span, run.x0
+    rhs, jac = run.functions
+    implicit = _is_implicit(method)
+    if implicit and "jac" not in options:
+        options["jac"] = c.jac(t0, x0) if c.dae.is_constant else jac
+    if not implicit:
+        _warn_if_costly(method, run.stiffness, c, t0, x0)
+    if "events" in options and run.origin != 0.0:
+        options["events"] = shifted_events(options["events"], run.origin)
+    t_eval = run.t_eval_run()
+    result = run_ivp(rhs, (t0, run.t_end), x0, method, t_eval, run.rtol, run.atol, options, run.origin,
+                     None if run.t_eval is None else run.t_eval[: t_eval.size])
     if result.failure is not None:
-        return _failed(completion, result.failure, result.t, result.x, result.nfev, t_end, built)
+        return _failed(run, result.failure, result.t, result.x, result.nfev)
     sol = result.sol
-    dense = None if sol.sol is None else BoundedSolution(sol.sol, origin, t0, t_end)
-    if stop is not None:
-        return _stopped(completion, stop, result.t, result.x, sol.nfev, dense, built, sol)
-    message = sol.message + built
-    if not _is_implicit(method) and stiffness > _STIFF:
-        message += (f" (the completion is stiff on this interval: |rate| x length = {stiffness:.3g}; "
+    dense = None if sol.sol is None else BoundedSolution(sol.sol, run.origin, t0, run.t_end)
+    if run.stop is not None:
+        return _stopped(run, result.t, result.x, sol.nfev, dense, sol)
+    message = sol.message + run.built
+    if not implicit and run.stiffness > _STIFF:
+        message += (f" (the completion is stiff on this interval: |rate| x length = {run.stiffness:.3g}; "
                     "method='Radau' or 'auto' takes far fewer steps)")
-    elif not sol.success and not _is_implicit(method):
-        message += (f" (the step size collapsed after t={float(result.t[-1]):g}, but the completion is not stiff: its known "
-                    f"rates (lam, and the eigenvalues of G for constant coefficients) x length = {stiffness:.3g}; look "
-                    "for a singularity of the coefficients or the forcing just after it)")
+    elif not sol.success and not implicit:
+        message += (f" (the step size collapsed after t={float(result.t[-1]):g}, but the completion is not stiff: its "
+                    f"known rates (lam, and the eigenvalues of G for constant coefficients) x length = "
+                    f"{run.stiffness:.3g}; look for a singularity of the coefficients or the forcing just after it)")
     return CompletionResult(
         t=result.t, x=result.x, success=bool(sol.success), status=sol.status, message=message,
-        nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=dense, completion=completion,
+        nfev=sol.nfev, njev=sol.njev, nlu=sol.nlu, sol=dense, completion=c,
     )
 
 
@@ -340,14 +375,14 @@ def _interpolant(completion, t0, t1, tol):
     return None, f"; no interpolation (evaluating the completion failed at t={failed_at!r})", stop
 
 
-def _stopped(completion, stop, t, x, nfev, dense, built, sol=None):
+def _stopped(run, t, x, nfev, dense, sol=None):
     """The result of a run that ended where the completion cannot be evaluated (`lsc._singular.Stop`)."""
     how = "" if sol is None or sol.success else f"; the integrator stopped before it: {sol.message}"
     kept = (f"; the result holds the {t.size} point(s) computed before it, up to t={float(t[-1])!r}" if t.size
             else "; no point was computed")
     return CompletionResult(
-        t=t, x=x, success=False, status=-2, message=f"{stop.message}{kept}{how}{built}",
-        nfev=nfev, njev=getattr(sol, "njev", 0), nlu=getattr(sol, "nlu", 0), sol=dense, completion=completion,
+        t=t, x=x, success=False, status=-2, message=f"{run.stop.message}{kept}{how}{run.built}",
+        nfev=nfev, njev=getattr(sol, "njev", 0), nlu=getattr(sol, "nlu", 0), sol=dense, completion=run.completion,
     )
 
 
@@ -378,19 +413,24 @@ def _backward_refusal(completion, t0, t1):
     )
 
 
-def _solve_cvode(completion, rhs, jac, t_span, x0, t_eval, rtol, atol, options, built, origin=0.0):
-    """CVODE on `t_span` (offsets from `origin`, as `rhs` and `jac` take them)."""
-    constant_jac = completion.jac(t_span[0], x0) if completion.dae.is_constant else None
-    out = _cvode.solve(rhs, jac, *t_span, x0, t_eval, rtol, atol, options, constant_jac=constant_jac)
-    message = out["message"] + built
+def _solve_cvode(run, method, options):
+    """CVODE on the run (offsets from `origin`, as its right-hand side and Jacobian take them)."""
+    c, origin = run.completion, run.origin
+    rhs, jac = run.functions
+    span = (run.t_span[0] - origin, run.t_end - origin)
+    constant_jac = c.jac(span[0], run.x0) if c.dae.is_constant else None
+    out = _cvode.solve(_as_value_error(rhs), jac, *span, run.x0, run.t_eval_run(), run.rtol, run.atol, options,
+                       constant_jac=constant_jac)
+    message = out["message"] + run.built
     status = out["status"]
     if "failure" in out:
         t_fail, exc = out["failure"]
         message, status = f"evaluating the right-hand side failed at t={float(origin + t_fail)!r}: {exc}", -2
-    return CompletionResult(
+    res = CompletionResult(
         t=out["t"] if origin == 0.0 else origin + out["t"], x=out["x"], success=out["success"], status=status,
-        message=message, nfev=out["nfev"], njev=out["njev"], nlu=0, sol=None, completion=completion,
+        message=message, nfev=out["nfev"], njev=out["njev"], nlu=0, sol=None, completion=c,
     )
+    return res if run.stop is None else _stopped(run, res.t, res.x, res.nfev, None, res)
 
 
 def _interpolation_tol(interpolate, rtol):
@@ -404,10 +444,10 @@ def _interpolation_tol(interpolate, rtol):
     raise ValueError(f"`interpolate` must be None, True, False or a relative accuracy in (0, 1); found {interpolate!r}.")
 
 
-def _failed(completion, failure, ts, xs, nfev, t_end, built):
+def _failed(run, failure, ts, xs, nfev):
     """A run whose right-hand side failed mid-run (`failure`, a ForcingFailed): the trajectory computed
     before it, and why; where the derivative array loses rank near the failure, the time it does."""
-    t, exc = failure.t, failure.exc
+    completion, t_end, t, exc = run.completion, run.t_end, failure.t, failure.exc
     kept = f"; the result holds the {ts.size} point(s) computed before it, up to t={float(ts[-1])!r}" if ts.size else ""
     singular = ""
     if isinstance(exc, (IndexDeterminationError, RankDecisionWarning)) and ts.size:
@@ -417,7 +457,7 @@ def _failed(completion, failure, ts, xs, nfev, t_end, built):
                         "loses rank there)")
     return CompletionResult(
         t=ts, x=xs, success=False, status=-2,
-        message=f"evaluating the right-hand side failed at t={float(t)!r}: {exc}{singular}{kept}{built}",
+        message=f"evaluating the right-hand side failed at t={float(t)!r}: {exc}{singular}{kept}{run.built}",
         nfev=nfev, njev=0, nlu=0, sol=None, completion=completion,
     )
 

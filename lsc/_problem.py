@@ -1,5 +1,7 @@
 """The problem object: a linear DAE ``A x' + B x = f(t)``."""
 
+import copy
+
 import numpy as np
 
 from ._exceptions import DimensionError
@@ -306,6 +308,30 @@ class Scaling:
                 setattr(scaled, name, _scaled(h, self.r, self.c, self.sigma, power))
         return scaled
 
+    def maps_given(self, G, W, n, order, maps):
+        """``(G, W)`` of a completion of the equilibrated DAE in the given unknowns and time.
+
+        With ``x = diag(c) y`` and ``t = sigma tau``: ``x' = diag(c) (G_y diag(c)^-1 x + g_y) / sigma``. A
+        forcing map (`maps`) acts on the given jet, which the equilibrated one is times `fstack_scales`.
+        """
+        if self.c is not None:
+            G, W = self.c[:, None] * G / self.c, self.c[:, None] * W
+        if maps and (self.r is not None or self.sigma != 1.0):
+            W = W * self.fstack_scales(n, order)
+        return (G, W) if self.sigma == 1.0 else (G / self.sigma, W / self.sigma)
+
+    def factors_given(self, fac, n, order):
+        """``(factors, cg)``: `fac` with its constraint rows in the given unknowns, ``C_y diag(c)^-1`` (a copy:
+        `fac` stays the equilibrated DAE's), and its constraints' forcing acting on the given jet."""
+        cg = fac.cg
+        if fac.fstack is None and (self.r is not None or self.sigma != 1.0):
+            cg = cg * self.fstack_scales(n, order)
+        if self.c is None:
+            return fac, cg
+        given = copy.copy(fac)
+        given.C, given._C_svd = fac.C / self.c, None
+        return given, cg
+
     def fstack_scales(self, n, order):
         """What the equilibrated forcing jet ``[f~, f~', ..., f~^(order)]`` is the given one times:
         ``sigma^d r`` in block d (a map acting on the equilibrated jet acts on the given one times these)."""
@@ -345,18 +371,6 @@ class _ScaledFunction(TimeFunction):
 def row_scaled(dae, r, c=None):
     """The DAE ``diag(r) (A D y' + B D y - f) = 0``, ``D = diag(c)``: the solutions ``y = D^-1 x``."""
     return Scaling(r, c).apply(dae)
-
-
-def unscale_columns(fac, G, g, c):
-    """``(G, g)`` of a completion computed in ``y = x / c``, back in ``x``; `fac`'s constraints too.
-
-    ``x' = diag(c) (G_y diag(c)^-1 x + g_y)``. The constraints ``C_y y = C_y diag(c)^-1 x`` become
-    ``C = C_y diag(c)^-1`` (after the completion's maps, which use `fac` in ``y``), so residuals,
-    `project` (nearest consistent ``x``) and the manifold's basis are those of the given unknowns.
-    """
-    fac.C = fac.C / c
-    fac._C_svd = None
-    return c[:, None] * G / c, (c[:, None] if np.ndim(g) == 2 else c) * g
 
 
 def _infer_n(value, name):

@@ -10,7 +10,7 @@ import numpy as np
 from ._timefunc import TimeFunction, _contains_sympy, as_time_function
 from ._validate import check_lam_value
 
-__all__ = ["as_rate", "lam_jet", "lam_at"]
+__all__ = ["as_rate", "check_rate", "check_rate_on", "lam_jet", "lam_at"]
 
 
 def as_rate(lam):
@@ -47,3 +47,30 @@ def lam_at(lam, t, order=0):
     if not jet[0] > 0.0:
         raise ValueError(f"`lam` must be positive wherever the completion is evaluated; lam({float(t)!r}) = {float(jet[0])!r}.")
     return jet
+
+
+def check_rate(lam, uses_lam, method, times):
+    """The rate a completion of `method` takes: None where it has no stabilization (`uses_lam` False), else a
+    positive constant or a TimeFunction positive at `times` (`check_rate_on`)."""
+    if not uses_lam:
+        if lam is not None:
+            raise ValueError(
+                f"`lam` must be None for the {method!r} completion, which has no stabilization; found {lam!r}.")
+        return None
+    if lam is None:
+        raise ValueError(
+            f"`lam` is required for the {method!r} completion: a positive finite rate "
+            "(e.g. lam=1.0), a sympy expression in t or a callable lam(t, d); found None."
+        )
+    lam = as_rate(lam)
+    check_rate_on(lam, times)
+    return lam
+
+
+def check_rate_on(lam, t_span):
+    """Refuse a time-varying rate that is not positive at 101 points of `t_span` (or at its one time)."""
+    if not isinstance(lam, TimeFunction):
+        return
+    times = np.linspace(t_span[0], t_span[-1], 101 if len(t_span) == 2 else 1)
+    for t in times:
+        lam_at(lam, float(t))

@@ -22,7 +22,7 @@ import scipy.linalg
 
 from ._derivative_array import array_jets
 from ._exceptions import RankDecisionWarning
-from ._linalg import _MARGIN, default_rcond
+from ._linalg import RANK_MARGIN, default_rcond
 
 __all__ = []
 
@@ -63,7 +63,7 @@ def rank_margin(completion, t):
     """The factor by which the rank of the standard array at `t` clears its threshold.
 
     ``min(s_r / tol, tol / s_(r+1))`` for the completion's rank ``r`` and the threshold ``tol = rcond s_1``:
-    below 1 the rank is not ``r``, below `_MARGIN` the decision is a close call. Infinite where the
+    below 1 the rank is not ``r``, below `RANK_MARGIN` the decision is a close call. Infinite where the
     coefficients cannot be evaluated (that is no rank decision).
     """
     try:
@@ -162,7 +162,7 @@ def _singular_time(completion, t_bad, t_far, length, direction):
     """The time past `t_bad` (towards `t_far`) where the array's rank margin is smallest, if it falls below 1.
 
     The search reaches to `t_far` and at least 1e-6 of the run's `length` past `t_bad`: a close call starts
-    ``_MARGIN rcond / c`` before a simple zero of slope ``c`` of the smallest singular value kept.
+    ``RANK_MARGIN rcond / c`` before a simple zero of slope ``c`` of the smallest singular value kept.
     """
     width = max(abs(t_far - t_bad), 1e-6 * length, 1e3 * _resolution(t_bad, t_far))
     t, margin = _minimum_margin(completion, t_bad, t_bad + direction * width)
@@ -193,7 +193,7 @@ def find_stop(completion, t0, t1, failed_at=None, unresolved=()):
             good, bad = start, end
         else:
             t, margin = _minimum_margin(completion, start, end)
-            why = clear(completion, t) if margin < _MARGIN else None
+            why = clear(completion, t) if margin < RANK_MARGIN else None
             if why is None:
                 continue
             good, bad = start, t

@@ -325,24 +325,7 @@ class SparseCompletion:
 
     # -- implicit steps ---------------------------------------------------------------------------------------
     def step_solver(self, c):
-        """A solver of ``(I - c G) k = r`` (``c > 0``): the set-up's Schur factorization and one sparse LU of
-        the pencil ``A + c B`` (rows scaled), cached by `c`.
-
-        With ``v = (k - r) / c`` in the least-squares conditions
-        ``H v_d + C_c^T mu = -W B_d k`` (``W = E^T R_d^2``, ``H = W E``) and
-        ``C v = -lam C k``: a row ``i`` of level >= 1 is ``C_i = -C_p^d E^-1 B_d``
-        (``p`` its parent), so ``C_i k = -lam C_p k + S_p mu`` with ``S = C_c H^-1 C_c^T``,
-        and every constraint row gives ``(1 + c lam) C_i k = C_i r``. Hence
-
-            S mu = m,   m_p = (C_i r + lam C_p r) / (1 + c lam)      (one row per parent)
-
-            [E + c B_dd   c B_da] [k_d]   [E r_d - c W^-1 C_c^T mu   ]
-            [B_ad         B_aa  ] [k_a] = [B_a r / (1 + c lam)       ]
-
-        The second matrix is ``A + c B`` with its algebraic rows divided by
-        ``c``: the DAE's own sparsity (for Stokes the implicit-Euler saddle
-        point ``[[I - c L, c A12], [A12^T, 0]]``).
-        """
+        """A solver of ``(I - c G) k = r`` (``c > 0``), cached by `c` (`_StepSolver` states how it solves)."""
         c = float(c)
         hit = self._step_cache.get(c)
         if hit is not None:
@@ -353,19 +336,6 @@ class SparseCompletion:
             self._step_cache.pop(next(iter(self._step_cache)))
         return solver
 
-    def _mu(self, m):
-        """``mu = S^-1 m`` (``S = C_c H^-1 C_c^T``), through the Schur factorization or the saddle-point one."""
-        if self._schur is not None:
-            return self._schur.solve(m)
-        sol = self._kkt.solve(np.concatenate([np.zeros(self.structure.diff_cols.size), m]))
-        return -sol[self.structure.diff_cols.size:]
-
-    def _times_W_inverse(self, v):
-        if self._w_diag is not None:
-            return v / self._w_diag
-        # W^-1 = R_d^-2 E^-T
-        return self.structure.E_solver.solve(v, trans="T") / self._W_weights
-
     def __repr__(self):
         return (f"SparseCompletion(n={self.n}, k={self.k}, lam={self.lam:g}, constraints={self.n_constraints}, "
                 f"{self.structure.describe()})")
@@ -375,7 +345,24 @@ _STEP_CACHE = 4
 
 
 class _StepSolver:
-    """``(I - c G)^-1`` through the Schur factorization and one LU of ``A + c B`` (see `SparseCompletion.step_solver`)."""
+    """``(I - c G)^-1`` (``c > 0``) through the set-up's Schur factorization and one sparse LU of the pencil
+    ``A + c B`` (rows scaled).
+
+    With ``v = (k - r) / c`` in the least-squares conditions
+    ``H v_d + C_c^T mu = -W B_d k`` (``W = E^T R_d^2``, ``H = W E``) and
+    ``C v = -lam C k``: a row ``i`` of level >= 1 is ``C_i = -C_p^d E^-1 B_d``
+    (``p`` its parent), so ``C_i k = -lam C_p k + S_p mu`` with ``S = C_c H^-1 C_c^T``,
+    and every constraint row gives ``(1 + c lam) C_i k = C_i r``. Hence
+
+        S mu = m,   m_p = (C_i r + lam C_p r) / (1 + c lam)      (one row per parent)
+
+        [E + c B_dd   c B_da] [k_d]   [E r_d - c W^-1 C_c^T mu   ]
+        [B_ad         B_aa  ] [k_a] = [B_a r / (1 + c lam)       ]
+
+    The second matrix is ``A + c B`` with its algebraic rows divided by
+    ``c``: the DAE's own sparsity (for Stokes the implicit-Euler saddle
+    point ``[[I - c L, c A12], [A12^T, 0]]``).
+    """
 
     def __init__(self, comp, c):
         s = comp.structure
@@ -398,10 +385,23 @@ class _StepSolver:
         if comp._cont.size:
             m = np.empty(comp._cont.size)
             m[self._parent_pos] = (Cr[self._child] + comp.lam * Cr[s.parent[self._child]]) / scale
-            rhs_d = rhs_d - c * comp._times_W_inverse(comp._C_cT @ comp._mu(m))
+            rhs_d = rhs_d - c * self._times_W_inverse(comp._C_cT @ self._mu(m))
         sol = self.lu.solve(np.concatenate([rhs_d, Cr[: s.alg_rows.size] / scale]))
         nd = s.diff_cols.size
         return comp._join(sol[:nd], sol[nd:])
+
+    def _mu(self, m):
+        """``mu = S^-1 m`` (``S = C_c H^-1 C_c^T``), through the Schur factorization or the saddle-point one."""
+        if self.comp._schur is not None:
+            return self.comp._schur.solve(m)
+        sol = self.comp._kkt.solve(np.concatenate([np.zeros(self.comp.structure.diff_cols.size), m]))
+        return -sol[self.comp.structure.diff_cols.size:]
+
+    def _times_W_inverse(self, v):
+        if self.comp._w_diag is not None:
+            return v / self.comp._w_diag
+        # W^-1 = R_d^-2 E^-T
+        return self.comp.structure.E_solver.solve(v, trans="T") / self.comp._W_weights
 
 
 class SparseMaps:

@@ -12,12 +12,15 @@ from a grid of ratio sqrt(2), so a factorization serves many steps: the
 completion caches the last four.
 """
 
+from types import SimpleNamespace
+
 import numpy as np
 import scipy.sparse.linalg
-from scipy.integrate import OdeSolver, solve_ivp
+from scipy.integrate import OdeSolver
 from scipy.integrate._ivp.base import DenseOutput
 
-from ._integrate import CompletionResult, _backward_refusal, _failed, _ForcingFailed, _partial_run, _recording
+from ._integrate import CompletionResult, _backward_refusal, _failed
+from ._ivp import BoundedSolution, run
 from ._validate import check_state, check_t_eval, check_t_span, check_tolerances
 
 __all__ = ["Rodas4", "SPARSE_METHODS", "fastest_rate", "solve_sparse"]
@@ -246,28 +249,21 @@ def solve_sparse(completion, t_span, x0, *, method="auto", t_eval=None, rtol=1e-
     rhs = completion.rhs
 
     def fun(t, x):
-        try:
-            out = rhs(t, x)
-        except Exception as exc:  # noqa: BLE001 - anything from the forcing ends the run with what it has
-            raise _ForcingFailed(t, exc) from exc
+        out = rhs(t, x)
         if not np.all(np.isfinite(out)):
-            raise _ForcingFailed(t, ValueError("the right-hand side is not finite"))
+            raise ValueError("the right-hand side is not finite")
         return out
 
     base = Rodas4 if method == "Rodas4" else method
     if method == "Rodas4":
         options["completion"] = completion
-    solvers = []
-    try:
-        sol = solve_ivp(fun, (t0, t1), x0, method=_recording(base, solvers), t_eval=t_eval, rtol=rtol, atol=atol,
-                        **options)
-    except _ForcingFailed as exc:
-        t_ok = getattr(solvers[-1], "t", t0) if solvers else t0
-        opts = dict(options, rtol=rtol, atol=atol)
-        partial = _partial_run(fun, t0, t_ok, x0, base, t_eval, opts)
-        return _failed(completion, exc.t, exc.exc, partial)
-    nlu = getattr(solvers[-1], "nlu", 0) if solvers else 0
+    result = run(fun, (t0, t1), x0, base, t_eval, rtol, atol, options, 0.0, t_eval)
+    if result.failure is not None:
+        return _failed(SimpleNamespace(completion=completion, t_end=t1, built=""), result.failure, result.t, result.x,
+                       result.nfev)
+    sol = result.sol
+    dense = None if sol.sol is None else BoundedSolution(sol.sol, 0.0, t0, t1)
     return CompletionResult(
-        t=sol.t, x=sol.y, success=bool(sol.success), status=sol.status, message=sol.message + note,
-        nfev=sol.nfev, njev=0, nlu=nlu, sol=sol.sol, completion=completion, method=method,
+        t=result.t, x=result.x, success=bool(sol.success), status=sol.status, message=sol.message + note,
+        nfev=sol.nfev, njev=0, nlu=getattr(sol, "nlu", 0), sol=dense, completion=completion, method=method,
     )

@@ -36,7 +36,7 @@ QR of ``A``, solves and products of n-sized blocks; nothing of size
 ``((k+1) n)^2`` is formed. Rank decisions use ``rcond`` (default: the dense
 path's default for the array of that level) relative to the largest pivot
 of ``A`` or, on the small level matrices, to 1 (they hold cosines between
-orthonormal bases). A decision within a factor ``_MARGIN`` (100, the margin
+orthonormal bases). A decision within a factor ``RANK_MARGIN`` (100, the margin
 of `RankDecisionWarning`) of the threshold, no shift that makes ``B + mu A``
 well conditioned (singular or nearly singular pencils), k below the index
 or an index-one system that is not clearly invertible is not decided here;
@@ -44,7 +44,7 @@ nor is what the dense arrays decide differently from the staircase: an
 ``rcond`` at rounding level, a rank of A that holds against ``||A||`` but
 not against ``||B||``, ``||A||`` and ``||B||`` far apart (`_check_balance`)
 and bases that miss the dense threshold (`_check_residuals`).
-`StructuredFallback` says why and the caller uses the dense path, which
+`lsc._factors.Decline` says why and the caller uses the dense path, which
 decides, warns or refuses as it always does.
 """
 
@@ -55,32 +55,22 @@ import scipy.linalg
 from scipy.linalg import lapack
 
 from ._derivative_array import stabilization_jets
-from ._exceptions import IndexDeterminationError
-from ._linalg import default_rcond, numerical_rank
+from ._factors import Decline, Factors
+from ._linalg import RANK_MARGIN, TRIAL_SHIFTS, close_call, default_rcond
 
-__all__ = ["StructuredFallback", "StructuredArray", "StructuredFactors", "constraint_svd", "structured_array"]
+__all__ = ["StructuredArray", "StructuredFactors", "structured_array"]
 
-# A rank decision closer than this factor to the threshold goes to the dense path (its SVDs decide it and
-# warn): the margin `numerical_rank` warns within.
-_MARGIN = 100.0
-# Shifts tried, in units of ||B|| / ||A|| (the pencil's natural scale); a regular pencil is singular at
-# no more than n of them.
-_SHIFTS = (0.7317, -1.3641, 2.2713, -0.4127)
 # B_mu is accepted when its reciprocal condition number (1-norm estimate) exceeds this.
 _SHIFT_RCOND = 1e-6
 _EPS = float(np.finfo(float).eps)
 
 
-class StructuredFallback(Exception):
-    """The structured set-up cannot decide this problem as safely as the dense one (message: why)."""
-
-
 def _shift(A, B):
-    """``(mu, lu)`` with ``B + mu A`` well conditioned, or StructuredFallback."""
+    """``(mu, lu)`` with ``B + mu A`` well conditioned, or `Decline`."""
     nA, nB = np.linalg.norm(A, 1), np.linalg.norm(B, 1)
     scale = (nB or 1.0) / (nA or 1.0)
     worst = None
-    for s in _SHIFTS:
+    for s in TRIAL_SHIFTS:
         mu = s * scale
         Bm = B + mu * A
         lu, piv, info = lapack.dgetrf(Bm)
@@ -91,7 +81,7 @@ def _shift(A, B):
             worst = rc
         else:
             worst = 0.0
-    raise StructuredFallback(
+    raise Decline(
         f"B + mu A is ill conditioned at every trial shift (reciprocal condition {worst:.1e}): the pencil is "
         "singular or nearly so"
     )
@@ -103,9 +93,9 @@ def _default_rcond(n, level):
 
 
 def _count_above(values, tol, what):
-    """How many of `values` exceed `tol`; a value within `_MARGIN` of it is a close call left to the dense path."""
-    if np.any((values > tol / _MARGIN) & (values < tol * _MARGIN)):
-        raise StructuredFallback(f"the rank decision on {what} is a close call (within {_MARGIN:g} of the threshold)")
+    """How many of `values` exceed `tol`; a close call (`lsc._linalg.close_call`) is left to the dense path."""
+    if close_call(values, tol):
+        raise Decline(f"the rank decision on {what} is a close call (within {RANK_MARGIN:g} of the threshold)")
     return int(np.count_nonzero(values > tol))
 
 
@@ -136,14 +126,14 @@ def _generalized_null_space(A, Bm, Mt, rcond, kmax, norm_B):
     (qr, tau), R, piv = scipy.linalg.qr(A, mode="raw", pivoting=True)  # Q stays in Householder form
     d = np.abs(np.diag(R))
     if d.size == 0 or d[0] == 0.0:
-        raise StructuredFallback("A is zero")
+        raise Decline("A is zero")
     tol0 = rcond if rcond is not None else _default_rcond(n, 0)
     r = _count_above(d / d[0], tol0, "A (k=0)")
     # From k = 1 on the dense arrays hold B too and decide A's rank against their largest singular value
     # (at least ||B||): a rank that only holds against ||A|| itself is not theirs.
     scale_J = max(d[0], norm_B)
     if _count_above(d / scale_J, rcond if rcond is not None else _default_rcond(n, 1), "A against the array (k=1)") != r:
-        raise StructuredFallback(
+        raise Decline(
             f"A's rank depends on its scale: {r} against ||A|| = {d[0]:.1e}, less against the derivative array "
             f"(||B|| = {norm_B:.1e})"
         )
@@ -160,7 +150,7 @@ def _generalized_null_space(A, Bm, Mt, rcond, kmax, norm_B):
     N, levels, U, sizes = N1, 1, N1, [N1.shape[1]]
     while True:
         if levels > kmax:
-            raise StructuredFallback(f"the index exceeds kmax={kmax}")
+            raise Decline(f"the index exceeds kmax={kmax}")
         H = Wl.T @ N
         _, sv, Vh = np.linalg.svd(H)
         tol = rcond if rcond is not None else _default_rcond(n, levels)
@@ -235,16 +225,16 @@ def _check_balance(norm_A, norm_B, k, n, rcond):
     index, computes a different G where the structured one would not. Measured on random pencils of index
     1..6 (cond 10, ``s`` from 1e-4 to 1e4, n = 12): the dense decisions changed only where
     ``m^(k + 2)``, ``m = max(||A||/||B||, ||B||/||A||)``, exceeded about ``1 / rcond``; this declines from
-    ``m^max(2k, k + 2) = 1 / (rcond _MARGIN^2)`` on.
+    ``m^max(2k, k + 2) = 1 / (rcond RANK_MARGIN^2)`` on.
     """
     tol = rcond if rcond is not None else _default_rcond(n, k)
     rho = norm_A / norm_B if norm_B else np.inf
     spread = max(rho, 1.0 / rho) if rho else np.inf
     power = max(2 * k, k + 2)
-    if k and spread**power * tol * _MARGIN**2 > 1.0:
-        raise StructuredFallback(
+    if k and spread**power * tol * RANK_MARGIN**2 > 1.0:
+        raise Decline(
             f"||A|| / ||B|| = {rho:.1e}: with k = {k} the dense arrays' rank decisions depend on that ratio "
-            f"(its power {power} or that of its inverse reaches 1 / (rcond {_MARGIN:g}^2), rcond = {tol:.1e})"
+            f"(its power {power} or that of its inverse reaches 1 / (rcond {RANK_MARGIN:g}^2), rcond = {tol:.1e})"
         )
 
 
@@ -252,15 +242,15 @@ def _pencil_reduction(A, B, rcond, kmax, k=None):
     """Shift, ``Mt = B_mu^-T A^T``, its generalized null space and ``(||A||, ||B||)`` (k: the differentiations
     that will be used, None for the index)."""
     n = A.shape[0]
-    if rcond is not None and rcond < _MARGIN * n * _EPS:
-        raise StructuredFallback(
-            f"rcond={rcond:.1e} is below the rounding level of n-sized blocks ({_MARGIN * n * _EPS:.1e}): "
+    if rcond is not None and rcond < RANK_MARGIN * n * _EPS:
+        raise Decline(
+            f"rcond={rcond:.1e} is below the rounding level of n-sized blocks ({RANK_MARGIN * n * _EPS:.1e}): "
             "pivots there cannot be told from zero"
         )
     mu, lu = _shift(A, B)
     Mt = scipy.linalg.lu_solve(lu, A.T, trans=1)
     if not np.all(np.isfinite(Mt)):
-        raise StructuredFallback("B_mu^-1 A overflows: A and B are too far apart in scale for n-sized blocks")
+        raise Decline("B_mu^-1 A overflows: A and B are too far apart in scale for n-sized blocks")
     norms = _norm2(A), _norm2(B)
     U_S, sizes, N1, Nr, Wl, lu_Mt = _generalized_null_space(A, B + mu * A, Mt, rcond, kmax, norms[1])
     _check_balance(*norms, len(sizes) if k is None else max(k, len(sizes)), n, rcond)
@@ -268,7 +258,7 @@ def _pencil_reduction(A, B, rcond, kmax, k=None):
 
 
 def structured_index(A, B, rcond=None, kmax=10):
-    """The differentiation index of a regular constant pencil (StructuredFallback when not clear-cut)."""
+    """The differentiation index of a regular constant pencil (`Decline` when not clear-cut)."""
     return len(_pencil_reduction(np.asarray(A, float), np.asarray(B, float), rcond, kmax)[4])
 
 
@@ -276,36 +266,36 @@ def _check_residuals(A, B, Z2, P, k, norms, rcond):
     """Decline unless ``Z2^T J`` and ``P J - [I, 0, ...]`` are small against the dense threshold.
 
     The dense SVD keeps both at rounding level; a structured basis further from the array's null space than
-    `_MARGIN` below the rank threshold would be a basis the dense path does not compute (its completions then
+    `RANK_MARGIN` below the rank threshold would be a basis the dense path does not compute (its completions then
     differ beyond rounding). Blockwise, ``J``'s block column m is ``A`` (row m) over ``B`` (row m + 1).
     """
     n, a = A.shape[0], Z2.shape[1]
-    tol = (rcond if rcond is not None else _default_rcond(n, k)) / _MARGIN
+    tol = (rcond if rcond is not None else _default_rcond(n, k)) / RANK_MARGIN
     scale = max(norms)  # <= ||J||_2
     Zb = Z2.reshape(k + 1, n, a)
     R = np.matmul(A.T, Zb)
     R[:-1] += np.matmul(B.T, Zb[1:])
     res = np.sqrt(np.einsum("mia,mia->", R, R)) / scale if a else 0.0
     if res > tol:
-        raise StructuredFallback(
+        raise Decline(
             f"the structured null space is not the dense one at its threshold: ||Z2^T J|| = {res:.1e} ||J|| "
-            f"(rcond / {_MARGIN:g} = {tol:.1e})"
+            f"(rcond / {RANK_MARGIN:g} = {tol:.1e})"
         )
     v = np.cos(np.arange((k + 1) * n * 2) * 0.7).reshape(k + 1, n, 2)  # fixed test vectors
     Jv = np.matmul(A, v)
     Jv[1:] += np.matmul(B, v[:-1])
     err = np.linalg.norm(P @ Jv.reshape(-1, 2) - v[0]) / (np.linalg.norm(P) * scale * np.linalg.norm(v))
     if err > tol:
-        raise StructuredFallback(
+        raise Decline(
             f"the structured first rows of J^+ do not invert J at the dense threshold: ||P J v - v_0|| = {err:.1e} "
-            f"||P|| ||J|| ||v|| (rcond / {_MARGIN:g} = {tol:.1e})"
+            f"||P|| ||J|| ||v|| (rcond / {RANK_MARGIN:g} = {tol:.1e})"
         )
 
 
 def structured_array(A, B, k=None, rcond=None, kmax=10):
     """The `StructuredArray` of ``A x' + B x = f`` with k (None: the index) differentiations.
 
-    Raises StructuredFallback when a rank decision is not clear-cut, no
+    Raises `lsc._factors.Decline` when a rank decision is not clear-cut, no
     shift makes ``B + mu A`` well conditioned, or ``k`` is below the index
     (the dense path then refuses or decides).
     """
@@ -315,7 +305,7 @@ def structured_array(A, B, k=None, rcond=None, kmax=10):
     index = len(sizes)
     k = index if k is None else k
     if k < index:
-        raise StructuredFallback(f"k={k} is below the index {index}")
+        raise Decline(f"k={k} is below the index {index}")
     a = U_S.shape[1]
     Binv_T = scipy.linalg.lu_solve(lu, np.eye(n), trans=1)
     # Y_0 with Mt Y_0 = B_mu^-T - U_S Psi: Psi (least norm) puts the right side into range(Mt) = Wl^perp, then
@@ -355,85 +345,41 @@ def structured_array(A, B, k=None, rcond=None, kmax=10):
     return out
 
 
-def constraint_svd(C, t):
-    """SVD of the constraint matrix ``C = Z2^T F``; refuses dependent constraints ([J, F] not of full row rank)."""
-    a = C.shape[0]
-    Uc, sc, Vct = np.linalg.svd(C)
-    rank_C = numerical_rank(sc, C.shape, None, what="constraint matrix Z2^T F")
-    if rank_C != a:
-        raise IndexDeterminationError(
-            f"the constraints Z2^T F x = Z2^T g are dependent (rank {rank_C} < {a}) at t={t!r}: "
-            "[J, F] does not have full row rank, so the DAE is not solvable."
-        )
-    return Uc, sc, Vct
+class StructuredFactors(Factors):
+    """The standard derivative array's factors for constant ``A, B`` from a `StructuredArray` (one time, maps).
 
-
-class ConstraintBasis:
-    """What both factor classes derive from their constraint matrix ``C`` (attributes ``C``, ``t``, ``_C_svd``)."""
-
-    def _c_svd(self):
-        if self._C_svd is None:
-            self._C_svd = constraint_svd(self.C, self.t)
-        return self._C_svd
-
-    @property
-    def T2(self):
-        """Orthonormal basis of the homogeneous manifold ``{x : C x = 0}`` (thesis T2)."""
-        Uc, sc, Vct = self._c_svd()
-        return Vct[sc.size :].T
-
-    @property
-    def C_pinv(self):
-        """Pseudo-inverse of ``C``."""
-        Uc, sc, Vct = self._c_svd()
-        return (Vct[: sc.size].T / sc) @ Uc.T
-
-
-class StructuredFactors(ConstraintBasis):
-    """The standard derivative array's factors for constant ``A, B`` from a `StructuredArray`.
-
-    Offers what a completion's ``_maps`` uses (``first_rows``, ``Z2``, ``C``,
-    ``cg``, ``A0``, ``B0``, ``times_F``, ``times_L``, ``T2``,
-    ``C_pinv``, ``index_one_solve``) without forming ``J``, ``F`` or the forcing
-    map ``L = Lam kron I``: ``F = [B; 0; ...]`` and ``L`` act block by block.
+    The `lsc._factors.Factors` protocol without forming ``J``, ``F`` or the forcing map
+    ``L = Lam kron I``: ``F = [B; 0; ...]`` and ``L`` act block by block, and the index-one system of the
+    alternative completion is solved with a bordered LU (`index_one_solve`).
     """
 
-    has_Jd = False  # constant coefficients: J' = 0
+    kind = "structured"
 
     def __init__(self, A, B, k, q, rcond, kmax=10):
         s = structured_array(A, B, k, rcond, kmax)
         n = s.n
-        self.n, self.t, self.k, self.q, self.index = n, 0.0, s.k, q, s.index
+        self.n, self.t, self.k, self.q, self.index, self.rcond = n, np.zeros(1), s.k, q, s.index, rcond
         self.rank = (s.k + 1) * n - s.a
         self.structured = s
-        self.Z2, self.first_rows, self.shift = s.Z2, s.first_rows, s.shift
-        self.A0, self.B0 = A, B
-        self._Lam = stabilization_jets(s.k, q, None)
-        self.C = self.Z2[:n].T @ B
-        self.cg = self.times_L(self.Z2.T, 0)
-        self._C_svd = None
+        self.Z2, self.first_rows, self.shift = s.Z2[None], s.first_rows[None], s.shift
+        self.A0, self.B0 = A[None], B[None]
+        self._forcing(stabilization_jets(s.k, q, None), None)
+        self.C = self.Z2[:, :n].transpose(0, 2, 1) @ B
 
     @property
     def rounding_scale(self):
         """``||B|| ||P||``, P the first rows of ``J^+``: what ``G`` is computed from (the dense factors'
         ``||F|| / sigma_min(J)`` without an SVD of ``J``)."""
-        return np.linalg.norm(self.B0, 2) * np.linalg.norm(self.first_rows, 2)
+        return np.linalg.norm(self.B0[0], 2) * np.linalg.norm(self.first_rows[0], 2)
 
     def times_F(self, X, d):
         """``X @ F^(d)`` with ``F = [B; 0; ...]`` (constant, so ``F' = 0``)."""
         if d:
-            return np.zeros((X.shape[0], self.n))
-        return X[:, : self.n] @ self.B0
+            return np.zeros(X.shape[:2] + (self.n,))
+        return X[..., : self.n] @ self.B0
 
-    def times_L(self, X, d):
-        """``X @ (Lam[d] kron I_n)``, block by block."""
-        m = X.shape[0]
-        blocks = X.reshape(m, self.k + 1, self.n)
-        out = np.einsum("ij,mic->mjc", self._Lam[d], blocks)
-        return out.reshape(m, out.shape[1] * out.shape[2])  # explicit: m = 0 (no constraints) cannot infer -1
-
-    def index_one_solve(self, G_c, W_c, rcond, t):
-        """``(G, W)`` of the alternative completion from its constraint rows ``C x' = G_c x + W_c``.
+    def index_one_solve(self, G_c, W_c, rcond):
+        """``(G, W, ok)`` of the alternative completion from its constraint rows ``C x' = G_c x + W_c``.
 
         The dense path solves ``[Z1^T A; C] x' = [-Z1^T B x + Z1^T f; ...]`` with ``Z1`` an orthonormal
         basis of range(A T2). Equivalently, with ``Ws`` one of its orthogonal complement (dimension a),
@@ -441,7 +387,7 @@ class StructuredFactors(ConstraintBasis):
         LU of a bordered (n + a) matrix, no SVD. ``Ws`` = {u : A^T u in range(C^T)}: ``A^T u = C^T b``
         with ``b`` in null((null A)^T C^T), solved with A^T bordered by its null spaces.
         """
-        n, A, C = self.n, self.A0, self.C
+        n, A, C = self.n, self.A0[0], self.C[0]
         s = self.structured
         Nr, N1 = s.null_A, s.left_null_A
         a1 = N1.shape[1]
@@ -456,16 +402,16 @@ class StructuredFactors(ConstraintBasis):
         else:
             Ws = np.zeros((n, 0))
         if Ws.shape[1] != C.shape[0]:
-            raise StructuredFallback(f"A T2 does not have corank {C.shape[0]}")
+            raise Decline(f"A T2 does not have corank {C.shape[0]}")
         K = np.block([[A, Ws], [C, np.zeros((C.shape[0], Ws.shape[1]))]])
         lu, piv, info = lapack.dgetrf(K)
         rc, _ = lapack.dgecon(lu, np.linalg.norm(K, 1))
         tol = rcond if rcond is not None else default_rcond(K.shape)
-        if info != 0 or not rc / K.shape[0] > tol * _MARGIN:
-            raise StructuredFallback("the index-one system [A, Ws; C, 0] is not clearly invertible")
+        if info != 0 or not rc / K.shape[0] > tol * RANK_MARGIN:
+            raise Decline("the index-one system [A, Ws; C, 0] is not clearly invertible")
         S = scipy.linalg.lu_solve((lu, piv), np.eye(K.shape[0]), check_finite=False)[:n]
         S11, S12 = S[:, :n], S[:, n:]
         G = -S11 @ self.B0 + S12 @ G_c
         W = S12 @ W_c
-        W[:, :n] += S11  # f0 = [I, 0, ...]
-        return G, W
+        W[..., :n] += S11  # f0 = [I, 0, ...]
+        return G, W, np.ones(G.shape[0], dtype=bool)

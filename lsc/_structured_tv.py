@@ -29,9 +29,9 @@ Rank decisions have the dense path's meaning (``rcond`` relative to
 singular values the decomposition discards and a triangular condition
 estimate of ``U_p`` bounds the smallest one it keeps from below (with the
 safety factors of the warm-started LU). Only when both lie farther than
-``_MARGIN`` from the threshold, the array is 1-full and the angle of its null
+``RANK_MARGIN`` from the threshold, the array is 1-full and the angle of its null
 space to ``{x' = 0}`` is provably below the dense test's, is the result used:
-otherwise `StructuredFallback` says why and the caller takes the SVD, which
+otherwise `lsc._factors.Decline` says why and the caller takes the SVD, which
 decides, warns or refuses as it always does.
 """
 
@@ -39,18 +39,14 @@ import numpy as np
 import scipy.linalg
 from scipy.linalg import lapack
 
-from ._linalg import default_rcond
-from ._structured import StructuredFallback
+from ._factors import Decline
+from ._linalg import ONE_FULL_TOL, RANK_MARGIN, default_rcond
 
 __all__ = ["BlockQR"]
 
-# Decisions closer than this factor to the threshold are left to the dense SVD (which warns within it).
-_MARGIN = 100.0
 # Safety factor on the triangular condition estimate (LAPACK's estimate of ||U^-1||_1 is a lower bound,
 # rarely off by more than 3), as for the warm-started LU.
 _EST_MARGIN = 10.0
-# 1-fullness: the dense test's bound on the sine of the angle between null(J) and {x' = 0}.
-_ONE_FULL_TOL = np.sqrt(np.finfo(float).eps)
 
 
 def _sigma_max_bounds(J):
@@ -90,20 +86,20 @@ class BlockQR:
     first_rows : ndarray, shape (n, N)
         ``[I, 0, ...] J^+``.
 
-    Raises StructuredFallback when a rank decision is not proven clear-cut or
+    Raises Decline when a rank decision is not proven clear-cut or
     ``J`` is not 1-full.
     """
 
     def __init__(self, J, n, rcond=None):
         N = J.shape[0]
         if J.shape != (N, N) or N % n:
-            raise StructuredFallback(f"J of shape {J.shape} is not square in blocks of {n}")
+            raise Decline(f"J of shape {J.shape} is not square in blocks of {n}")
         k = N // n - 1
         s_lo, s_hi = _sigma_max_bounds(J)
         if s_lo == 0.0:
-            raise StructuredFallback("J is zero")
+            raise Decline("J is zero")
         rc = default_rcond(J.shape) if rcond is None else rcond
-        budget2 = (rc * s_lo / _MARGIN) ** 2 / (k + 1)  # each step's share of ||Delta||_F^2
+        budget2 = (rc * s_lo / RANK_MARGIN) ** 2 / (k + 1)  # each step's share of ||Delta||_F^2
         T = np.empty((N, N))    # Q^T J, pivot rows in step order (block column k first); rows >= rank unused
         Qt = np.zeros((N, N))   # Q^T: the same rows' coefficients of J's rows, the a null rows last
         E = np.zeros((0, N))    # rows left over, their entries in block columns 0..j
@@ -138,7 +134,7 @@ class BlockQR:
         self.rank, self.n, self.k = row, n, k
         self.Z2 = coef.T
         if r0 < n:
-            raise StructuredFallback(f"block column 0 has rank {r0} < n: J is not 1-full, or nearly so")
+            raise Decline(f"block column 0 has rank {r0} < n: J is not 1-full, or nearly so")
         self._pcols, self._fcols = np.concatenate(pcols), np.concatenate(fcols)
         self._Up = T[:row, self._pcols]
         self._Uf = T[:row, self._fcols]
@@ -155,18 +151,18 @@ class BlockQR:
             anorm = np.abs(Up).sum(axis=0).max()
             rcu, info = lapack.dtrcon(Up.T, norm="I", uplo="L", diag="N")  # Up.T: Fortran order, no copy
             if info != 0 or rcu <= 0.0:
-                raise StructuredFallback("the kept triangular factor is singular")
+                raise Decline("the kept triangular factor is singular")
             # ||U^-1||_2 <= sqrt(rank) ||U^-1||_1, and the estimate of ||U^-1||_1 is a lower bound
             sigma_low = 1.0 / (_EST_MARGIN * np.sqrt(rank) / (rcu * anorm)) - delta
         else:
             sigma_low = np.inf
-        if not delta * _MARGIN <= rc * s_lo:
-            raise StructuredFallback(f"the discarded part ({delta:.1e}) is not clearly below the threshold")
-        if not sigma_low > _MARGIN * rc * s_hi:
-            raise StructuredFallback(f"the smallest kept singular value (>= {sigma_low:.1e}) is not clearly above the "
+        if not delta * RANK_MARGIN <= rc * s_lo:
+            raise Decline(f"the discarded part ({delta:.1e}) is not clearly below the threshold")
+        if not sigma_low > RANK_MARGIN * rc * s_hi:
+            raise Decline(f"the smallest kept singular value (>= {sigma_low:.1e}) is not clearly above the "
                                      f"threshold ({rc * s_hi:.1e})")
-        if delta > 0.0 and not delta / sigma_low * _EST_MARGIN < _ONE_FULL_TOL:
-            raise StructuredFallback("1-fullness is not clear-cut")
+        if delta > 0.0 and not delta / sigma_low * _EST_MARGIN < ONE_FULL_TOL:
+            raise Decline("1-fullness is not clear-cut")
 
     @property
     def first_rows(self):

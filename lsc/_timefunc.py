@@ -68,12 +68,12 @@ class ConstantFunction(TimeFunction):
 
 
 class SympyFunction(TimeFunction):
-    """A sympy matrix or vector expression in the symbol ``t``."""
+    """A sympy matrix or vector expression `expr` in the sympy symbol of time `symbol` (``t``)."""
 
     def __init__(self, name, expr, shape, t_symbol):
         super().__init__(name, shape)
         self.expr = expr
-        self._t = t_symbol
+        self.symbol = t_symbol
         self._derivs = [expr]
         self._compiled = {}
 
@@ -81,13 +81,13 @@ class SympyFunction(TimeFunction):
         import sympy
 
         while len(self._derivs) <= order:
-            self._derivs.append(self._derivs[-1].diff(self._t))
+            self._derivs.append(self._derivs[-1].diff(self.symbol))
         flat = [sympy.Matrix(d).reshape(1, int(np.prod(self.shape, dtype=int)))[:] for d in self._derivs[: order + 1]]
         entries = [e for row in flat for e in row]
         # t is always a Python float here, so the math module (then numpy for
         # what math lacks) is about twice as fast as numpy on scalars; common
         # subexpressions of the derivatives are evaluated once.
-        fn = sympy.lambdify(self._t, entries, modules=["math", "numpy"], cse=True)
+        fn = sympy.lambdify(self.symbol, entries, modules=["math", "numpy"], cse=True)
         full_shape = (order + 1,) + self.shape
 
         def jet(t):

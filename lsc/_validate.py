@@ -11,7 +11,7 @@ import numpy as np
 from ._exceptions import DimensionError
 from ._timefunc import _shape_str
 
-__all__ = ["check_k", "check_lam_value", "check_time", "check_t_span", "check_state", "check_t_eval", "check_tolerances",
+__all__ = ["check_k", "check_lam_value", "check_time", "check_times", "check_t_span", "check_state", "check_t_eval", "check_tolerances",
            "check_dense_times"]
 
 
@@ -40,6 +40,21 @@ def check_time(name, t):
     if not np.isfinite(t):
         raise ValueError(f"`{name}` must be finite; found {t!r}.")
     return t
+
+
+def check_times(name, t):
+    """A time or a sequence of times as a 1-D float array of finite times."""
+    if isinstance(t, (bool, str, bytes)):
+        raise TypeError(f"`{name}` must be a real number or a 1-D array of them; found {t!r}.")
+    try:
+        arr = np.asarray(t, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(f"`{name}` must be a real number or a 1-D array of them; found {t!r}.") from None
+    if arr.ndim > 1:
+        raise DimensionError(f"`{name}` must be a time or a 1-D array of times; found shape {_shape_str(arr.shape)}.")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"`{name}` must be finite; found {arr.reshape(-1)[~np.isfinite(arr.reshape(-1))][:3].tolist()}.")
+    return arr.reshape(-1)
 
 
 def check_t_span(t_span):

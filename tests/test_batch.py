@@ -1,4 +1,4 @@
-"""The stacked evaluation of a time-varying completion (lsc._batch) equals the per-time path."""
+"""The stacked evaluation of a time-varying completion (lsc._setup.factors_many) equals the per-time path."""
 
 import warnings
 
@@ -7,9 +7,14 @@ import pytest
 
 import lsc
 from lsc import gallery
-from lsc._batch import batchable, matrices_many
+from lsc import JetCallable
 from lsc._chebyshev import ChebyshevCoefficients, EvaluationFailed
-from lsc._timefunc import JetCallable
+from lsc._setup import stackable as batchable, stacked
+
+
+def matrices_many(c, ts):
+    """``[(G, g) or None]``: the times the stacked factors decide."""
+    return [None if r is None else (r[0], r[1][:, 0]) for r in stacked(c, ts)]
 
 
 def _problems():
@@ -49,7 +54,7 @@ def test_interpolant_unchanged_by_stacking(monkeypatch):
     p = gallery.rotating_canonical(3)
     c = lsc.complete(p.dae, "alternative", lam=1.0)
     fast = ChebyshevCoefficients(c, p.t_span, 1e-8)
-    monkeypatch.setattr("lsc._chebyshev.matrices_many", lambda comp, ts: [None] * len(ts))
+    monkeypatch.setattr("lsc._setup.stackable", lambda comp: False)
     slow = ChebyshevCoefficients(c, p.t_span, 1e-8)
     assert fast.evaluations == slow.evaluations and fast.pieces == slow.pieces
     for t in np.linspace(*p.t_span, 23):
@@ -94,8 +99,7 @@ def test_failing_coefficient_left_to_per_time_path():
 
 def test_vectorized_ranks_equal_numerical_rank():
     # the stacked rank decisions are numerical_rank's, and every close call (a warning) is left out (-1)
-    from lsc._batch import _ranks
-    from lsc._linalg import numerical_rank
+    from lsc._linalg import numerical_rank, ranks_many as _ranks
 
     rng = np.random.default_rng(3)
     tol = 1e-10  # rcond; relative singular values at, around and far from it
@@ -117,13 +121,12 @@ def test_vectorized_ranks_equal_numerical_rank():
 def test_a_subclass_with_its_own_maps_is_never_stacked():
     # the stacked formulas are the built-in ones: a subclass overriding `_maps` got them at most Chebyshev points
     # (G off by 3.8 of 7.6) and a run reported success with a final state 9.5 off
-    from lsc._batch import batchable
     from lsc._chebyshev import ChebyshevCoefficients
     from lsc._completion import StandardCompletion
 
     class Doubled(StandardCompletion):
-        def _maps(self, fac, t):
-            G, g = super()._maps(fac, t)
+        def _maps(self, fac, lam):
+            G, g = super()._maps(fac, lam)
             return 2.0 * G, 2.0 * g
 
     p = gallery.rotating_canonical(3)

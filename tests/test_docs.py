@@ -18,9 +18,12 @@ def test_docs_build_without_warnings(tmp_path):
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-5000:]
     api = (tmp_path / "html" / "reference" / "api.html").read_text()
-    for name in ("lsc.complete", "lsc.solve_completion", "lsc.gallery.prescribed_path", "fmu_build.build_fmu"):
+    for name in ("lsc.complete", "lsc.solve_completion", "lsc.gallery.prescribed_path", "fmu_build.build_fmu",
+                 "lsc.Completion.maps", "lsc.CompletionMaps", "lsc.Completion.lam_affine", "lsc.LamAffine",
+                 "lsc.ExactPropagator", "lsc.chebyshev_coefficients"):
         assert f'id="{name}"' in api, name
     assert (tmp_path / "html" / "reference" / "benchmarks.html").exists()
+    assert (tmp_path / "html" / "architecture.html").exists()
 
 
 def test_readme_has_no_project_history():

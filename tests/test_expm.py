@@ -125,7 +125,7 @@ def test_expm_callable_forcing_vectorized_and_not():
     for f in (f_numpy, f_math):
         c = complete(LinearDAE(A, B, f), "alternative", lam=1.0)
         results.append(solve_completion(c, (0.0, 3.0), exact(0.0), method="expm", t_eval=ts, rtol=1e-9, atol=1e-9).x)
-        assert c._forcing._callable_vectorizes is (f is f_numpy)
+        assert c._g._callable_vectorizes is (f is f_numpy)
     np.testing.assert_allclose(results[0], results[1], rtol=0, atol=1e-13)
     np.testing.assert_allclose(results[0], exact(ts), rtol=0, atol=1e-8)
 
@@ -150,3 +150,20 @@ def test_expm_dense_output_backward():
     c = complete(p.dae, "standard")
     res = solve_completion(c, (2.0, 0.0), p.exact(2.0), method="expm", dense_output=True, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(res.sol([1.7, 0.2]), p.exact(np.array([1.7, 0.2])), rtol=0, atol=1e-7)
+
+
+def test_exact_propagator_on_the_jet_of_f_is_the_step_on_the_jet_of_g():
+    # K = Psi Wbig: a step on [f; ...; f^(p+q)] equals the step on g's Taylor jet [g; ...; g^(q)] = Wbig fjet
+    from lsc import ExactPropagator
+
+    p = gallery.prescribed_path()
+    c = complete(p.dae, "alternative", lam=2.0)
+    maps, q, h = c.maps(), 3, 0.07
+    fjet = p.dae.f_jet(0.4, maps.order + q).reshape(-1)
+    on_f = ExactPropagator(maps.G[0], q, W=maps.W[0])
+    Phi, K = on_f.step_matrices(h)
+    u = c._g.jets(np.array([0.4]), q).reshape(-1)  # [g; g'; ...; g^(q)] at 0.4 from the compiled forcing
+    x = p.exact(0.4) + 0.01
+    expected = ExactPropagator(maps.G[0], q).step(x, u, h)
+    np.testing.assert_allclose(Phi @ x + K @ fjet, expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
+    assert on_f.n_exponentials == 1 and on_f.step_matrices(h, cache=False)[0].shape == Phi.shape

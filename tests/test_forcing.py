@@ -1,4 +1,4 @@
-"""The compiled forcing of constant-coefficient completions (lsc._forcing) against the jet path."""
+"""The compiled forcing of constant-coefficient completions (lsc._g) against the jet path."""
 
 import numpy as np
 import pytest
@@ -19,32 +19,33 @@ def _dae():
 def test_compiled_forcing_matches_the_jet_path(method, lam):
     dae = _dae()
     c = complete(dae, method, lam=lam)
-    p, n = c._order, c.n
+    p, n = c.order, c.n
+    G, W = c.maps().G[0], c.maps().W[0]
     ts = np.linspace(-1.0, 4.0, 23)
     x = np.linspace(-1.0, 1.0, n)
     for s in ts:
-        jet = c._W @ dae.f.jet(s, p).reshape(-1)
+        jet = W @ dae.f.jet(s, p).reshape(-1)
         scale = 1.0 + np.abs(jet).max()
-        np.testing.assert_allclose(c.rhs(s, x), c._G @ x + jet, rtol=0, atol=1e-13 * scale)
+        np.testing.assert_allclose(c.rhs(s, x), G @ x + jet, rtol=0, atol=1e-13 * scale)
         np.testing.assert_allclose(c.matrices(s)[1], jet, rtol=0, atol=1e-13 * scale)
     q = 4
-    jets = c._forcing.jets(ts, q)
+    jets = c._g.jets(ts, q)
     assert jets.shape == (q + 1, n, ts.size)
     for i, s in enumerate(ts):
         fj = dae.f.jet(s, p + q)
         for j in range(q + 1):
-            ref = c._W @ fj[j : j + p + 1].reshape(-1)
+            ref = W @ fj[j : j + p + 1].reshape(-1)
             np.testing.assert_allclose(jets[j, :, i], ref, rtol=0, atol=1e-13 * (1.0 + np.abs(ref).max()))
 
 
 def test_compiled_forcing_uses_only_the_derivatives_W_needs():
     dae = _dae()
     c = complete(dae, "alternative", lam=1.0)
-    used = c._forcing._cols0
+    used, W = c._g._cols0, c.maps().W[0]
     # the zero component of f and columns W does not touch are never compiled
-    assert np.all(np.any(c._W[:, used] != 0.0, axis=0))
+    assert np.all(np.any(W[:, used] != 0.0, axis=0))
     assert not np.any(used % dae.n == 1)
-    assert used.size < c._W.shape[1]
+    assert used.size < W.shape[1]
 
 
 def test_compiled_forcing_reports_non_finite_values():
@@ -54,16 +55,12 @@ def test_compiled_forcing_reports_non_finite_values():
     with pytest.raises(ValueError, match="cannot be evaluated at t=1.0.*ZeroDivisionError"):
         c.rhs(1.0, np.zeros(2))
     with pytest.raises(ValueError, match="not finite"):
-        c._forcing.jets(np.array([0.0, 1.0]), 2)
+        c._g.jets(np.array([0.0, 1.0]), 2)
 
 
-@pytest.mark.xfail(strict=True, reason="slow path: a forcing that offers jet(t, order) is evaluated one time at a "
-                   "time by method='expm' (lsc._forcing.Forcing._callable_stack never tries an array of times on it); "
-                   "the gallery's canonical problems run expm about 15x slower than with the same forcing as a plain "
-                   "array callable (examples/bench_peers.py)")
 def test_expm_evaluates_a_jet_forcing_over_arrays_of_times():
     from lsc import solve_completion
-    from lsc._timefunc import JetCallable
+    from lsc import JetCallable
 
     calls = []
 

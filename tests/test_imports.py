@@ -167,6 +167,20 @@ def test_no_function_is_too_long():
     assert not too_long, f"functions over {MAX_FUNCTION_LINES} lines (docstring not counted): {too_long}"
 
 
+MAX_CLASS_LINES = 300  # docstring counted
+
+
+def test_no_class_of_lsc_is_too_large():
+    sizes = {}
+    for name in (m for m in MODULES if m == "lsc" or m.startswith("lsc.")):
+        for node in ast.walk(ast.parse(PATHS[name].read_text())):
+            if isinstance(node, ast.ClassDef):
+                sizes[f"{name}.{node.name}"] = node.end_lineno - node.lineno + 1
+    assert sizes["lsc._completion.Completion"] > 100  # the count sees the classes (a test that can fail)
+    too_large = {c: n for c, n in sizes.items() if n > MAX_CLASS_LINES}
+    assert not too_large, f"classes of lsc over {MAX_CLASS_LINES} lines: {too_large}"
+
+
 def test_the_public_names_stay():
     assert set(fmu_build.__all__) == {"build_fmu", "cosimulate", "load_spec", "parse_spec", "ModelSpec", "SpecError",
                                       "ExpressionError", "native_host_env", "ecos_executable", "NativeTargetError",

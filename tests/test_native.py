@@ -163,11 +163,16 @@ def test_c_is_warning_free(built, key, tmp_path):
     assert proc.returncode == 0, proc.stderr
 
 
-def test_build_is_atomic_and_says_what_is_fixed(tmp_path, capfd):
+def test_build_is_atomic_and_says_what_is_fixed(tmp_path, capfd, monkeypatch):
+    calls, complete = [], lsc.complete
+    monkeypatch.setattr(lsc, "complete", lambda *a, **kw: calls.append(a[1]) or complete(*a, **kw))
     path = build_fmu(ROOT / "examples" / "specs" / "prescribed_path.toml", tmp_path, target="native", fix_parameters=True)
     err = capfd.readouterr().err
     assert "fixed at their spec values: c, k, m" in err and "lambda tunable" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]  # no temporary file left
+    # one completion: lambda's affine parts come from its own factors (`Completion.lam_affine`), not from
+    # completions at other rates
+    assert calls == ["alternative"]
 
 
 def test_fmu_file_has_the_mode_of_an_ordinary_file(built, tmp_path):
@@ -330,8 +335,8 @@ def test_output_derivatives_are_exact(built):
              "output_derivatives": states(spec)})
     t, x = r["time"][-1], np.array(r["values"][-1])
     _, c = library(spec, np.array([0.0, 1.0]))
-    G, W = c._G, c._W
-    p = c._order
+    maps = c.maps()
+    G, W, p = maps.G[0], maps.W[0], maps.order
     fj = c.dae.f.jet(t, p + 4).reshape(-1)
     n = c.n
     xd = [x]

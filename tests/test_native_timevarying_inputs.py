@@ -128,7 +128,7 @@ def _library(name, times, u=None, x0=None):
 
 def test_the_scaled_problem_is_equilibrated():
     c = lsc.complete(_numeric_dae(parse_spec(PROBLEMS["RotForce3Scaled"][0])), "alternative", lam=2.0)
-    assert c._row_scales is not None and c._col_scales is not None
+    assert c._scaling.r is not None and c._scaling.c is not None
 
 
 @pytest.mark.parametrize("name", list(PROBLEMS))

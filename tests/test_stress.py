@@ -128,7 +128,7 @@ def test_scaled_equations(scale):
     p = gallery.nilpotent_chain(3, seed=0)
     rows = np.logspace(np.log10(scale), 0, p.dae.n)  # row scales spread from `scale` to 1
     A, B = rows[:, None] * p.dae.A.value, rows[:, None] * p.dae.B.value
-    f = lsc._timefunc.JetCallable(lambda t, order: rows * p.dae.f_jet(t, order))
+    f = lsc.JetCallable(lambda t, order: rows * p.dae.f_jet(t, order))
     scaled = gallery.Problem("scaled", lsc.LinearDAE(A, B, f), p.t_span, p._exact, 3, p.finite_eigenvalues, (3,))
     assert lsc.differentiation_index(scaled.dae) == 3  # the rank decisions did not flip
     solved(lsc.complete(scaled.dae, "alternative", lam=1.0), scaled, 1e-6, method="DOP853", rtol=1e-10, atol=1e-12)

@@ -7,7 +7,8 @@ import pytest
 
 from lsc import IndexDeterminationError, LinearDAE, RankDecisionWarning, complete, differentiation_index, gallery
 from lsc._derivative_array import array_jets
-from lsc._structured import StructuredFallback, structured_array, structured_index
+from lsc._factors import Decline
+from lsc._structured import structured_array, structured_index
 
 from conftest import CONSTANT_PROBLEMS, METHOD_LAMS
 
@@ -29,12 +30,13 @@ def assert_same_setup(dae, method, lam, **kw):
     fast = complete(dae, method, lam=lam, **kw)
     assert (dense.setup, fast.setup) == ("dense", "structured"), fast.setup_note
     assert (fast.k, fast.n_constraints, fast._rank) == (dense.k, dense.n_constraints, dense._rank)
-    assert rel(dense._G, fast._G) < TOL
-    assert rel(dense._W, fast._W) < TOL
+    md, mf = dense.maps(), fast.maps()
+    assert rel(md.G[0], mf.G[0]) < TOL
+    assert rel(md.W[0], mf.W[0]) < TOL
     # The constraint basis is unique up to a rotation: compare what does not depend on it.
-    C, Cs = dense._std.C, fast._std.C
+    C, Cs = md.C[0], mf.C[0]
     assert rel(C.T @ C, Cs.T @ Cs) < TOL
-    assert rel(C.T @ dense._W_c, Cs.T @ fast._W_c) < TOL
+    assert rel(C.T @ md.Wc[0], Cs.T @ mf.Wc[0]) < TOL
     return dense, fast
 
 
@@ -84,7 +86,7 @@ def test_structured_index_equals_dense_index(index):
 def test_singular_pencil_refused_as_before():
     """No shift makes B + mu A invertible: the dense path decides, with its message."""
     dae = LinearDAE([[1.0, 0.0], [0.0, 0.0]], [[1.0, 0.0], [0.0, 0.0]])
-    with pytest.raises(StructuredFallback, match="singular"):
+    with pytest.raises(Decline, match="singular"):
         structured_array(dae.A(0.0), dae.B(0.0))
     with pytest.raises(IndexDeterminationError, match="singular"):
         complete(dae, "alternative", lam=1.0)
@@ -145,7 +147,7 @@ def test_zero_A_falls_back_and_is_completed_as_before():
     c = complete(LinearDAE(np.zeros((3, 3)), np.eye(3)), "alternative", lam=1.0)
     assert (c.setup, c.k) == ("dense", 1)
     assert "A is zero" in c.setup_note
-    np.testing.assert_allclose(c._G, -np.eye(3), atol=1e-14)
+    np.testing.assert_allclose(c.maps().G[0], -np.eye(3), atol=1e-14)
 
 
 def test_user_subclass_keeps_the_dense_factors():
@@ -155,14 +157,14 @@ def test_user_subclass_keeps_the_dense_factors():
     class Seen(Completion):
         method = "seen"
 
-        def _maps(self, fac, t):
+        def _maps(self, fac, lam):
             P = fac.first_rows
-            return -P @ fac.jets.F[0], P @ fac.Lg[0]
+            return -P @ fac.jets.F[0], P @ fac.jets.L[0]
 
     p = gallery.random_pencil(n=8, blocks=(2, 1), seed=2)
     c = complete(p.dae, Seen)
     assert c.setup == "dense"
-    np.testing.assert_allclose(c._G, complete(p.dae, "standard")._G, atol=1e-12)
+    np.testing.assert_allclose(c.maps().G, complete(p.dae, "standard").maps().G, atol=1e-12)
 
 
 def test_badly_scaled_rows_structured_equals_dense():
@@ -180,7 +182,7 @@ def test_singular_shifts_fall_back_to_dense():
     p = gallery.random_pencil(n=12, blocks=(3, 2), seed=3, cond=1e4)
     c = complete(p.dae, "alternative", lam=2.0)
     assert c.setup == "dense" and "ill conditioned at every trial shift" in c.setup_note
-    np.testing.assert_array_equal(c._G, complete(p.dae, "alternative", lam=2.0, setup="dense")._G)
+    np.testing.assert_array_equal(c.maps().G, complete(p.dae, "alternative", lam=2.0, setup="dense").maps().G)
 
 
 @pytest.mark.parametrize("cond", [3e2, 1e3])
@@ -194,11 +196,11 @@ def test_a_close_call_either_way_gives_the_dense_answer(cond):
     c = complete(p.dae, "alternative", lam=2.0)
     if c.setup == "dense":
         assert "close call" in c.setup_note, c.setup_note
-        np.testing.assert_array_equal(c._G, dense._G)
+        np.testing.assert_array_equal(c.maps().G, dense.maps().G)
     else:
         assert c.setup == "structured"
         assert (c.k, c.n_constraints, c._rank) == (dense.k, dense.n_constraints, dense._rank)
-        assert rel(dense._G, c._G) < 1e-9  # measured up to 1.7e-11 on five kernels
+        assert rel(dense.maps().G, c.maps().G) < 1e-9  # measured up to 1.7e-11 on five kernels
     for t in (0.0, 0.7, 2.1):
         xd = p.exact(t, 1)
         assert np.linalg.norm(c.rhs(t, p.exact(t)) - xd) < 1e-8 * np.linalg.norm(xd)  # measured up to 2.3e-10
@@ -208,4 +210,4 @@ def test_a_close_call_either_way_gives_the_dense_answer(cond):
 def test_a_problem_without_constraints_is_set_up_structured(method, lam):
     """An ODE written as a DAE (invertible A: no constraints, a = 0): empty constraint maps, no reshape of zero rows."""
     dense, fast = assert_same_setup(LinearDAE([[2.0, 0.0], [1.0, 1.0]], [[0.0, -1.0], [1.0, 0.5]]), method, lam)
-    assert fast.n_constraints == 0 and fast._W_c.shape[0] == 0
+    assert fast.n_constraints == 0 and fast.maps().Wc.shape[1] == 0

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from lsc import IndexDeterminationError, LinearDAE, RankDecisionWarning, complete, gallery
-from lsc._timefunc import JetCallable
+from lsc import JetCallable
 from lsc.gallery._canonical import _Sinusoids, _conditioned, _real_block, _shift_blocks
 
 from conftest import METHOD_LAMS
@@ -62,7 +62,8 @@ def assert_as_dense(dae, method, lam, tol=1e-8, **kw):
         return None, None
     fast = quiet_complete(dae, method, lam, **kw)
     assert (fast.k, fast.n_constraints) == (dense.k, dense.n_constraints), (fast.setup, fast.setup_note)
-    assert np.abs(fast._G - dense._G).max() <= tol * np.abs(dense._G).max(), (fast.setup, fast.setup_note)
+    Gf, Gd = fast.maps().G[0], dense.maps().G[0]
+    assert np.abs(Gf - Gd).max() <= tol * np.abs(Gd).max(), (fast.setup, fast.setup_note)
     return dense, fast
 
 
@@ -118,7 +119,7 @@ def test_stabilized_with_a_large_rate_is_as_accurate_as_dense(lam):
 def test_stabilized_at_lam_1e6_keeps_its_spectrum(setup):
     p = gallery.random_pencil(n=10, blocks=(3, 2), seed=1)
     lam = 1e6
-    ev = np.linalg.eigvals(complete(p.dae, "stabilized", lam=lam, setup=setup)._G)
+    ev = np.linalg.eigvals(complete(p.dae, "stabilized", lam=lam, setup=setup).maps().G[0])
     added = ev[np.abs(ev + lam) < 1e-2 * lam]
     assert added.size == 5 and np.all(ev.real < 0)
 
@@ -136,17 +137,17 @@ def test_overflowing_scales_refused_as_dense():
 def test_finite_eigenvalue_at_the_first_trial_shift():
     """A finite eigenvalue placed exactly at the first trial shift (B + mu A singular there): the next shift
     is taken and the completion equals the dense one."""
-    from lsc._structured import _SHIFTS
+    from lsc._linalg import TRIAL_SHIFTS
 
     lam0 = 1.0
     for _ in range(40):  # fixed point: the shift scales with ||B||_1 / ||A||_1, which moves with the eigenvalue
         p = gallery.random_pencil(n=10, blocks=(3, 2), spectrum=[-0.5, -1.0, -1.5, -2.0, lam0], seed=0)
         A, B = p.dae.A(0.0), p.dae.B(0.0)
-        lam0 = _SHIFTS[0] * np.linalg.norm(B, 1) / np.linalg.norm(A, 1)
+        lam0 = TRIAL_SHIFTS[0] * np.linalg.norm(B, 1) / np.linalg.norm(A, 1)
     assert np.min(np.abs(np.linalg.eigvals(B + lam0 * A))) < 1e-12 * np.linalg.norm(B, 1)
     for method, lam in METHOD_LAMS:
         dense, fast = assert_as_dense(p.dae, method, lam, tol=1e-10)
-        assert fast.setup == "structured" and abs(fast._structured.shift - lam0) > 0.1 * abs(lam0)
+        assert fast.setup == "structured" and abs(fast._factors0.shift - lam0) > 0.1 * abs(lam0)
         assert exact_error(fast, p.exact) < 1e-11
 
 

@@ -14,7 +14,7 @@ import sympy
 from lsc import IndexDeterminationError, LinearDAE, check_solvability, complete, differentiation_index, gallery
 from lsc import solve_completion
 from lsc._chebyshev import ChebyshevCoefficients
-from lsc._timefunc import JetCallable
+from lsc import JetCallable
 
 T = sympy.Symbol("t")
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from lsc import LinearDAE
-from lsc._timefunc import JetCallable
+from lsc import JetCallable
 
 
 def test_a_real_jet_is_checked_without_boxing_its_entries():

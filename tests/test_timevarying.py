@@ -163,9 +163,9 @@ def test_theorem9_bound_with_vanishing_delta(method, lam):
     deltas = []
     for s in ts:
         fac = alt._evaluate(s)[0]
-        A = fac.jets.J[0][:1, :1]
-        Z1 = np.linalg.svd(A @ fac.T2, full_matrices=False)[0]
-        deltas.append(np.linalg.svd(np.vstack([Z1.T @ A, fac.C]), compute_uv=False).min())
+        A = fac.jets.J[0][0][:1, :1]
+        Z1 = np.linalg.svd(A @ fac.T2[0], full_matrices=False)[0]
+        deltas.append(np.linalg.svd(np.vstack([Z1.T @ A, fac.C[0]]), compute_uv=False).min())
     deltas = np.array(deltas)
     np.testing.assert_allclose(deltas, np.exp(-2 * ts), rtol=1e-10)  # delta(t) = e^{-2t} -> 0
     k = -np.log(deltas)
@@ -230,18 +230,18 @@ def test_lam_not_positive_on_interval():
 
 
 def test_evaluations_at_one_time_share_one_factorization(monkeypatch):
-    import lsc._completion as mod
+    import lsc._setup as mod
 
     p = gallery.rotating_canonical(3)
     c = complete(p.dae, "alternative", lam=1.0, t_span=p.t_span)
     calls = []
-    original = mod._Factors.__init__
+    original = mod.factors_at
 
-    def counting(self, *args, **kwargs):
-        calls.append(args[2])
-        original(self, *args, **kwargs)
+    def counting(completion, t, *args, **kwargs):
+        calls.append(t)
+        return original(completion, t, *args, **kwargs)
 
-    monkeypatch.setattr(mod._Factors, "__init__", counting)
+    monkeypatch.setattr(mod, "factors_at", counting)
     x = p.exact(1.7)
     c.rhs(1.7, x)
     c.matrices(1.7)

@@ -1,6 +1,6 @@
 """The time-varying set-up's block-column QR and warm-started LU of J against the SVD at every time.
 
-`lsc._dense_factors._Factors._warm` (the default) and `lsc._structured_tv.BlockQR`
+`lsc._dense_factors.DenseFactors._warm` (the default) and `lsc._structured_tv.BlockQR`
 (``Completion.block_qr = True``) replace the SVD of the standard derivative array;
 these tests pin that their completions equal the SVD path's (all three
 methods), that they are actually taken, that their rank checks fall back to the
@@ -54,7 +54,7 @@ def test_any_regular_reference_gives_the_same_completion(pencil):
     c = lsc.complete(pencil.dae, "alternative", lam=1.0)
     c.block_qr = False
     c.matrices(0.1)
-    c._last_factors.N = np.roll(c._last_factors.N, 7, axis=0)
+    c._last_factors.right = np.roll(c._last_factors.right, 7, axis=0)
     _against_svd(pencil, c, 0.2)
     assert c._cache[0.2][0].warm
 
@@ -68,7 +68,7 @@ def test_singular_warm_start_falls_back_to_svd(pencil):
     ref = c._last_factors
     J = array_jets(c._eq, c.k, 0.2, None, 1).J[0]
     # a right basis orthogonal to J's null space at 0.2: M = J + s Z2 N^T is singular there
-    ref.N = np.linalg.svd(J)[2][: ref.N.shape[1]].T
+    ref.right = np.linalg.svd(J)[2][: ref.right.shape[1]].T
     _against_svd(pencil, c, 0.2)
     assert not c._cache[0.2][0].warm
 
@@ -177,35 +177,35 @@ def test_block_qr_factors_against_the_svd():
 
 
 def test_block_qr_declines_a_close_rank_decision():
-    from lsc._structured import StructuredFallback
+    from lsc._factors import Decline
     from lsc._structured_tv import BlockQR
 
     J, n = _array()
     s = np.linalg.svd(J, compute_uv=False)
     r = BlockQR(J, n).rank
     # a threshold at the smallest kept singular value: the SVD warns (close call), the block QR must not decide
-    with pytest.raises(StructuredFallback, match="not clearly"):
+    with pytest.raises(Decline, match="not clearly"):
         BlockQR(J, n, rcond=s[r - 1] / s[0])
 
 
 def test_block_qr_declines_an_array_that_is_not_one_full():
-    from lsc._structured import StructuredFallback
+    from lsc._factors import Decline
     from lsc._structured_tv import BlockQR
 
     J, n = _array(k=2)  # index 3: two differentiations do not determine x'
-    with pytest.raises(StructuredFallback, match="not 1-full"):
+    with pytest.raises(Decline, match="not 1-full"):
         BlockQR(J, n)
 
 
 def test_block_qr_leaves_a_rank_change_to_the_svd():
-    from lsc._dense_factors import _Factors
+    from lsc._dense_factors import DenseFactors
 
     p = gallery.moving_pencil(n=30, blocks=(3, 2), seed=1)  # J has 120 rows: the block QR applies when asked for
-    fstack = p.dae.f_jet(0.3, 3).reshape(-1)
-    ok = _Factors(p.dae, 3, 0.3, 0, None, fmap=fstack, block=True)
+    fstack = p.dae.f_jet(0.3, 3)
+    ok = DenseFactors.at(p.dae, 3, 0.3, 0, None, fstack=fstack, block=True)
     assert ok.block is not None and ok.block_note is None
     with pytest.raises(lsc.IndexDeterminationError, match="changes at t=0.3"):
-        _Factors(p.dae, 3, 0.3, 0, None, fmap=fstack, expected_rank=ok.rank + 1, block=True)
+        DenseFactors.at(p.dae, 3, 0.3, 0, None, fstack=fstack, expected_rank=ok.rank + 1, block=True)
 
 
 def test_block_qr_run_against_exact_solution(pencil):

@@ -6,8 +6,8 @@ ask (sizes, rates, derivatives) so that a build cannot run away.
 """
 
 from ._expressions import ExpressionError
-from ._limits import MAX_K, derivative_problems, lam_problem
+from ._limits import MAX_K, derivative_problems, lam_problem, lam_value
 from ._spec import METHODS, ModelSpec, SpecError, load_spec, model_name_problems, parse_spec
 
-__all__ = ["ExpressionError", "METHODS", "MAX_K", "ModelSpec", "SpecError", "derivative_problems", "lam_problem",
+__all__ = ["ExpressionError", "METHODS", "MAX_K", "ModelSpec", "SpecError", "derivative_problems", "lam_problem", "lam_value",
            "load_spec", "model_name_problems", "parse_spec"]

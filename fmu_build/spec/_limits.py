@@ -4,6 +4,9 @@
 values it is given besides the spec.
 """
 
+import math
+import numbers
+
 MAX_NAME = 100  # characters of a state, parameter, input or output name
 MAX_MODEL_NAME = 64  # characters of the model name (it names files and a class)
 MAX_TEXT = 10_000  # characters of a description or unit
@@ -18,6 +21,22 @@ MAX_DERIVATIVE_SIZE = 2000
 # experiment.step relative to the largest |time|: a smaller step is lost in the rounding of the
 # time (1e20 + 0.01 == 1e20); a double carries about 16 significant digits.
 MIN_RELATIVE_STEP = 1e-12
+
+
+def lam_value(lam):
+    """`lam` as a float when it is a positive finite real number; a TypeError or ValueError naming it otherwise.
+
+    Examples
+    --------
+    >>> lam_value(2)
+    2.0
+    """
+    if isinstance(lam, bool) or not isinstance(lam, numbers.Real):
+        raise TypeError(f"`lam` must be a positive finite real number; found {lam!r}.")
+    value = float(lam)
+    if not math.isfinite(value) or value <= 0.0:
+        raise ValueError(f"`lam` must be a positive finite real number; found {lam!r}.")
+    return value
 
 
 def lam_problem(lam):

@@ -1,9 +1,8 @@
 """`build_fmu`: one front over the targets (checks the arguments, resolves the spec, picks the target)."""
 
-import lsc
 
 from .._model import _resolve
-from ..spec import MAX_K, METHODS, SpecError, derivative_problems, lam_problem, model_name_problems
+from ..spec import MAX_K, METHODS, SpecError, derivative_problems, lam_problem, lam_value, model_name_problems
 
 __all__ = ["build_fmu"]
 
@@ -76,7 +75,7 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
             raise ValueError(f"`method` must be one of {METHODS}; found {method!r}.")
         spec.method = method
     if lam is not None:
-        spec.lam = lsc._validate.check_lam_value(lam)
+        spec.lam = lam_value(lam)
         if lam_problem(spec.lam):
             raise ValueError(f"lam: {lam_problem(spec.lam)}")
     if model_name is not None:

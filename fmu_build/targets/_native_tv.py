@@ -4,9 +4,10 @@ Over the experiment's horizon ``[start, stop]`` the FMU needs, as functions of
 ``t`` only (parameters fixed at their spec values; inputs enter through their
 forcing maps, below):
 
-- ``G(t) = G0(t) + lambda G1(t)`` and ``g(t) = g0(t) + lambda g1(t)`` (the parts
-  fitted at the well-scaled rates 1 and 2, checked at 0.3, 7 and the spec's
-  rate; ``G1 = g1 = 0`` where lambda is fixed),
+- ``G(t) = G0(t) + lambda G1(t)`` and ``g(t) = g0(t) + lambda g1(t)`` (lsc's
+  `Completion.lam_affine` at each time: fitted at the rates 1 and 2 from one
+  factorization, checked at 0.3, 7 and the spec's rate; ``G1 = g1 = 0`` where
+  lambda is fixed),
 - the residual map in Gram form, ``|c|^2 = x^T M x - 2 m^T x + s`` with
   ``M = C^T C``, ``m = C^T c_g``, ``s = c_g^T c_g`` (basis-free: the left null
   space basis ``Z2`` of the derivative array may rotate from one time to the
@@ -17,8 +18,8 @@ checked at build time), ``g0``, ``g1`` are those of ``f0`` and the forcing maps
 of the inputs ride along: ``g(t) = g0 + lambda g1 + sum_(i,j) (U0 + lambda U1)_(i,j)
 u_i^(j)`` for ``j <= p`` (``p = k`` plus the completion's extra order), with
 ``U_(i,j) = sum_(d>=j) C(d, j) W_d b_i^(d-j)`` from the completion's map ``W``
-of ``[f; f'; ...; f^(p)]`` (`_maps_at`); the residual's Gram form gets the terms
-of ``c_g = c_g0 + V u``: ``C^T V``, ``V^T c_g0`` and ``V^T V``.
+of ``[f; f'; ...; f^(p)]`` (`lsc.CompletionMaps`); the residual's Gram form gets
+the terms of ``c_g = c_g0 + V u``: ``C^T V``, ``V^T c_g0`` and ``V^T V``.
 
 The horizon reaches `HORIZON_MARGIN` of the experiment's length past its
 stop time (Model Exchange integrators evaluate a little past it); where the
@@ -43,7 +44,7 @@ import re
 import numpy as np
 
 import lsc
-from lsc._chebyshev import _coefficients, _coefficients_at, _extreme_points as _points, _positions  # the library's
+from lsc import chebyshev_coefficients, chebyshev_points  # the library's own pieces of a Chebyshev table
 
 __all__ = []
 
@@ -56,35 +57,22 @@ MAX_TABLE_DOUBLES = 6_000_000  # all coefficients (~ 25 bytes of C each): the in
 HORIZON_MARGIN = 0.1  # the tables reach this fraction of the experiment's length past its stop time
 MARGIN_HALVINGS = 4   # where the completion cannot be tabulated that far: the margin halved up to this often, then none
 _CHECK_RATES = (0.3, 7.0)
-_AFFINE_RTOL = 1e-9
+_INPUT_MAPS_RTOL = 1e-9  # the tables' g with the input maps against the library's g of a polynomial input
 
 
 class _Sampler:
-    """The vector [G0, G1, g0, g1, U0, U1 | M, m, s, C^T V, V^T c_g0, V^T V] at t, from completions at fixed rates.
+    """The vector [G0, G1, g0, g1, U0, U1 | M, m, s, C^T V, V^T c_g0, V^T V] at t, from one completion.
 
-    `inputs` (None without inputs in f): ``(f0_dae, b, check_dae, ujet)`` from `_inputs`.
+    `comp`: the completion of the spec's DAE (its maps do not depend on f); `inputs` (None without inputs in
+    f): ``(f0_dae, b, check_dae, ujet)`` from `_inputs`.
     """
 
-    def __init__(self, dae, method, lam, k, error, inputs=None):
-        self.n = n = dae.n
-        self.error = error
+    def __init__(self, comp, error, inputs=None):
+        self.comp, self.n, self.error, self.inputs = comp, comp.n, error, inputs
+        n = self.n
         self.where = "the horizon"  # the interval being tabulated, for the messages
-        self.affine = method == "alternative"
-        self.inputs = inputs
-        # the checks: the spec's DAE (with inputs: the inputs a known polynomial) at other rates, or at the fixed one
-        check = dae if inputs is None else inputs[2]
-        self.checks = [(r, lsc.complete(check, method, lam=r, k=k)) for r in (*_CHECK_RATES, float(lam))] \
-            if self.affine else [] if inputs is None else \
-            [(0.0, lsc.complete(check, method, lam=None if method == "standard" else lam, k=k))]
-        dae = dae if inputs is None else inputs[0]  # with inputs: the completion of f0
-        if method == "standard":
-            self.comps = [lsc.complete(dae, "standard", k=k)]
-        elif method == "stabilized":
-            self.comps = [lsc.complete(dae, "stabilized", lam=lam, k=k)]
-        else:
-            self.comps = [lsc.complete(dae, method, lam=r, k=k) for r in (1.0, 2.0)]
-        self.nc = self.comps[0].n_constraints
-        self.p = self.comps[0]._order
+        self.affine = comp.method == "alternative"
+        self.nc, self.p = comp.n_constraints, comp.order
         self.m = 0 if inputs is None else inputs[1](0.0).shape[0] * (self.p + 1)  # input-jet entries used
         m = self.m
         self.ndyn = 2 * n * n + 2 * n + 2 * n * m
@@ -93,31 +81,31 @@ class _Sampler:
         # constraints leaves rounding noise there, which a group of its own would ask to resolve
         self.groups = [(0, self.ndyn), (self.ndyn, self.ndyn + self.nres)]
 
-    def _dynamics(self, comp, t):
-        """G, g, the input maps U (n x m) and, for the residual, C, c_g and V at t from one completion."""
-        if self.inputs is None:
-            G, g = comp.matrices(t)
-            fac = comp._evaluate(t)[0]
-            return G, g, np.zeros((self.n, 0)), fac.C, fac.cg, np.zeros((fac.cg.shape[0], 0))
-        G, W, C, cmap = _maps_at(comp, t)
-        f0 = self.inputs[0].f.jet(t, self.p).reshape(-1)
-        b = self.inputs[1](t)
-        return G, W @ f0, _input_columns(W, b, self.p), C, cmap @ f0, _input_columns(cmap, b, self.p)
+    def _maps(self, t):
+        """``(G0, G1, W0, W1, C, Wc)`` at t: the completion's maps split in lambda (lsc's `lam_affine`; lambda fixed:
+        G1 = W1 = 0), from one factorization of the derivative array."""
+        if self.affine:
+            a = self.comp.lam_affine(t)
+            return a.G0[0], a.G1[0], a.W0[0], a.W1[0], a.maps.C[0], a.maps.Wc[0]
+        maps = self.comp.maps(t)
+        return maps.G[0], np.zeros_like(maps.G[0]), maps.W[0], np.zeros_like(maps.W[0]), maps.C[0], maps.Wc[0]
 
     def __call__(self, t):
-        n = self.n
         try:
-            G, g, U, C, cg, V = self._dynamics(self.comps[0], t)
-            if self.affine:
-                Gb, gb, Ub = self._dynamics(self.comps[1], t)[:3]
-                G1, g1, U1 = Gb - G, gb - g, Ub - U
-                G0, g0, U0 = G - G1, g - g1, U - U1
+            G0, G1, W0, W1, C, Wc = self._maps(t)
+            dae = self.comp.dae if self.inputs is None else self.inputs[0]  # with inputs: f0, their part removed
+            f0 = dae.f_jet(t, self.p).reshape(-1)
+            if self.inputs is None:
+                U0 = U1 = np.zeros((self.n, 0))
+                V = np.zeros((Wc.shape[0], 0))
             else:
-                G0, g0, U0, G1, g1, U1 = G, g, U, np.zeros((n, n)), np.zeros(n), np.zeros_like(U)
+                b = self.inputs[1](t)
+                U0, U1, V = (_input_columns(X, b, self.p) for X in (W0, W1, Wc))
         except ValueError as exc:
             raise self.error(f"the completion cannot be evaluated at t = {float(t)!r} on {self.where}: {exc}") from exc
-        return np.concatenate([G0.ravel(), G1.ravel(), g0, g1, U0.ravel(), U1.ravel(), (C.T @ C).ravel(), C.T @ cg,
-                               [cg @ cg], (C.T @ V).ravel(), V.T @ cg, (V.T @ V).ravel()])
+        cg = Wc @ f0
+        return np.concatenate([G0.ravel(), G1.ravel(), W0 @ f0, W1 @ f0, U0.ravel(), U1.ravel(), (C.T @ C).ravel(),
+                               C.T @ cg, [cg @ cg], (C.T @ V).ravel(), V.T @ cg, (V.T @ V).ravel()])
 
     def _parts(self, v):
         n, m = self.n, self.m
@@ -125,43 +113,30 @@ class _Sampler:
         G0, G1, g0, g1, U0, U1 = (v[a:b] for a, b in zip(cut[:-1], cut[1:]))
         return G0.reshape(n, n), G1.reshape(n, n), g0, g1, U0.reshape(n, m), U1.reshape(n, m)
 
-    def check_affine(self, ts):
-        """G(t, lam) = G0 + lam G1 and g likewise at a few times and rates, relative to the terms' size.
-
-        With inputs, also every column of the input maps: the tables' g on the jet of a polynomial input of
-        degree p against the library's completion of f with that input."""
-        if not self.affine and self.inputs is None:
+    def check_inputs(self, ts):
+        """The tables' g on the jet of a polynomial input of degree p against the completion's own map of f with
+        that input (sympy's jet of it), at a few times and rates: every column of the input maps."""
+        if self.inputs is None:
             return
+        rates = (*_CHECK_RATES, float(self.comp.lam)) if self.affine else (0.0,)
         for t in ts:
             G0, G1, g0, g1, U0, U1 = self._parts(self(t))
-            ujet = self.inputs[3](t) if self.inputs is not None else np.zeros(0)
-            for rate, comp in self.checks:
-                with np.errstate(over="ignore", invalid="ignore"):
-                    G, g = comp.matrices(t)
-                    g_tab = g0 + U0 @ ujet
-                if self.inputs is not None and not (np.all(np.isfinite(g)) and np.all(np.isfinite(g_tab))):
-                    raise self.error(f"g(t) with the inputs at their start values is not finite at t = {t:g} (the "
-                                     "build checks the input maps there): give the inputs a start value of a "
-                                     "magnitude their forcing can hold")
-                for name, M0, M1, M in (("G", G0, G1, G), ("g", g0 + U0 @ ujet, g1 + U1 @ ujet, g)):
-                    scale = max(np.abs(M).max(), np.abs(M0).max() + rate * np.abs(M1).max(), 1.0)
-                    err = np.abs(M0 + rate * M1 - M).max() / scale
-                    if not err <= _AFFINE_RTOL:
-                        what = "is not affine in lambda" if self.inputs is None else \
-                            "with its input maps is not affine in lambda or does not reproduce g"
-                        raise self.error(f"{name}(t, lambda) of the {self.comps[0].method} completion {what} "
-                                         f"(relative misfit {err:.1e} at t = {t:g}, lambda = {rate:g}); build with "
-                                         "target='pythonfmu'")
-
-
-def _maps_at(comp, t):
-    """``(G, W, C, cmap)`` of a time-varying completion at t: ``x' = G x + W [f; ...; f^(p)]``, ``c = C x -
-    cmap [f; ...; f^(p)]``, in the given unknowns and f (the library's own maps, as for constant coefficients)."""
-    from lsc._completion import _Factors
-
-    fac = _Factors(comp._eq, comp.k, t, comp.extra_order, comp.rcond, expected_rank=comp._rank)
-    G, W, cmap = comp._unscaled(fac, *comp._maps(fac, t))  # rows, unknowns and unit of time mapped back
-    return G, W, fac.C, cmap
+            ujet = self.inputs[3](t)
+            split = self.comp.lam_affine(t) if self.affine else None
+            W0, W1 = (split.W0[0], split.W1[0]) if self.affine else (self.comp.maps(t).W[0], 0.0)
+            with np.errstate(over="ignore", invalid="ignore"):
+                fjet = self.inputs[2].f_jet(t, self.p).reshape(-1)
+                for rate in rates:
+                    g, g_tab = (W0 + rate * W1) @ fjet, g0 + U0 @ ujet + rate * (g1 + U1 @ ujet)
+                    if not (np.all(np.isfinite(g)) and np.all(np.isfinite(g_tab))):
+                        raise self.error(f"g(t) with the inputs at their start values is not finite at t = {t:g} (the "
+                                         "build checks the input maps there): give the inputs a start value of a "
+                                         "magnitude their forcing can hold")
+                    err = np.abs(g_tab - g).max() / max(np.abs(g).max(), np.abs(g_tab).max(), 1.0)
+                    if not err <= _INPUT_MAPS_RTOL:
+                        raise self.error(f"g(t, lambda) of the {self.comp.method} completion with its input maps does "
+                                         f"not reproduce g (relative misfit {err:.1e} at t = {t:g}, lambda = {rate:g}); "
+                                         "build with target='pythonfmu'")
 
 
 def _input_columns(X, b, p):
@@ -177,14 +152,14 @@ def _input_columns(X, b, p):
     return out
 
 
-def fit_tables(dae, method, lam, k, t_span, error, inputs=None, counter=None):
+def fit_tables(comp, t_span, error, inputs=None, counter=None):
     """Piecewise Chebyshev coefficients of the sampler's vector on `t_span`; a dict for the header.
 
     `counter` (a one-element list) counts the evaluations of the completion, also of a fit that fails."""
     a, b = map(float, t_span)
-    sampler = _Sampler(dae, method, lam, k, error, inputs)
+    sampler = _Sampler(comp, error, inputs)
     sampler.where = f"[{a:.12g}, {b:.12g}]"
-    sampler.check_affine(np.linspace(a, b, 5))
+    sampler.check_inputs(np.linspace(a, b, 5))
     values, scale = {}, np.zeros(len(sampler.groups))
 
     def sample(t):
@@ -206,10 +181,9 @@ def fit_tables(dae, method, lam, k, t_span, error, inputs=None, counter=None):
 
     def fit(lo, hi, degrees):
         for m in degrees:
-            ts = 0.5 * (hi + lo) + 0.5 * (hi - lo) * _points(m)
-            ts[0], ts[-1] = hi, lo
+            ts = chebyshev_points(m, (lo, hi))
             # the polynomial through the times actually sampled (rounded to doubles: 1e-11 of a piece at t = 1e5)
-            coef = _coefficients_at(np.array([sample(float(t)) for t in ts]), _positions(ts, lo, hi))
+            coef = chebyshev_coefficients(np.array([sample(float(t)) for t in ts]), ts, (lo, hi))
             if tail_ok(coef):
                 return coef
         return None
@@ -260,7 +234,7 @@ def _lowest_degree(pieces, limit, tail_ok, refit):
         room, parts, split = limit - len(out) - (len(pieces) - i), 2, None
         while coef.shape[0] - 1 > m0 and parts - 1 <= room:
             edges = np.linspace(lo, hi, parts + 1)
-            if all(tail_ok(_coefficients(_expansion_at_points(coef, lo, hi, l, h, m0)))
+            if all(tail_ok(chebyshev_coefficients(_expansion_at_points(coef, lo, hi, l, h, m0)))
                    for l, h in zip(edges[:-1], edges[1:])):
                 fits = [(l, h, refit(l, h)) for l, h in zip(edges[:-1], edges[1:])]
                 split = fits if all(f is not None for _, _, f in fits) else None
@@ -273,7 +247,7 @@ def _lowest_degree(pieces, limit, tail_ok, refit):
 def _expansion_at_points(coef, lo, hi, l, h, m):
     """The piece's expansion (`coef` on [lo, hi]) at the m + 1 Chebyshev extreme points of [l, h], in the order
     `fit_tables` samples them (placed by their offsets from lo: no rounding of |t| itself)."""
-    x = np.clip((2.0 * (l - lo) + (h - l) * (1.0 + _points(m))) / (hi - lo) - 1.0, -1.0, 1.0)
+    x = np.clip((2.0 * (l - lo) + (h - l) * (1.0 + chebyshev_points(m))) / (hi - lo) - 1.0, -1.0, 1.0)
     return np.polynomial.chebyshev.chebval(x, coef).T
 
 
@@ -393,28 +367,24 @@ def _fit_horizon(fit, a, b, error):
                  f"{100 * HORIZON_MARGIN:g} %): {reason}.")
 
 
-def prepare(dae, spec, k, error):
+def prepare(comp, spec, error):
     """The tables over the experiment's horizon and zero placeholders for the constant-coefficient arrays."""
     import time
-    from types import SimpleNamespace
 
     start = time.perf_counter()
     a, b = float(spec.experiment["start"]), float(spec.experiment["stop"])
-    inputs = None
-    if spec.inputs:
-        order = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=k)._order
-        inputs = _inputs(spec, order)
+    inputs = _inputs(spec, comp.order) if spec.inputs else None
     # the tables reach past the stop time (Model Exchange integrators evaluate a little past it) where they can
     counter = [0]  # evaluations of every fit tried
-    tab, margin_note = _fit_horizon(
-        lambda end: fit_tables(dae, spec.method, spec.lam, k, (a, end), error, inputs, counter), a, b, error)
+    tab, margin_note = _fit_horizon(lambda end: fit_tables(comp, (a, end), error, inputs, counter), a, b, error)
     tab["margin_note"], tab["evaluations"] = margin_note, counter[0]
-    n = dae.n
+    n = comp.n
     # with inputs, the constant runtime's input jets (lengths from the order p, as for constant coefficients)
-    comp = SimpleNamespace(_order=tab["p"] if spec.inputs else 0, _W_c=np.zeros((0, n)),
-                           _std=SimpleNamespace(C=np.zeros((0, n)), C_pinv=None))
-    Z, ZW = np.zeros((n, n)), np.zeros((n, n * (comp._order + 1)))
-    tab["placeholders"] = (Z, Z, ZW, ZW, comp, spec.method == "alternative")
+    order = tab["p"] if spec.inputs else 0
+    Z, ZW = np.zeros((n, n)), np.zeros((n, n * (order + 1)))
+    empty = lsc.CompletionMaps(np.zeros(1), Z[None], ZW[None], np.zeros((1, 0, n)), np.zeros((1, 0, n)), order,
+                               comp.k, None, comp.method)
+    tab["placeholders"] = (Z, Z, ZW, ZW, empty, spec.method == "alternative")
     tab["fit_seconds"] = time.perf_counter() - start
     return tab
 

@@ -13,9 +13,11 @@ Time-varying ``A(t)``, ``B(t)`` (`_native_tv`): the completion's maps as
 piecewise Chebyshev tables over the experiment's horizon, inputs in ``f``
 where ``f`` is affine in them, every parameter fixed.
 For the alternative completion ``G`` and ``W`` are affine in ``lambda``
-(``G = G0 + lambda G1``), checked at build time, so ``lambda`` stays tunable
-in C; for the stabilized one (not affine in ``lambda``) and the standard one
-(no ``lambda``) ``lambda`` is a fixed value.
+(``G = G0 + lambda G1``, lsc's `Completion.lam_affine`, checked at build
+time), so ``lambda`` stays tunable in C; for the stabilized one (not affine in
+``lambda``) and the standard one (no ``lambda``) ``lambda`` is a fixed value.
+The target reads lsc through its public names only: one completion per build,
+its `CompletionMaps`.
 """
 
 import hashlib
@@ -49,7 +51,6 @@ _FMI3_SOURCES = ("fmi3Functions.c", "fmi3Functions.h", "fmi3FunctionTypes.h", "f
 TAYLOR_DEGREE = 3  # the forcing over a step is its Taylor polynomial of this degree (as lsc's method='expm')
 # any warning is an error: a C compiler that truncates a constant or converts a value only warns
 C_FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror")
-_AFFINE_RTOL = 1e-10
 
 
 class NativeTargetError(ValueError):
@@ -119,34 +120,19 @@ def _check_expressible(spec, fix_parameters):
     return sorted(in_ab)
 
 
-# The affine parts are fitted at rates of order one, whatever the spec's rate: taken at rates lam and 2 lam,
-# (G(2 lam) - G(lam)) / lam cancels all digits for lam near 1e-12 and amplifies G0's rounding for lam near 1e12.
-_FIT_RATES = (1.0, 2.0)
-_CHECK_RATES = (0.3, 7.0)
-
-
-def _affine_maps(dae, method, lam, k):
-    """G0, G1, W0, W1 with G(lam) = G0 + lam G1 (same for W), fitted at rates 1 and 2; checked at 0.3, 7 and lam."""
-    if method == "standard":
-        c = lsc.complete(dae, "standard", k=k)
-        return c._G, np.zeros_like(c._G), c._W, np.zeros_like(c._W), c, False
-    c_spec = lsc.complete(dae, method, lam=lam, k=k)
-    if method == "stabilized":
-        # G(lam) is not affine (nor polynomial) in lam: the rate is fixed in the native FMU
-        return c_spec._G, np.zeros_like(c_spec._G), c_spec._W, np.zeros_like(c_spec._W), c_spec, False
-    (a, ca), (b, cb) = [(r, lsc.complete(dae, method, lam=r, k=k)) for r in _FIT_RATES]
-    G1, W1 = (cb._G - ca._G) / (b - a), (cb._W - ca._W) / (b - a)
-    G0, W0 = ca._G - a * G1, ca._W - a * W1
-    for rate, c in [(r, lsc.complete(dae, method, lam=r, k=k)) for r in _CHECK_RATES] + [(lam, c_spec)]:
-        for name, M0, M1, M in (("G", G0, G1, c._G), ("W", W0, W1, c._W)):
-            # relative to the size of the terms at that rate: at lam = 1e12 the lam G1 part is all of G
-            scale = max(np.abs(M).max(), np.abs(M0).max() + rate * np.abs(M1).max(), 1.0)
-            err = np.abs(M0 + rate * M1 - M).max() / scale
-            if not err <= _AFFINE_RTOL:
-                raise NativeTargetError(f"{name}(lambda) of the alternative completion is not affine in lambda here "
-                                        f"(relative misfit {err:.1e} at lambda = {rate:g}); build with "
-                                        "target='pythonfmu'")
-    return G0, G1, W0, W1, c_spec, True
+def _affine_maps(comp):
+    """``(G0, G1, W0, W1, maps, lam_tunable)``: G(lam) = G0 + lam G1 (same for W) for the alternative completion
+    (`lsc.Completion.lam_affine`: fitted and checked from the completion's own factors); the others' maps at
+    their fixed rate (G1 = W1 = 0)."""
+    if comp.method != "alternative":
+        maps = comp.maps()
+        zero = np.zeros_like(maps.G[0]), np.zeros_like(maps.W[0])
+        return maps.G[0], zero[0], maps.W[0], zero[1], maps, False
+    try:
+        split = comp.lam_affine()
+    except ValueError as exc:
+        raise NativeTargetError(f"{exc}; build with target='pythonfmu'") from exc
+    return split.G0[0], split.G1[0], split.W0[0], split.W1[0], split.maps, True
 
 
 def _ccode(expr):
@@ -192,22 +178,23 @@ def _is_linear_in_states(expr, state_symbols, spec):
         return False
 
 
-def _model_header(spec, *, ident, guid, G0, G1, W0, W1, comp, lam_tunable, fpars, kpars, f_jet=True):
+def _model_header(spec, *, ident, guid, G0, G1, W0, W1, maps, lam_tunable, fpars, kpars, f_jet=True):
     """The generated part: sizes, value references, matrices and the C of f and the outputs (`f_jet` False: no
-    C of f's jet, which the time-varying runtime does not call: its forcing is tabulated)."""
+    C of f's jet, which the time-varying runtime does not call: its forcing is tabulated). `maps`: the
+    completion's `lsc.CompletionMaps` (its order, constraint rows and their forcing map)."""
     import sympy
 
     n = spec.n
-    P = comp._order
+    P = maps.order
     nj = P + 1
-    C, Wc = comp._std.C, comp._W_c
+    C, Wc = maps.C[0], maps.Wc[0]
     nc = C.shape[0]
     njc = Wc.shape[1] // n if nc else 1
     nf = max(nj + TAYLOR_DEGREE, njc)
     nfe = nf + 2  # two more derivatives: the error estimate of a step (the next two Taylor terms)
     nu, no, nk = len(spec.inputs), len(spec.outputs), len(kpars)
     npar = len(fpars)
-    Cpinv = comp._std.C_pinv if nc else np.zeros((n, 1))
+    Cpinv = maps.C_pinv[0] if nc else np.zeros((n, 1))
     udeg = min(P + 3, 8)  # the history polynomial's degree: derivatives for g and its Taylor terms
     vr = {"LAMBDA": 0, "PAR": 1}
     vr["X0"] = 1 + npar
@@ -361,19 +348,19 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     # time-varying: the library's solvability check over the experiment's horizon (the tables' samples check
     # only the rank at their own times, not the consistency of [J, F] where the equations nearly degenerate)
     span = None if dae.is_constant else (float(spec.experiment["start"]), float(spec.experiment["stop"]))
-    k = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=spec.k, t_span=span).k
+    comp = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=spec.k, t_span=span)
     if dae.is_constant:
-        G0, G1, W0, W1, comp, lam_tunable = _affine_maps(dae, spec.method, spec.lam, k)
+        G0, G1, W0, W1, maps, lam_tunable = _affine_maps(comp)
         tv = None
     else:  # time-varying: tables over the horizon; the constant arrays are zeros the C runtime does not read
-        tv = _native_tv.prepare(dae, spec, k, NativeTargetError)
-        G0, G1, W0, W1, comp, lam_tunable = tv["placeholders"]
+        tv = _native_tv.prepare(comp, spec, NativeTargetError)
+        G0, G1, W0, W1, maps, lam_tunable = tv["placeholders"]
     fpars = [p["name"] for p in spec.parameters if p["name"] not in kpars]
     ident = spec.name
     # the GUID is a hash of everything compiled into the binary (model.h: matrices, start values, formulas;
     # the fixed sources) and of the variables the model description declares: any change gives another GUID
     placeholder = "{00000000-0000-0000-0000-000000000000}"
-    header, info = _model_header(spec, ident=ident, guid=placeholder, G0=G0, G1=G1, W0=W0, W1=W1, comp=comp,
+    header, info = _model_header(spec, ident=ident, guid=placeholder, G0=G0, G1=G1, W0=W0, W1=W1, maps=maps,
                                  lam_tunable=lam_tunable, fpars=fpars, kpars=kpars, f_jet=tv is None)
     fixed_note = (f" Parameters in A or B fixed at their spec values: {', '.join(kpars)}." if kpars else "")
     lam_note = {"alternative": "lambda tunable (G and the forcing map are affine in lambda, checked at build time)",

@@ -100,9 +100,10 @@ def _copy_runtime(dest):
     if len(lines) - len(kept) != len(dropped):  # lsc's __init__ changed shape: fail at build, not in the FMU
         raise RuntimeError("fmu_build could not strip the gallery and _integrate imports from lsc/__init__.py")
     (dest / "__init__.py").write_text("".join(kept))
-    _vendor_ivp(dest / "_ivp")
-    # inside the FMU the runtime is a subpackage of the lsc copy (its `_lsc` imports from there)
+    # inside the FMU the runtime is a subpackage of the lsc copy (its `_lsc` imports lsc's public names from there),
+    # with scipy's solvers in a subpackage of its own
     shutil.copytree(_RUNTIME, dest / "_fmu_runtime", ignore=shutil.ignore_patterns("__pycache__"))
+    _vendor_ivp(dest / "_fmu_runtime" / "_scipy_ivp")
 
 
 def _remove_stale_work_dirs(folder):

@@ -11,7 +11,7 @@ Design rules, from pythonfmu's behaviour:
 - The completion is rebuilt only when something it depends on changed
   (``lambda``, ``method`` or a parameter); otherwise it is reused.
 - Constant coefficients A, B are stepped exactly by default (`_ExactStepper`:
-  the matrix exponential of lsc._expm.Propagator, once per step size; the
+  the matrix exponential of lsc.ExactPropagator, once per step size; the
   inputs' extrapolation polynomials are polynomial forcing, stepped exactly).
   Time-varying completions can take a fourth-order Magnus step with one
   evaluation of the completion per communication step (``solver = 5``).

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 
-from ._lsc import Propagator
+from ._lsc import ExactPropagator
 
 _GAUSS = (0.5 - math.sqrt(3.0) / 6.0, 0.5 + math.sqrt(3.0) / 6.0)  # two-point Gauss nodes on [0, 1]
 _STEP_TOLERANCE = 1e-10  # relative: step sizes this close share one step matrix (masters' step jitter)
@@ -46,7 +46,7 @@ class _ExactStepper:
 
     Over a step the forcing ``g = W [f; f'; ...; f^(p)]`` is its Taylor
     polynomial of degree ``q`` at the step's start, and the completion with
-    that polynomial is stepped by the exponential of `lsc._expm.Propagator`:
+    that polynomial is stepped by `lsc.ExactPropagator`:
     ``x(t + h) = Phi x + Psi [g; g'; ...; g^(q)](t)``, exact when ``g`` is a
     polynomial of degree <= q over the step (an input's extrapolation
     polynomial, and no other time dependence), with local error
@@ -64,13 +64,15 @@ class _ExactStepper:
 
     _BATCH = 256  # forcing terms computed at once for the next steps of a fixed step size
 
-    def __init__(self, c, key, q, model, params, inputs, x, t_span):
+    def __init__(self, c, key, q, model, params, inputs, t_span):
         self.key, self.n = key, c.n
-        self.constant = c._g_const is not None
+        self.constant = c.dae.f is None or c.dae.f.is_constant
         self.q = 0 if self.constant else q
-        self.p = c._order
-        self._prop = Propagator(c._G, self.q)
-        self._g_const = c._g_const
+        maps = c.maps(t_span[0])  # constant coefficients: the same at every time
+        self.p = maps.order
+        # K = Psi Wbig acts on the stacked jet [f; f'; ...; f^(p+q)] directly (`ExactPropagator.step_matrices`)
+        self._prop = ExactPropagator(maps.G[0], self.q, W=None if self.constant else maps.W[0])
+        self._g_const = c.matrices(t_span[0])[1] if self.constant else None
         M = model.MODEL
         self._f_jet, self._params, self._inputs = model.f_jet, dict(params), inputs
         self._top = M.get("f_order_max", M["k"] + 2)
@@ -80,13 +82,8 @@ class _ExactStepper:
         self._anchor = float(t_span[0])  # forcing terms of fixed-step runs are read on the grid anchor + i h
         self.affine = not self.constant and bool(M.get("f_affine")) and hasattr(model, "f0_many")
         self._f_time = bool(M.get("f_time"))
-        if not self.constant:
-            n, m, p = c.n, c.n, c._order
-            self.W = np.zeros(((self.q + 1) * n, (p + self.q + 1) * m))  # [g; ...; g^(q)] = W [f; ...; f^(p+q)]
-            for j in range(self.q + 1):
-                self.W[j * n:(j + 1) * n, j * m:(j + p + 1) * m] = c._W
-            if self._f_time and self._top >= self.p + self.q + 1:
-                self.H = self._step_bound(c, x, t_span)
+        if not self.constant and self._f_time and self._top >= self.p + self.q + 1:
+            self.H = self._step_bound(maps.W[0], t_span)
         if self.affine:
             # f = f0(t) + sum_u c_u u: the input part of [f; ...; f^(p+q)] is c_u times u's derivatives
             self._f0_many = model.f0_many
@@ -101,19 +98,19 @@ class _ExactStepper:
             self._f0_stack = None if self._f_time else \
                 self._f0_many(np.array([self._anchor]), self._params, order)[:, :, 0].reshape(-1)
 
-    def _step_bound(self, c, x, t_span):
+    def _step_bound(self, W, t_span):
         q, p = self.q, self.p
         top = p + q + 1
         zeros = {name: np.zeros(self._top + 1) for name in self._inputs}  # inputs: polynomials of degree <= q
         bound = 0.0
         for t in np.linspace(t_span[0], t_span[1], 33):
             jet = self._f_jet(t, self._params, top, zeros) if self._inputs else self._f_jet(t, self._params, top)
-            g = c._W @ jet[q + 1:].reshape(-1)  # g^(q+1) = W [f^(q+1); ...; f^(q+1+p)]
+            g = W @ jet[q + 1:].reshape(-1)  # g^(q+1) = W [f^(q+1); ...; f^(q+1+p)]
             bound = max(bound, float(np.max(np.abs(g))))
         if not (bound > 0.0 and math.isfinite(bound)):
             return math.inf
         start = self._f_jet(t_span[0], self._params, p, zeros) if self._inputs else self._f_jet(t_span[0], self._params, p)
-        scale = float(np.max(np.abs(c._W @ start.reshape(-1)), initial=0.0))  # |g| at the start
+        scale = float(np.max(np.abs(W @ start.reshape(-1)), initial=0.0))  # |g| at the start
         tol = 1e-13 * max(1.0, scale)
         return (tol * math.factorial(q + 2) / bound) ** (1.0 / (q + 2))
 
@@ -126,15 +123,13 @@ class _ExactStepper:
             if abs(h - entry["h"]) <= _STEP_TOLERANCE * entry["h"]:
                 self._last = entry
                 return entry
-        E = self._prop.exponential(h)
-        self._prop._cache.clear()  # this class keeps its own table
+        Phi, K = self._prop.step_matrices(h, cache=False)  # this class keeps its own table
         n = self.n
-        entry = {"h": h, "Phi": np.ascontiguousarray(E[:n, :n]), "batch": (None, None)}
-        Psi = E[:n, n:]
+        entry = {"h": h, "Phi": Phi, "batch": (None, None)}
         if self.constant:
-            entry["k0"] = Psi @ self._g_const
+            entry["k0"] = K @ self._g_const  # (K is Psi: no forcing map)
         else:
-            K = entry["K"] = np.ascontiguousarray(Psi @ self.W)
+            entry["K"] = K
             if self.affine:
                 order = self.p + self.q
                 entry["Ku"] = {name: np.column_stack([K[:, j * n:(j + 1) * n] @ cu for j in range(order + 1)])

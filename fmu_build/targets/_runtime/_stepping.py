@@ -62,7 +62,7 @@ class Stepping:
             # the grid and the step bound depend only on the experiment, never on when the stepper
             # was made: a state restored across a change of lambda repeats its steps bit for bit
             ex = self._exact = _ExactStepper(c, self._completion_key, self.model.MODEL.get("exact_degree", 0),
-                                             self.model, self._params(), self.inputs, None,
+                                             self.model, self._params(), self.inputs,
                                              (self._t_start, max(self._t_start, self.t_stop)))
         if self.inputs:
             for signal in self.inputs.values():
@@ -100,8 +100,7 @@ class Stepping:
         if self.inputs:
             for signal in self.inputs.values():
                 signal.record(t)
-            if hasattr(c, "_cache"):
-                c._cache.clear()
+            c.clear_cache()
         if h == 0.0:
             return True
         history = self._magnus_history
@@ -174,8 +173,7 @@ class Stepping:
                 # the input estimates change with every received value: new forcing, new solver
                 for signal in self.inputs.values():
                     signal.record(self.t)
-                if hasattr(c, "_cache"):
-                    c._cache.clear()
+                c.clear_cache()
                 self._solver = None
             if self._solver is None or target > self._solver.t_bound:
                 self._start_solver(c, target)
