@@ -1,0 +1,100 @@
+"""examples/bench_master_peers.py --quick: the errors it reports are those of the runs it recorded against an
+independent monolithic solution, our step control meets its tolerance there, and every master is charged the
+FMU calls it made.
+
+The quick run co-simulates the mass-spring-damper chain split into three C FMUs (built with gcc at run time) on
+[0, 2] with our master (one controlled, one fixed-step run), libcosim's ECCO and the re-implemented oms-mav,
+oms-mav2 and MasterSim step doubling, in a subprocess (built FMUs run in subprocesses in tests). The reference
+here is the chain's equations of motion written from the forces, integrated by scipy at rtol 1e-12: not the
+script's matrix exponential.
+"""
+import importlib.util
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+pytest.importorskip("libcosimpy", reason="libcosimpy is not installed (pip install -e '.[cosim]')")
+pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="the chain FMUs are compiled with gcc")
+
+ROOT = Path(__file__).resolve().parent.parent
+SCRIPT = ROOT / "examples" / "bench_master_peers.py"
+
+
+def _constants():
+    spec = importlib.util.spec_from_file_location("bench_master_peers_constants", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.MASSES, module.SPRINGS, module.DAMPERS, module.CHAIN_X0
+
+
+def _reference(t_end):
+    """Velocities of masses 1 and 3 as dense output: m_i x_i'' = the forces of the springs and dampers on it."""
+    (m1, m2, m3), (k0, k1, k2, k3), (c0, c1, c2, c3), z0 = _constants()
+
+    def rhs(_, z):
+        x1, v1, x2, v2, x3, v3 = z
+        f12 = k1 * (x2 - x1) + c1 * (v2 - v1)  # on mass 1 from the spring-damper to mass 2
+        f23 = k2 * (x3 - x2) + c2 * (v3 - v2)  # on mass 2 from the one to mass 3
+        return [v1, (-k0 * x1 - c0 * v1 + f12) / m1, v2, (-f12 + f23) / m2, v3, (-k3 * x3 - c3 * v3 - f23) / m3]
+
+    sol = solve_ivp(rhs, (0.0, t_end), z0, method="DOP853", rtol=1e-12, atol=1e-14, dense_output=True)
+    assert sol.success
+    return lambda t: sol.sol(np.asarray(t))[[1, 5]]
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench_master_peers")
+    proc = subprocess.run([sys.executable, str(SCRIPT), "--quick", "--out", str(out)], capture_output=True, text=True,
+                          timeout=900, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads((out / "bench_master_peers.json").read_text())["rows"]
+
+
+def _one(rows, master):
+    found = [r for r in rows if r["master"] == master]
+    assert len(found) == 1, [r["master"] for r in rows]
+    return found[0]
+
+
+def test_reported_errors_are_the_runs_errors(quick):
+    stop = quick[0]["stop_time"]
+    reference = _reference(stop * 1.01)  # ECCO's last step may end beyond the stop time
+    amplitude = np.max(np.abs(reference(np.linspace(0.0, stop, 4001))), axis=1)
+    assert {r["master"] for r in quick} == {"ours", "ours-fixed", "ECCO", "oms-mav", "oms-mav2", "MasterSim"}
+    for r in quick:
+        t, Y = np.array(r["t"]), np.array(r["Y"])
+        assert r["success"], r["message"]
+        assert t[-1] == pytest.approx(stop, rel=1e-2) and np.all(np.diff(t) > 0), r["master"]
+        error = np.max(np.abs(Y - reference(t)) / amplitude[:, None])
+        # the script's reference (a matrix exponential) and scipy's agree to rounding: the same error
+        assert r["error"] == pytest.approx(error, rel=1e-4, abs=1e-10), (r["master"], r["setting"])
+
+
+def test_our_step_control_meets_its_tolerance_with_fewer_calls_than_ecco(quick):
+    ours, fixed, ecco = _one(quick, "ours"), _one(quick, "ours-fixed"), _one(quick, "ECCO")
+    rtol = float(ours["setting"].rsplit("=", 1)[1])
+    assert ours["error"] < 10 * rtol, ours  # 6e-7 at rtol 1e-5 when written
+    assert fixed["error"] < 3e-5, fixed  # H = 0.01, extrapolation 2: third order, 7.6e-6 when written
+    # ECCO (zero-order hold, first order) at tol 1e-4: 6e-3 with 2.5 times our calls when written
+    assert ours["error"] < ecco["error"] and ours["calls"] < ecco["calls"], (ours, ecco)
+
+
+def test_every_master_is_charged_its_fmu_calls(quick):
+    """Three FMUs: our master's counted calls cover its attempts; ECCO steps each FMU once per macro step (the
+    script checks that against the FMUs' own nDoStep counters); the peers step every FMU once (oms-mav), twice
+    (oms-mav2) or three times (MasterSim) per attempt, rejected attempts included."""
+    ours = _one(quick, "ours")
+    assert ours["calls"] >= 3 * (ours["steps"] + ours["rejected"])
+    assert _one(quick, "ECCO")["calls"] == 3 * _one(quick, "ECCO")["steps"]
+    ecco_steps = np.diff(_one(quick, "ECCO")["t"])
+    assert ecco_steps.max() > 2 * ecco_steps.min()  # its step size did adapt
+    for master, passes in (("oms-mav", 1), ("oms-mav2", 2), ("MasterSim", 3)):
+        r = _one(quick, master)
+        assert r["calls"] == 3 * passes * (r["steps"] + r["rejected"]), r
