@@ -86,13 +86,22 @@ def _add_simulate(sub):
         "simulate", help="run an FMU in fmpy and write its outputs as CSV (and a PNG)",
         description="Simulate an FMU in fmpy over its default experiment (or --stop-time) and write every "
                     "output to a CSV file. An input CSV has a header row 'time,<input>,...' and one row per "
-                    "time; fmpy interpolates it linearly. It is checked before the run: times finite and "
-                    "strictly increasing, every value a finite number, every column an input of the FMU, "
-                    "every input a column or given a start value.",
+                    "time. It is checked before the run: times finite and strictly increasing, every value a "
+                    "finite number, every column an input of the FMU, every input a column or given a start "
+                    "value. Each column is fitted by the interpolating spline of degree 5 through its rows "
+                    "(scipy's make_interp_spline, not-a-knot ends; degree rows - 1 below 6 rows): its j-th "
+                    "derivative errs by O(spacing^(6 - j)) for a smooth signal. Every communication point, the "
+                    "start included, receives the fit's value and, where the FMU takes them (native FMUs: "
+                    "fmi2SetRealInputDerivatives), its derivatives; an FMU that takes none (pythonfmu) "
+                    "estimates them, guessing them at the start (a note says so). --linear-input interpolates "
+                    "linearly and sends values only, as fmpy does (for a table with corners or jumps).",
         epilog="example: lsc-fmu simulate out/PathInput.fmu --input examples/inputs/path.csv --step 0.01 --plot -o out/run.csv",
     )
     p.add_argument("fmu", help="path of the .fmu file")
     p.add_argument("--input", metavar="CSV", help="input signals: columns 'time' and one per FMU input")
+    p.add_argument("--linear-input", action="store_true",
+                   help="interpolate the input CSV linearly and send values only (fmpy's way), not the spline fit "
+                        "and its derivatives")
     p.add_argument("-o", "--output", metavar="CSV",
                    help="result file, or a folder to write <model>.csv into (default: <model>.csv in the current folder)")
     p.add_argument("--plot", action="store_true", help="also plot the outputs to the result's name with .png")
@@ -177,10 +186,14 @@ def _run_simulate(args):
     unzipped = tempfile.mkdtemp(prefix="lsc_simulate_")  # fmpy's own extraction is left behind on a signal
     previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        extract(args.fmu, unzipdir=unzipped)
-        result = simulate_fmu(unzipped, start_time=start, stop_time=stop_time, output_interval=step,
-                              start_values=start_values, input=signals, output=outputs, logger=logger,
-                              debug_logging=True, model_description=md)
+        result = None
+        if signals is not None and not args.linear_input:
+            result, signals = _simulate_fitted(args, md, signals, (start, stop_time, step), start_values, outputs)
+        if result is None:
+            extract(args.fmu, unzipdir=unzipped)
+            result = simulate_fmu(unzipped, start_time=start, stop_time=stop_time, output_interval=step,
+                                  start_values=start_values, input=signals, output=outputs, logger=logger,
+                                  debug_logging=True, model_description=md)
     except (Exception, KeyboardInterrupt) as exc:
         if interrupted or isinstance(exc, KeyboardInterrupt):
             print(f"lsc-fmu: error: interrupted ({interrupted[0] if interrupted else 'SIGINT'}); nothing written.",
@@ -205,6 +218,32 @@ def _run_simulate(args):
               file=sys.stderr)
         return 1
     return 0
+
+
+def _simulate_fitted(args, md, signals, run, start_values, outputs):
+    """The input table's smooth fit: (result, None) for a Co-Simulation FMU, run with the fit's values and
+    derivatives from the start; (None, the fit's values at every output point) for a Model Exchange one."""
+    import numpy as np
+
+    from ._input_tables import fit_inputs, simulate_with_inputs
+
+    start, stop_time, step = run
+    fit = fit_inputs(signals)
+    if md.coSimulation is None:  # no derivatives can be sent; fmpy runs it with the fit's values
+        grid = np.append(np.arange(start, stop_time, step if step is not None else (stop_time - start) / 500),
+                         stop_time)
+        print("lsc-fmu: note: a Model Exchange FMU cannot receive input derivatives: the fit's values at every "
+              "output point; the FMU estimates the derivatives", file=sys.stderr)
+        return None, fit.sample(grid)
+    notes = []
+    result = simulate_with_inputs(args.fmu, fit, start_time=start, stop_time=stop_time, step=step,
+                                  start_values=start_values, output=outputs, notes=notes)
+    for note in notes:
+        if "values only" in note:
+            print(f"lsc-fmu: note: {note}", file=sys.stderr)
+    if any("values only" in note for note in notes):
+        print("lsc-fmu: note: a native FMU (lsc-fmu build --native) takes the input derivatives", file=sys.stderr)
+    return result, None
 
 
 def _write_result(out, result):
@@ -407,8 +446,8 @@ def _gallery(text):
 def _add_cosim(sub):
     cosim = sub.add_parser(
         "cosim", help="co-simulate FMUs connected by an SSP file (.ssp/.ssd)",
-        description="Co-simulate the FMUs of an SSP system (an .ssp archive or a SystemStructure.ssd) with a "
-                    "fixed macro step in fmpy, and write the recorded variables as CSV (columns 'time' and "
+        description="Co-simulate the FMUs (FMI 2.0 and 3.0 Co-Simulation) of an SSP system (an .ssp archive or a "
+                    "SystemStructure.ssd) with a fixed macro step in fmpy, and write the recorded variables as CSV (columns 'time' and "
                     "'component.variable'). A run that stops early writes what it computed and exits 1.",
         epilog="example: lsc-fmu cosim out/path_control.ssp --stop-time 10 --step-size 0.01 -o out/result.csv --plot")
     cosim.add_argument("system", help="the .ssp or .ssd file")
@@ -428,7 +467,8 @@ def _add_cosim(sub):
 
 
 def _write_csv(path, result):
-    """The result as CSV: numbers with 17 digits, Booleans as 0/1, Strings quoted where needed."""
+    """The result as CSV: numbers with 17 digits, integers exact, Booleans as 0/1, Strings quoted where needed,
+    Binary values as hexadecimal text."""
     import csv
 
     import numpy as np
@@ -436,6 +476,8 @@ def _write_csv(path, result):
     def cell(x):
         if isinstance(x, str):
             return x
+        if isinstance(x, (bytes, bytearray)):
+            return bytes(x).hex()
         if isinstance(x, (bool, np.bool_)) or isinstance(x, (int, np.integer)):
             return str(int(x))
         return format(float(x), ".17g")
@@ -499,7 +541,8 @@ def _run_cosim(args):
 
         fig, ax = plt.subplots(figsize=(7, 4))
         for n in names[1:]:
-            ax.plot(result["time"], result[n], label=n)
+            if result.dtype[n].kind in "biuf":  # Strings and Binary values are in the CSV only
+                ax.plot(result["time"], result[n], label=n)
         ax.set_xlabel("time")
         ax.legend(fontsize=7)
         fig.tight_layout()

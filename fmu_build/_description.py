@@ -8,7 +8,7 @@ standard prescribes.
 
 from xml.etree import ElementTree as ET
 
-__all__ = ["model_description"]
+__all__ = ["model_description", "model_structure", "unit_definitions"]
 
 _TYPE_ORDER = ("Real", "Integer", "Boolean", "String")
 
@@ -66,17 +66,7 @@ def model_description(*, model_name, guid, description, model_identifier, variab
             files = ET.SubElement(el, "SourceFiles")
             for name in source_files:
                 ET.SubElement(files, "File", name=name)
-    units = sorted({v["unit"] for v in variables if v.get("unit")})
-    if units:
-        defs = ET.SubElement(root, "UnitDefinitions")
-        for u in units:
-            ET.SubElement(defs, "Unit", name=u)
-    if log_categories:
-        cats = ET.SubElement(root, "LogCategories")
-        for name, text in log_categories:
-            ET.SubElement(cats, "Category", name=name, description=text)
-    if experiment:
-        ET.SubElement(root, "DefaultExperiment", **{k: _text(v) for k, v in experiment.items()})
+    _shared_blocks(root, variables, log_categories, experiment)
     model_vars = ET.SubElement(root, "ModelVariables")
     index = {}
     for i, v in enumerate(variables, start=1):
@@ -101,14 +91,61 @@ def model_description(*, model_name, guid, description, model_identifier, variab
             v["_element"].set("derivative", str(index[v["derivative"]]))
             # attribute order: derivative first reads better, but XML does not care
 
-    _model_structure(ET.SubElement(root, "ModelStructure"), variables, index, model_exchange is not None)
+    model_structure(ET.SubElement(root, "ModelStructure"), variables, index, model_exchange is not None)
     for v in variables:
         v.pop("_element", None)
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
-def _model_structure(structure, variables, index, model_exchange):
+def _shared_blocks(root, variables, log_categories, experiment):
+    """``<UnitDefinitions>``, ``<LogCategories>`` and ``<DefaultExperiment>``: the same in FMI 2.0 and 3.0."""
+    units = unit_definitions(variables)
+    if units is not None:
+        root.append(units)
+    if log_categories:
+        cats = ET.SubElement(root, "LogCategories")
+        for name, text in log_categories:
+            ET.SubElement(cats, "Category", name=name, description=text)
+    if experiment:
+        ET.SubElement(root, "DefaultExperiment", **{k: _text(v) for k, v in experiment.items()})
+
+
+def unit_definitions(variables):
+    """The ``<UnitDefinitions>`` element of the units the variables use (sorted), or None if they use none."""
+    units = sorted({v["unit"] for v in variables if v.get("unit")})
+    if not units:
+        return None
+    defs = ET.Element("UnitDefinitions")
+    for u in units:
+        ET.SubElement(defs, "Unit", name=u)
+    return defs
+
+
+def _dependencies(v, key):
+    """The ``dependencies`` attribute of an unknown (`key` maps a name to its index or value reference),
+    or None when the variable states none."""
+    deps = v.get("dependencies")
+    return None if deps is None else " ".join(str(j) for j in sorted(key[d] for d in deps))
+
+
+def _initial_unknowns(variables, model_exchange):
+    """The variables listed as initial unknowns: outputs, calculated parameters and, with Model Exchange,
+    states and derivatives, whose ``initial`` (given, or the default of their causality) is calculated."""
+    derivatives = [v for v in variables if v.get("derivative")] if model_exchange else []
+    states = {v["derivative"] for v in derivatives}
+    out = []
+    for v in variables:
+        default = "calculated" if v["causality"] in ("output", "local", "calculatedParameter") \
+            and v["variability"] not in ("constant", "fixed", "tunable") else None
+        if (v.get("initial") or default) in ("approx", "calculated") and (
+                v["causality"] in ("output", "calculatedParameter") or v["name"] in states
+                or any(v is d for d in derivatives)):
+            out.append(v)
+    return out
+
+
+def model_structure(structure, variables, index, model_exchange):
     """Fill ``<ModelStructure>``: outputs and derivatives with their dependencies, and the initial unknowns.
 
     `index` maps a variable's name to its 1-based index; `model_exchange` says whether the
@@ -116,9 +153,9 @@ def _model_structure(structure, variables, index, model_exchange):
     """
     def unknown(parent, v):
         attrs = {"index": str(index[v["name"]])}
-        deps = v.get("dependencies")
+        deps = _dependencies(v, index)
         if deps is not None:
-            attrs["dependencies"] = " ".join(str(j) for j in sorted(index[d] for d in deps))
+            attrs["dependencies"] = deps
         ET.SubElement(parent, "Unknown", **attrs)
 
     outputs = [v for v in variables if v["causality"] == "output"]
@@ -131,14 +168,7 @@ def _model_structure(structure, variables, index, model_exchange):
         el = ET.SubElement(structure, "Derivatives")
         for v in derivatives:
             unknown(el, v)
-    states = {v["derivative"] for v in derivatives} if model_exchange else set()
-    initial = []
-    for v in variables:
-        calculated = v.get("initial", "calculated" if v["causality"] in ("output", "local", "calculatedParameter")
-                           and v["variability"] not in ("constant", "fixed", "tunable") else None) in ("approx", "calculated")
-        if (v["causality"] in ("output", "calculatedParameter") and calculated) or \
-                ((v["name"] in states or (v.get("derivative") and model_exchange)) and calculated):
-            initial.append(v)
+    initial = _initial_unknowns(variables, model_exchange)
     if initial:
         el = ET.SubElement(structure, "InitialUnknowns")
         for v in initial:

@@ -10,7 +10,7 @@ dependencies are value references.
 
 from xml.etree import ElementTree as ET
 
-from ._description import _text
+from ._description import _dependencies, _initial_unknowns, _shared_blocks, _text
 
 __all__ = ["model_description3", "build_description3"]
 
@@ -56,17 +56,7 @@ def model_description3(*, model_name, token, description, model_identifier, vari
     for tag, flags in (("ModelExchange", model_exchange), ("CoSimulation", co_simulation)):
         if flags is not None:
             ET.SubElement(root, tag, modelIdentifier=model_identifier, **{k: _text(v) for k, v in flags.items()})
-    units = sorted({v["unit"] for v in variables if v.get("unit")})
-    if units:
-        defs = ET.SubElement(root, "UnitDefinitions")
-        for u in units:
-            ET.SubElement(defs, "Unit", name=u)
-    if log_categories:
-        cats = ET.SubElement(root, "LogCategories")
-        for name, text in log_categories:
-            ET.SubElement(cats, "Category", name=name, description=text)
-    if experiment:
-        ET.SubElement(root, "DefaultExperiment", **{k: _text(v) for k, v in experiment.items()})
+    _shared_blocks(root, variables, log_categories, experiment)
     model_vars = ET.SubElement(root, "ModelVariables")
     vr_of = {v["name"]: v["vr"] for v in variables}
     for v in variables:
@@ -93,25 +83,19 @@ def _model_structure3(structure, variables, vr_of, model_exchange):
     """Outputs, state derivatives (with Model Exchange) and initial unknowns, in the schema's order."""
     def unknown(tag, v):
         attrs = {"valueReference": str(v["vr"])}
-        deps = v.get("dependencies")
+        deps = _dependencies(v, vr_of)
         if deps is not None:
-            attrs["dependencies"] = " ".join(str(j) for j in sorted(vr_of[d] for d in deps))
+            attrs["dependencies"] = deps
         ET.SubElement(structure, tag, **attrs)
 
-    derivatives = [v for v in variables if v.get("derivative")] if model_exchange else []
     for v in variables:
         if v["causality"] == "output":
             unknown("Output", v)
-    for v in derivatives:
-        unknown("ContinuousStateDerivative", v)
-    states = {v["derivative"] for v in derivatives}
     for v in variables:
-        default = "calculated" if v["causality"] in ("output", "local", "calculatedParameter") \
-            and v["variability"] not in ("constant", "fixed", "tunable") else None
-        calculated = v.get("initial", default) in ("approx", "calculated")
-        if calculated and (v["causality"] in ("output", "calculatedParameter") or v["name"] in states
-                           or v in derivatives):
-            ET.SubElement(structure, "InitialUnknown", valueReference=str(v["vr"]))
+        if model_exchange and v.get("derivative"):
+            unknown("ContinuousStateDerivative", v)
+    for v in _initial_unknowns(variables, model_exchange):
+        ET.SubElement(structure, "InitialUnknown", valueReference=str(v["vr"]))
 
 
 def build_description3(model_identifier, source_file):

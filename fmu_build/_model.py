@@ -153,6 +153,19 @@ def _needed_input_orders(spec, dae, k):
     return need
 
 
+def _input_window(spec, u):
+    """The span (s) of input `u`'s least-squares window: the spec's ``window``, else 30 experiment steps."""
+    from .spec._spec import DEFAULT_WINDOW_STEPS
+
+    window = u.get("window")
+    return float(window) if window is not None else DEFAULT_WINDOW_STEPS * float(spec.experiment["step"])
+
+
+def _input_degree(order):
+    """Degree of an input's estimate: the highest derivative used + 4, at most 8 (0 for an input never used)."""
+    return min(order + 4, 8) if order >= 0 else 0
+
+
 _EXACT_DEGREE_T = 5  # Taylor degree of a forcing that depends on t: local error h^7 |g^(6)| / 7! per step
 
 
@@ -160,7 +173,7 @@ def _exact_degree(spec, input_orders):
     """Degree q of the forcing's Taylor polynomial over a step of the FMU's exact stepping.
 
     Constant coefficients only (0 otherwise, and for a constant forcing). An
-    input enters as its extrapolation polynomial, of degree ``order + 2``
+    input enters as its extrapolation polynomial, of degree `_input_degree` (``order + 4``)
     (`fmu_build.targets._runtime._inputs._InputSignal`): with ``q`` at least that degree, a forcing
     polynomial in the inputs' values is stepped exactly. A forcing that
     depends on t gets ``q >= 5``.
@@ -168,7 +181,7 @@ def _exact_degree(spec, input_orders):
     t = spec.t
     if t in spec.A.free_symbols or t in spec.B.free_symbols or _inputs_in(spec.A, spec) or _inputs_in(spec.B, spec):
         return 0
-    q = max([order + 2 for order in input_orders.values() if order >= 0], default=0)
+    q = max([_input_degree(order) for order in input_orders.values() if order >= 0], default=0)
     if t in spec.f.free_symbols:  # (the runtime also splits a step where g^(q+1) needs it)
         q = max(q, _EXACT_DEGREE_T)
     return q

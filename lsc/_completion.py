@@ -438,8 +438,11 @@ def complete(dae, method, *, lam=None, k=None, rcond=None, t_span=None, setup="a
         Relative threshold for every rank decision.
     t_span : pair of float, optional
         Interval of use. For time-varying coefficients ``k`` is then decided
-        over the interval (`check_solvability`): the index can be lower at
-        isolated times (thesis Example 1 is 1-full with k = 1 at t = 0 only).
+        at times sampled over the interval (`check_solvability` with
+        ``between=False``): the index can be lower at isolated times (thesis
+        Example 1 is 1-full with k = 1 at t = 0 only). A rank drop between the
+        samples is not looked for here: a run that reaches it ends there
+        (`solve_completion`); ``check_solvability(dae, t_span)`` finds it.
         Without it ``k`` is decided at t = 0. Either way, every evaluation
         checks that the array keeps its rank and stays 1-full, and raises
         `IndexDeterminationError` naming the time otherwise.

@@ -76,6 +76,10 @@ class ExactPropagator:
     """
 
     def __init__(self, G, q, W=None, n_f=None):
+        if (type(G).__module__ or "").startswith("scipy.sparse"):  # a sparse completion's operator, never densified
+            raise TypeError(f"`G` must be an array; found a {type(G).__name__} of shape {G.shape}: the exact step "
+                            "forms the exponential of an n (q + 2) square matrix. Integrate a sparse completion "
+                            "with lsc.solve_completion (method 'auto', 'Rodas4' or an explicit one).")
         self.G, self.q = np.asarray(G, dtype=float), int(q)
         self.n = self.G.shape[0]
         self.W = None if W is None else np.asarray(W, dtype=float)

@@ -95,14 +95,16 @@ def array_ranks(dae, k, t, rcond, previous=None, memo=None):
     return ranks
 
 
-def _equilibrated(dae, k, t, J, F):
+def _equilibrated(dae, k, t, J, F, at=None):
     """``J``, ``F`` of the equilibrated DAE (`lsc._problem.balance`): the same ranks, told apart in floating point.
 
     Rows ``r``: ``diag(r)`` on every block row. Unknowns ``x = diag(c) y``: ``diag(c)`` on every block column.
     Time ``t = sigma tau``: the array in ``tau`` is the given one with block row i times ``sigma^i`` and block
     column m (the derivative ``x^(m+1)``) times ``sigma^-(m+1)``; ``F``'s block row i times ``sigma^i``.
+    The scaling is that at `t`, or at the time `at` (fixed scales: a row whose coefficients vanish is not
+    rescaled away).
     """
-    scaling = balance(dae, t)
+    scaling = balance(dae, t if at is None else at)
     if scaling.identity:
         return J, F
     n = dae.n
@@ -251,6 +253,66 @@ class SolvabilityReport:
         )
 
 
+_DIPS = 4  # local minima of the sampled rank margin searched (the smallest first)
+
+
+def _array_margin(dae, k, rank, rcond, t, at):
+    """``min(s_r / tol, tol / s_(r+1))`` of ``J`` at `t` equilibrated as at `at`, for the rank `rank`: below 1,
+    not that rank.
+
+    Infinite where the coefficients cannot be evaluated (that is no rank decision).
+    """
+    try:
+        jets = array_jets(dae, k, t)
+        J, _ = _equilibrated(dae, k, t, jets.J[0], jets.F[0], at=at)
+    except (ValueError, ArithmeticError):
+        return np.inf
+    if not np.all(np.isfinite(J)):
+        return np.inf
+    return _margin(scipy.linalg.svdvals(J), rank, default_rcond(J.shape) if rcond is None else rcond)
+
+
+def _margin(s, rank, rcond):
+    tol = rcond * (s[0] if s.size else 0.0)
+    if tol == 0.0:
+        return np.inf
+    margin = np.inf
+    if rank > 0:
+        margin = min(margin, s[rank - 1] / tol)
+    if rank < s.size and s[rank] > 0.0:
+        margin = min(margin, tol / s[rank])
+    return float(margin)
+
+
+def _rank_drop(dae, k, times, ranks, rcond):
+    """A time between the sampled `times` where the rank of ``J`` (k differentiations) drops, or None.
+
+    A simple zero of the smallest kept singular value is a V in the rank margin, invisible at samples on
+    either side of it; each local minimum of the sampled margin is searched between its neighbours, with the
+    equilibration of the sample fixed (rescaled at each time, a row whose coefficients vanish would keep its
+    norm and hide the drop).
+    """
+    from ._singular import _golden  # (lsc._singular imports nothing of this module)
+
+    rank = ranks[0].rank_J
+    shape = ((k + 1) * dae.n, (k + 1) * dae.n)
+    rc = default_rcond(shape) if rcond is None else rcond
+    margins = [np.inf if r._s is None else _margin(r._s, rank, rc) for r in ranks]
+    margins = [_array_margin(dae, k, rank, rcond, float(t), float(t)) if m == np.inf else m
+               for t, m in zip(times, margins)]
+    last = len(times) - 1
+    dips = [i for i in range(last + 1)
+            if (i == 0 or margins[i] <= margins[i - 1]) and (i == last or margins[i] <= margins[i + 1])]
+    drops = []
+    for i in sorted(dips, key=lambda i: margins[i])[:_DIPS]:
+        lo, hi = float(times[max(i - 1, 0)]), float(times[min(i + 1, last)])
+        at = float(times[i])
+        t, margin = _golden(lambda t: _array_margin(dae, k, rank, rcond, t, at), lo, hi)
+        if margin < 1.0:
+            drops.append(float(t))
+    return min(drops, key=lambda t: abs(t - times[0])) if drops else None  # the first one a run meets
+
+
 def sample_times(t_span, samples=21):
     """Equally spaced times over `t_span`, plus t = 0 when inside (coefficients often degenerate there)."""
     t0, t1 = t_span
@@ -260,7 +322,7 @@ def sample_times(t_span, samples=21):
     return times
 
 
-def check_solvability(dae, t_span, *, k=None, kmax=10, rcond=None, samples=21):
+def check_solvability(dae, t_span, *, k=None, kmax=10, rcond=None, samples=21, between=True):
     """Decide unique solvability of a linear DAE over an interval.
 
     Solvability is decided by the derivative array, not by the pencil
@@ -283,6 +345,15 @@ def check_solvability(dae, t_span, *, k=None, kmax=10, rcond=None, samples=21):
     rcond : float, optional
     samples : int, optional
         Number of sampled times (at least 2), both ends included.
+    between : bool, optional
+        Also look between the sampled times for a time where the rank of
+        ``J`` drops (default True): where the rank margin of ``J`` (its
+        smallest kept singular value over the threshold) has a local minimum
+        at the samples, a golden-section search finds the minimum to the
+        rounding of t, and a margin below 1 there is refused, naming the
+        time. ``(0.95 - t) x2 = f2`` sampled at 0, 0.05, ..., 1 loses rank at
+        t = 0.95 only. `lsc.complete` with `t_span` checks the samples only:
+        a run that reaches such a time ends there (`solve_completion`).
 
     Returns
     -------
@@ -292,7 +363,8 @@ def check_solvability(dae, t_span, *, k=None, kmax=10, rcond=None, samples=21):
     ------
     IndexDeterminationError
         Naming the times where no k works, where ``k`` does not determine
-        ``x'`` or where the rank changes.
+        ``x'`` or where the rank changes (at a sampled time or, with
+        `between`, between them).
 
     Examples
     --------
@@ -306,6 +378,14 @@ def check_solvability(dae, t_span, *, k=None, kmax=10, rcond=None, samples=21):
     >>> report = check_solvability(dae, (-1.0, 1.0))
     >>> report.k, sorted(set(report.pointwise_index.tolist()))
     (2, [1, 2])
+
+    A coefficient that vanishes between the sampled times:
+
+    >>> singular = LinearDAE(np.diag([1.0, 0.0]), sympy.Matrix([[1, -1], [0, 0.93 - t]]))
+    >>> check_solvability(singular, (0.0, 1.0))
+    Traceback (most recent call last):
+    ...
+    lsc._exceptions.IndexDeterminationError: `dae` is not uniquely solvable on (0.0, 1.0): with k=1 the derivative array J loses rank at t=0.93...
     """
     check_dae(dae)
     t0, t1 = check_t_span(t_span)
@@ -313,6 +393,8 @@ def check_solvability(dae, t_span, *, k=None, kmax=10, rcond=None, samples=21):
     rcond = validate_rcond(rcond)
     if isinstance(samples, bool) or not isinstance(samples, int) or samples < 2:
         raise ValueError(f"`samples` must be an int >= 2; found {samples!r}.")
+    if not isinstance(between, (bool, np.bool_)):
+        raise TypeError(f"`between` must be a bool; found {type(between).__name__}.")
     times = sample_times((t0, t1), samples)
     index = None
     memo = {}  # the ranks found while determining the index are those k_works checks below
@@ -344,6 +426,12 @@ def check_solvability(dae, t_span, *, k=None, kmax=10, rcond=None, samples=21):
             f"with k={k} the rank of the derivative array is not constant on {tuple(t_span)} "
             f"(corank {typical} elsewhere): " + ", ".join(where)
         )
+    drop = _rank_drop(dae, k, times, ranks, rcond) if between and not dae.is_constant else None
+    if drop is not None:
+        raise IndexDeterminationError(
+            f"`dae` is not uniquely solvable on {tuple(t_span)}: with k={k} the derivative array J loses rank at "
+            f"t={drop:.12g} (between the sampled times: its smallest kept singular value vanishes there)"
+        )
     return SolvabilityReport(k, times, None if index is None else np.array(index), ranks)
 
 
@@ -355,11 +443,11 @@ def decide_k(dae, k, t, t_span, rcond):
     """
     if k is None:
         if not dae.is_constant and t_span is not None:
-            return check_solvability(dae, t_span, rcond=rcond).k
+            return check_solvability(dae, t_span, rcond=rcond, between=False).k
         return determine_index(dae, t, 10, rcond)[0]
     k = check_k(k)
     if not dae.is_constant and t_span is not None:
-        check_solvability(dae, t_span, k=k, rcond=rcond)
+        check_solvability(dae, t_span, k=k, rcond=rcond, between=False)
     else:
         ok, ranks, nxt = k_works(dae, k, t, rcond)
         if not ok:

@@ -28,6 +28,10 @@ class CompletionMaps:
     - the constraint residual is ``c = C x - Wc fjet`` (``c = Z2^T (F x - g)``, zero exactly on the
       solution manifold; `Completion.constraint_residual`).
 
+    A sparse completion's maps (`lsc.SparseCompletion.maps`, a subclass) hold ``G`` and ``W`` as
+    `scipy.sparse.linalg.LinearOperator` and ``C``, ``Wc`` as sparse matrices, without the leading time
+    axis (constant coefficients); `forcing` and `C_pinv` work the same.
+
     Attributes
     ----------
     t : ndarray, shape (m,)

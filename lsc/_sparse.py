@@ -38,14 +38,16 @@ import scipy.sparse.linalg
 from ._completion import SETUPS, AlternativeCompletion
 from ._exceptions import DimensionError, IndexDeterminationError
 from ._linalg import validate_rcond
-from ._sparse_integrate import solve_sparse
+from ._sparse_maps import SparseCompletionMaps, forcing_terms, setup_forcing, sparse_lam_affine, sparse_maps
+from ._sparse_step import step_solver
 from ._sparse_lu import DiagonalSolver, diagonal_of, factorize
 from ._sparse_problem import DENSE_MAX, SparseLinearDAE, input_forcing_of, is_sparse_dae, sparse_equilibration
 from ._sparse_structure import HessenbergForm, SparseStructureError, cols, hessenberg_form, rows
 from ._timefunc import TimeFunction, _shape_str
-from ._validate import check_k, check_lam_value
+from ._validate import check_k, check_lam_value, check_times
 
-__all__ = ["HessenbergForm", "SparseCompletion", "SparseStructureError", "complete_sparse", "hessenberg_form"]
+__all__ = ["HessenbergForm", "SparseCompletion", "SparseCompletionMaps", "SparseStructureError", "complete_sparse",
+           "hessenberg_form"]
 
 
 class SparseCompletion:
@@ -68,6 +70,11 @@ class SparseCompletion:
         'alternative'.
     setup : str
         'sparse'.
+    setup_note : str
+        Why the sparse set-up was taken: the structure recognised and the factorizations made.
+    order : int
+        ``p = k + 1``: the forcing jet ``[f; f'; ...; f^(p)]`` the maps (`maps`, `lam_affine`) act on, as for
+        `lsc.AlternativeCompletion` (the blocks beyond the index are zero).
     n_constraints : int
         Number of constraint rows (the dimension of the added dynamics).
     structure : HessenbergForm
@@ -98,11 +105,15 @@ class SparseCompletion:
                 raise IndexDeterminationError(
                     f"`k`={k} is below the differentiation index {s.index} ({s.describe()}). Use k=None.")
         self.k = s.index if k is None else k  # k above the index spans the same constraints: the same completion
+        self.order = self.k + 1  # the forcing jet the maps act on, as the dense alternative completion's
         self.n_constraints = s.n_constraints
         r, _ = sparse_equilibration(A, B)  # column scales cancel from the completion (docs/guide/sparse.md)
         self.row_scales = r
         self._build()
-        self._setup_forcing()
+        made = ", ".join(f"{name} {size} x {size}" for name, (size, _) in self.factorizations.items())
+        self.setup_note = (f"scipy.sparse coefficients, n = {self.n}: {s.describe()}; the alternative completion "
+                           f"through sparse factorizations ({made}), G never formed")
+        setup_forcing(self)
         self._step_cache = {}
         self._projector = None
 
@@ -151,36 +162,6 @@ class SparseCompletion:
                 "uniquely solvable, or its constraint rows are dependent."
             ) from None
 
-    def _setup_forcing(self):
-        """The forcing's contributions, mapped once: ``W f_d`` and ``cg = sum Gamma_i f^(i)``."""
-        s, f = self.structure, self.dae.f
-        self._order = s.index  # cg' needs f^(index)
-        self._input = input_forcing_of(self.dae) if f is not None else None
-        if self._input is not None:
-            Bu = self._input.input_map
-            Bu_d = Bu[s.diff_rows]
-            self._Wu = self._W @ Bu_d
-            self._Gu = [g @ Bu for g in s.Gamma]
-
-    def _forcing_terms(self, t, d=0):
-        """``(W f_d^(d), cg^(d), cg^(d+1))`` at `t`: the forcing parts of the least-squares data."""
-        s, f = self.structure, self.dae.f
-        a = s.n_constraints
-        if f is None:
-            return np.zeros(s.diff_rows.size), np.zeros(a), np.zeros(a)
-        order = self._order + d
-        if self._input is not None:
-            U = self._input.u.jet(t, order)
-            rhs = np.asarray(self._Wu @ U[d]).ravel()
-            cg = sum((np.asarray(G @ U[i + d]).ravel() for i, G in enumerate(self._Gu)), np.zeros(a))
-            dcg = sum((np.asarray(G @ U[i + d + 1]).ravel() for i, G in enumerate(self._Gu)), np.zeros(a))
-            return rhs, cg, dcg
-        F = f.jet(t, order)
-        rhs = self._W @ F[d][s.diff_rows]
-        cg = sum((G @ F[i + d] for i, G in enumerate(s.Gamma)), np.zeros(a))
-        dcg = sum((G @ F[i + d + 1] for i, G in enumerate(s.Gamma)), np.zeros(a))
-        return rhs, cg, dcg
-
     # -- the operator -----------------------------------------------------------------------------------------
     def _times_W(self, v):
         if self._w_diag is None:
@@ -226,7 +207,7 @@ class SparseCompletion:
     def rhs(self, t, x):
         """Right-hand side ``G x + g(t)`` in `scipy.integrate.solve_ivp` form (x: (n,) or (n, m))."""
         x = np.asarray(x, dtype=float)
-        rhs_f, cg, dcg = self._forcing_terms(float(t))
+        rhs_f, cg, dcg = forcing_terms(self, float(t))
         if x.ndim == 2:
             rhs_f, cg, dcg = rhs_f[:, None], cg[:, None], dcg[:, None]
         rhs_d = rhs_f - self._times_W(self._B_d @ x)
@@ -235,7 +216,7 @@ class SparseCompletion:
 
     def forcing(self, t, d=0):
         """``g^(d)(t)``: the d-th derivative of the completion's forcing ``g`` (exact, from f's jets)."""
-        rhs_f, cg, dcg = self._forcing_terms(float(t), d)
+        rhs_f, cg, dcg = forcing_terms(self, float(t), d)
         return self._solve(rhs_f, self.lam * cg + dcg)
 
     def operator(self):
@@ -251,13 +232,50 @@ class SparseCompletion:
         """``(G, g)`` at `t`: ``G`` as a LinearOperator, ``g`` a vector."""
         return self.operator(), self.forcing(t)
 
-    def maps(self, t):
-        """What a consumer needs at `t`: ``G`` (LinearOperator), ``g``, the constraint rows ``C`` and ``cg``."""
-        return SparseMaps(G=self.operator(), g=self.forcing(t), C=self.structure.C, cg=self._cg(t))
+    # -- the public contract (`lsc.CompletionMaps`, `lsc.LamAffine`) -------------------------------------------
+    def maps(self, t=None):
+        """The completion at the time(s) `t` as operators acting on ``x`` and the forcing's jet (`CompletionMaps`).
+
+        `lsc.Completion.maps` with the sparse kinds of arrays (`SparseCompletionMaps`): ``G``, ``W`` are
+        LinearOperators, ``C``, ``Wc`` sparse matrices, without the time axis that ``t`` (default 0) and ``lam`` have.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from lsc import complete, gallery
+        >>> p = gallery.msd_ind3(50)
+        >>> c = complete(p.dae, "alternative", lam=1.0)
+        >>> m = c.maps([0.5, 1.0])
+        >>> m.G.shape, m.W.shape, m.order
+        ((101, 101), (101, 505), 4)
+        >>> x = p.exact(0.5)
+        >>> bool(np.allclose(m.G @ x + m.forcing(p.dae.f_jet(0.5, m.order))[0], c.rhs(0.5, x)))
+        True
+        """
+        return sparse_maps(self, check_times("t", 0.0 if t is None else t))
+
+    def lam_affine(self, t=None, rtol=1e-10):
+        """The maps split as ``G = G0 + lam G1``, ``W = W0 + lam W1`` (`LamAffine`), as LinearOperators.
+
+        Exact: ``lam`` enters only the constraint rows' target ``-lam (C x - cg) + cg'``. Checked on a random
+        vector against the maps at the rates 0.3, 7 and the completion's own (`residual`, relative).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from lsc import complete, gallery
+        >>> p = gallery.stokes_ind2(4)
+        >>> a = complete(p.dae, "alternative", lam=3.0).lam_affine()
+        >>> x = np.ones(p.dae.n)
+        >>> G7 = complete(p.dae, "alternative", lam=7.0).operator()
+        >>> bool(np.allclose(a.G0 @ x + 7.0 * (a.G1 @ x), G7 @ x)), a.residual < 1e-12
+        (True, True)
+        """
+        return sparse_lam_affine(self, check_times("t", 0.0 if t is None else t), rtol)
 
     # -- constraints ------------------------------------------------------------------------------------------
     def _cg(self, t):
-        return self._forcing_terms(float(t))[1]
+        return forcing_terms(self, float(t))[1]
 
     def constraint_residual(self, t, x):
         """The constraint residual ``C x - cg(t)`` of the structural constraint rows.
@@ -297,26 +315,19 @@ class SparseCompletion:
         return x - self.structure.C.T @ self._projector.solve(c)
 
     def solve(self, t_span, x0, *, method="auto", t_eval=None, rtol=1e-3, atol=1e-6, project=False, **options):
-        """Integrate ``x' = G x + g(t)``: `lsc.solve_completion` (which calls this) for a sparse completion.
+        """Integrate ``x' = G x + g(t)``: what `lsc.solve_completion` runs for a sparse completion.
 
-        ``method``: 'auto' (default) estimates the fastest decay rate of
-        ``G`` (ARPACK, the eigenvalues of largest magnitude) and takes
-        'Rodas4' when that rate times the interval exceeds 100, 'DOP853'
-        otherwise; 'Rodas4' (stiff:
-        a Rosenbrock method whose solves are sparse saddle-point solves,
-        factorizations reused); or an explicit solve_ivp method ('RK23',
-        'RK45', 'DOP853') through the operator. ``t_eval``,
-        ``dense_output``, ``max_step``, ``first_step`` as for solve_ivp. The
-        result's ``method`` and message say what ran and why; a failed run
-        returns ``success=False`` with the reason and the trajectory computed
-        before it.
-
-        Returns
-        -------
-        CompletionResult
+        ``method``: 'auto' (DOP853, or Rodas4 when the fastest decay rate of ``G`` times the interval exceeds
+        100), 'Rodas4' (stiff: its solves are sparse saddle-point solves) or 'RK23', 'RK45', 'DOP853' through
+        the operator (docs/guide/sparse.md). Returns a `CompletionResult`; a failed run has ``success=False``.
         """
+        from ._sparse_integrate import solve_sparse  # scipy.integrate only when integrating (not in an FMU)
+
         return solve_sparse(self, t_span, x0, method=method, t_eval=t_eval, rtol=rtol, atol=atol, project=project,
                             **options)
+
+    def clear_cache(self):
+        """As `lsc.Completion.clear_cache`: nothing to forget (the forcing is read afresh at every evaluation)."""
 
     @property
     def added_eigenvalue(self):
@@ -325,90 +336,12 @@ class SparseCompletion:
 
     # -- implicit steps ---------------------------------------------------------------------------------------
     def step_solver(self, c):
-        """A solver of ``(I - c G) k = r`` (``c > 0``), cached by `c` (`_StepSolver` states how it solves)."""
-        c = float(c)
-        hit = self._step_cache.get(c)
-        if hit is not None:
-            return hit
-        solver = _StepSolver(self, c)
-        self._step_cache[c] = solver
-        while len(self._step_cache) > _STEP_CACHE:
-            self._step_cache.pop(next(iter(self._step_cache)))
-        return solver
+        """A solver of ``(I - c G) k = r`` (``c > 0``), cached by `c` (`lsc._sparse_step.StepSolver` states how)."""
+        return step_solver(self, c)
 
     def __repr__(self):
         return (f"SparseCompletion(n={self.n}, k={self.k}, lam={self.lam:g}, constraints={self.n_constraints}, "
                 f"{self.structure.describe()})")
-
-
-_STEP_CACHE = 4
-
-
-class _StepSolver:
-    """``(I - c G)^-1`` (``c > 0``) through the set-up's Schur factorization and one sparse LU of the pencil
-    ``A + c B`` (rows scaled).
-
-    With ``v = (k - r) / c`` in the least-squares conditions
-    ``H v_d + C_c^T mu = -W B_d k`` (``W = E^T R_d^2``, ``H = W E``) and
-    ``C v = -lam C k``: a row ``i`` of level >= 1 is ``C_i = -C_p^d E^-1 B_d``
-    (``p`` its parent), so ``C_i k = -lam C_p k + S_p mu`` with ``S = C_c H^-1 C_c^T``,
-    and every constraint row gives ``(1 + c lam) C_i k = C_i r``. Hence
-
-        S mu = m,   m_p = (C_i r + lam C_p r) / (1 + c lam)      (one row per parent)
-
-        [E + c B_dd   c B_da] [k_d]   [E r_d - c W^-1 C_c^T mu   ]
-        [B_ad         B_aa  ] [k_a] = [B_a r / (1 + c lam)       ]
-
-    The second matrix is ``A + c B`` with its algebraic rows divided by
-    ``c``: the DAE's own sparsity (for Stokes the implicit-Euler saddle
-    point ``[[I - c L, c A12], [A12^T, 0]]``).
-    """
-
-    def __init__(self, comp, c):
-        s = comp.structure
-        self.comp, self.c = comp, c
-        B_a = rows(comp.dae.B_sparse, s.alg_rows)
-        P = scipy.sparse.bmat([[s.E + c * cols(s.B_d, s.diff_cols), c * cols(s.B_d, s.alg_cols)],
-                               [cols(B_a, s.diff_cols), cols(B_a, s.alg_cols)]], format="csc")
-        self.size = P.shape[0]
-        self.lu = factorize(P, f"A + c B at c = {c:g} (the implicit step's matrix)")
-        self.nnz = self.lu.nnz
-        child = np.flatnonzero(s.parent >= 0)
-        self._child, self._parent_pos = child, np.searchsorted(comp._cont, s.parent[child])
-
-    def solve(self, r):
-        comp, s, c = self.comp, self.comp.structure, self.c
-        scale = 1.0 + c * comp.lam
-        Cr = s.C @ r
-        r_d, _ = comp._split(r)
-        rhs_d = s.E @ r_d
-        if comp._cont.size:
-            m = np.empty(comp._cont.size)
-            m[self._parent_pos] = (Cr[self._child] + comp.lam * Cr[s.parent[self._child]]) / scale
-            rhs_d = rhs_d - c * self._times_W_inverse(comp._C_cT @ self._mu(m))
-        sol = self.lu.solve(np.concatenate([rhs_d, Cr[: s.alg_rows.size] / scale]))
-        nd = s.diff_cols.size
-        return comp._join(sol[:nd], sol[nd:])
-
-    def _mu(self, m):
-        """``mu = S^-1 m`` (``S = C_c H^-1 C_c^T``), through the Schur factorization or the saddle-point one."""
-        if self.comp._schur is not None:
-            return self.comp._schur.solve(m)
-        sol = self.comp._kkt.solve(np.concatenate([np.zeros(self.comp.structure.diff_cols.size), m]))
-        return -sol[self.comp.structure.diff_cols.size:]
-
-    def _times_W_inverse(self, v):
-        if self.comp._w_diag is not None:
-            return v / self.comp._w_diag
-        # W^-1 = R_d^-2 E^-T
-        return self.comp.structure.E_solver.solve(v, trans="T") / self.comp._W_weights
-
-
-class SparseMaps:
-    """A sparse completion's maps at one time: ``G`` (LinearOperator), ``g``, constraint rows ``C``, ``cg``."""
-
-    def __init__(self, G, g, C, cg):
-        self.G, self.g, self.C, self.cg = G, g, C, cg
 
 
 def complete_sparse(cls, dae, *, lam=None, k=None, rcond=None, t_span=None, setup="auto"):

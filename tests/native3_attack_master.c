@@ -59,6 +59,13 @@ static fmi3Instance inited(fmi3Instance c) {
     F(fmi3ExitInitializationMode)(c);
     return c;
 }
+/* the same for an instance of LIB2: its own functions (another build's layout differs) */
+static fmi3Instance inited2(fmi3Instance c) {
+    if (!c) { printf("instantiate failed\n"); exit(4); }
+    F2(fmi3EnterInitializationMode)(c, fmi3False, 0.0, 0.0, fmi3False, 0.0);
+    F2(fmi3ExitInitializationMode)(c);
+    return c;
+}
 static int step(fmi3Instance c, double t, double h) {
     return (int)F(fmi3DoStep)(c, t, h, fmi3False, &ev, &term, &early, &last);
 }
@@ -337,7 +344,7 @@ int main(int argc, char **argv) {
             size_t osize = 0;
             fmi3Byte *ob;
             if (dlsym(lib2, "fmi3GetFMUState")) {
-                o = inited(F2(fmi3InstantiateCoSimulation)("o", token2, NULL, 0, 0, 0, 0, NULL, 0, NULL, logger, NULL));
+                o = inited2(F2(fmi3InstantiateCoSimulation)("o", token2, NULL, 0, 0, 0, 0, NULL, 0, NULL, logger, NULL));
                 F2(fmi3GetFMUState)(o, &os);
                 F2(fmi3SerializedFMUStateSize)(o, os, &osize);
                 ob = (fmi3Byte *)malloc(osize);

@@ -89,7 +89,7 @@ def test_study_plot_axes(tmp_path):
     pd = pytest.importorskip("pandas")
     from fmu_build.study._recommend import study_figure
 
-    df = pd.DataFrame({"lam": [1.0, 2.0, 4.0], "success": True, "message": "", "error": [1e-2, 1e-4, 1e-8],
+    df = pd.DataFrame({"lam": [1.0, 30.0, 1000.0], "success": True, "message": "", "error": [1e-2, 1e-4, 1e-8],
                        "residual_final": [1e-2, 1e-4, 1e-8], "residual_peak": 1e-1, "run_time": [0.1, 0.12, 0.2],
                        "steps": [10, 12, 30]})
     df.attrs["curves"] = {i: (np.linspace(0, 1, 5), np.geomspace(1e-1, r, 5)) for i, r in enumerate(df["error"])}
@@ -98,5 +98,7 @@ def test_study_plot_axes(tmp_path):
     error, cost, curves = fig.axes
     assert (error.get_xscale(), error.get_yscale(), curves.get_yscale()) == ("log",) * 3
     assert (cost.get_xscale(), cost.get_yscale()) == ("log", "linear")  # run times within a factor 2
+    df["lam"] = [1.0, 2.0, 4.0]  # lam within a factor 4: a linear axis (a log one reads "2 x 10^0")
+    assert study_figure(df, cost="run_time").axes[0].get_xscale() == "linear"
     assert error.get_xlabel() == "lam [1/s]" and cost.get_ylabel() == "run_time [s]"
     assert curves.get_xlabel() == "t [s]"

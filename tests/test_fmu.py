@@ -381,13 +381,15 @@ def _model_data(fmu, name):
     return ast.literal_eval(line[len("MODEL = "):])
 
 
-def test_input_derivatives_are_estimated_to_third_order(tmp_path):
+def test_input_derivatives_are_estimated_to_fourth_order(tmp_path):
+    # read at t = 4, where the start (p''' at t = 0 guessed 0) has decayed like exp(-5 t): the estimate's own
+    # order shows (3.0e-5 and 8.8e-7 measured, fifth order; at t = 2 the start's 8e-5 and 2e-5 still dominate)
     fmu = build_fmu(INPUT_SPEC, tmp_path)
     assert fmpy_validation.validate_fmu(str(fmu)) == []
     p = gallery.prescribed_path()
     errors = []
     for dt in (0.025, 0.0125):
-        steps = int(round(2.0 / dt))
+        steps = int(round(4.0 / dt))
         ts = dt * np.arange(steps)
         r = run({"fmu": str(fmu), "dt": dt, "steps": steps, "outputs": ["y", "v", "u"],
                  "start_values": {"v_0": 2.5, "u_0": 1.25, **TOL},
@@ -396,9 +398,9 @@ def test_input_derivatives_are_estimated_to_third_order(tmp_path):
         t = np.array(r["time"])
         X = np.array([r["values"][n] for n in ("y", "v", "u")])
         errors.append(np.abs(X[:, -1] - p.exact(t[-1])))
-    assert errors[1][2] < 1e-3  # the force u = m p'' + c p' + k p: uses p'' estimated from p
-    assert errors[0][2] / errors[1][2] > 2**2.5  # third order in the communication step
-    assert errors[1].max() < 1e-3
+    assert errors[1][2] < 1e-5  # the force u = m p'' + c p' + k p: uses p'' estimated from p
+    assert errors[0][2] / errors[1][2] > 2**4  # fourth order (at least) in the communication step
+    assert errors[1].max() < 1e-5
 
 
 def test_only_needed_input_derivatives_are_estimated(tmp_path):

@@ -184,7 +184,8 @@ def test_no_class_of_lsc_is_too_large():
 def test_the_public_names_stay():
     assert set(fmu_build.__all__) == {"build_fmu", "cosimulate", "load_spec", "parse_spec", "ModelSpec", "SpecError",
                                       "ExpressionError", "native_host_env", "ecos_executable", "NativeTargetError",
-                                      "sweep", "recommend", "plot_study"}
+                                      "sweep", "recommend", "plot_study", "InputFit", "fit_inputs",
+                                      "simulate_with_inputs"}
     assert all(getattr(fmu_build, name) for name in fmu_build.__all__)
 
 

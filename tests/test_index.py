@@ -1,3 +1,5 @@
+import re
+
 import numpy as np
 import pytest
 
@@ -42,3 +44,30 @@ def test_singular_pencil_without_zero_rows_is_refused():
     B = np.array([[0.0, 1, 0], [0, 0, 0], [0, 0, 1]])
     with pytest.raises(IndexDeterminationError, match="singular"):
         differentiation_index(LinearDAE(A, B))
+
+
+@pytest.mark.parametrize("b22, where", [("sin(10*t + 1)", (np.pi - 1) / 10), ("0.93 - t", 0.93), ("(t - 0.401)*(t - 0.83)", 0.401)])
+def test_a_rank_drop_between_the_sampled_times_is_found_and_named(b22, where):
+    # at the 21 sampled times (0, 0.05, ..., 1) every rank is clear; the coefficient vanishes in between
+    import sympy
+
+    from lsc import IndexDeterminationError, check_solvability
+
+    t = sympy.Symbol("t")
+    dae = LinearDAE(np.diag([1.0, 0.0]), sympy.Matrix([[1, -1], [0, sympy.sympify(b22, locals={"t": t})]]))
+    with pytest.raises(IndexDeterminationError, match=r"\(0\.0, 1\.0\).*loses rank at t=([0-9.]+)") as info:
+        check_solvability(dae, (0.0, 1.0))
+    found = float(re.search(r"loses rank at t=([0-9.e-]+)", str(info.value)).group(1))
+    assert abs(found - where) < 1e-9, (found, where)
+    # the samples alone (what lsc.complete checks) see nothing: a run ends at the drop instead
+    assert check_solvability(dae, (0.0, 1.0), between=False).k == 1
+
+
+def test_a_coefficient_that_comes_close_to_zero_but_stays_clear_is_solvable():
+    import sympy
+
+    from lsc import check_solvability
+
+    t = sympy.Symbol("t")
+    dae = LinearDAE(np.diag([1.0, 0.0]), sympy.Matrix([[1, -1], [0, (t - sympy.Rational(1, 3)) ** 2 + 1e-6]]))
+    assert check_solvability(dae, (0.0, 1.0)).k == 1

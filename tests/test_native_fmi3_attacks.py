@@ -201,7 +201,9 @@ def test_serialized_states_truncated_corrupted_or_foreign_are_refused(fmus, othe
     del st["freeFMUState_other_instance"]
     assert all(s == ERROR for s in st.values()) and len(st) == 10, st
     assert sum("checksum mismatch" in m for m in logs) >= 60  # every 7th byte of 448, one at a time
-    assert sum("GUID hash differ" in m for m in logs) == 4
+    # its own bytes truncated, empty and too long: 3 refused by their size; the other build's state 4 times, by
+    # its header, or by its size when the other model's state has another layout
+    assert sum("GUID hash differ" in m or "a state of this FMU has" in m for m in logs) == 3 + 4
 
 
 def test_many_instances_in_one_process_leak_nothing(fmus):
@@ -314,10 +316,12 @@ def test_fmpy_master_hostile_name_types_reset_and_foreign_states(fmus):
                           capture_output=True, text=True, timeout=120, cwd=HERE)
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = json.loads(proc.stdout)
+    # the two builds' states have one size (the GUID hash refuses the other's), small without inputs (424 bytes)
+    sizes = out["calls"].pop("fmi2_state_size"), out["calls"].pop("fmi3_state_size")
+    assert sizes[0] == sizes[1] <= 448, sizes
     assert out["calls"] == {"doStep_before_init": ERROR, "boolean_as_float64": ERROR, "float64_as_boolean": ERROR,
                             "reset": OK, "y_after_reset_minus_first": 0.0, "deserialize_fmi2_state": ERROR,
-                            "deserialize_truncated": ERROR, "deserialize_empty": ERROR, "fmi2_state_size": 448,
-                            "fmi3_state_size": 448, "me_state_into_cs": ERROR}
+                            "deserialize_truncated": ERROR, "deserialize_empty": ERROR, "me_state_into_cs": ERROR}
     assert len(out["logs"]) == 7 and "GUID hash differ" in out["logs"][3]
 
 

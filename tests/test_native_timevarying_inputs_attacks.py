@@ -12,6 +12,7 @@ import subprocess
 import sys
 import textwrap
 
+import numpy as np
 import pytest
 
 from fmu_build import build_fmu
@@ -469,10 +470,12 @@ def test_fmi3_cosimulation_with_inputs_equals_the_fmi2_build(fmus):
 
 
 def test_a_jump_in_a_values_only_input_is_visible_on_the_residual_as_for_constant_coefficients(fmus, tmp_path):
-    # u = 0 before t = 1, 1 after, values only: the history polynomial through the jump makes derivatives of
-    # order 1/h^j for UDEG steps, and x2 = -sin t - (1 + t/10) u is off by up to ten times the jump there. The
-    # FMU cannot know the input jumped; what it owes the host: the same answer as the constant-coefficient FMU
-    # of the same model, the bad steps flagged by constraint_residual, and the exact solution again after them
+    # u = 0 before t = 1, 1 after, values only. The FMU cannot know the input jumped; its estimate of u' is no
+    # delta: the estimate agrees with the values on each side once they are past the jump (derivatives zero),
+    # never 1/h^j spikes, and the state returns to the constraint at the completion's rate (lambda = 2), as
+    # off the manifold. What it owes the host: the same answer as the constant-coefficient FMU of the same model,
+    # the steps off the exact solution flagged by constraint_residual, and the exact solution approached at rate
+    # lambda after the jump, never farther than the jump's own size (x2 = -sin t - (1 + t/10) u jumps by 1.1).
     const = build_fmu(_spec("CIn", B=[["0", "-1"], ["3", "0"]], f=["u*(1 + t/10)", "3*cos(t)"]), tmp_path,
                       target="native")
     body = """
@@ -486,7 +489,7 @@ def test_a_jump_in_a_values_only_input_is_visible_on_the_residual_as_for_constan
     f = new()
     t, h = 0.0, 0.01
     rows = []
-    for i in range(120):
+    for i in range(200):
         us = 0.0 if i < 100 else 1.0
         for g in (f, c):
             g.setReal([U], [us])
@@ -500,13 +503,16 @@ def test_a_jump_in_a_values_only_input_is_visible_on_the_residual_as_for_constan
     """.format(const=str(const))
     found, _ = _host(fmus[2], body)
     rows = found["rows"]
-    # (row 99 ends at t = 1, where the exact input is already 1 and the FMU holds 0: not counted)
-    assert max(r[0] for r in rows[:99]) < 1e-8 and max(r[0] for r in rows[100:]) > 1.0  # the jump's garbage
-    assert all(r[1] > 0.1 for r in rows[100:] if r[0] > 1e-3)  # ... every bad step flagged by the residual
-    assert max(r[0] for r in rows[110:]) < 1e-8  # ... and gone after the history's UDEG + 1 points
-    # the constant-coefficient FMU answers the same (within the garbage, to 1e-3 of its size: the 1/h^j
-    # derivatives amplify the two runtimes' different rounding)
-    assert all(r[2] < (1e-8 if r[0] < 1e-3 else 1e-3 * r[0]) for r in rows)
+    t = 0.01 * np.arange(1, 201)
+    err, diff = np.array([r[0] for r in rows]), np.array([r[2] for r in rows])
+    envelope = 1.3 * np.exp(-2.0 * (t - 1.0)) + 1e-6
+    # (row 99 ends at t = 1, where the exact input is already 1 and the FMU holds 0: not flagged, it cannot know)
+    assert err[:99].max() < 1e-8 and 1.0 < err[99:].max() <= 1.1 * (1 + 1 / 10) + 1e-6  # no spike beyond the jump
+    assert np.all(err[99:] <= envelope[99:])  # back at the completion's rate
+    assert all(r[1] > 0.1 * r[0] for r in rows[100:] if r[0] > 1e-3)  # ... every step off it flagged by the residual
+    # the constant-coefficient FMU answers the same before the jump, and after it is back at the same rate (its
+    # estimate uses fewer derivatives of u, so the two differ while the jump is in the estimates' windows)
+    assert diff[:99].max() < 1e-8 and np.all(diff[99:] <= 2 * envelope[99:])
 
 
 def test_fmi3_early_return_at_the_horizon_with_an_input(fmus):

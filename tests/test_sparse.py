@@ -280,10 +280,66 @@ def test_maps_and_batch_rhs():
     p = gallery.stokes_ind2(3)
     c = lsc.complete(p.dae, "alternative", lam=LAM)
     m = c.maps(0.5)
+    fjet = p.dae.f_jet(0.5, m.order).ravel()
     X = np.column_stack([p.exact(0.5), p.exact(0.5) + 1.0])
-    np.testing.assert_allclose(c.rhs(0.5, X)[:, 0], m.G @ X[:, 0] + m.g, atol=1e-11)
+    np.testing.assert_allclose(c.rhs(0.5, X)[:, 0], m.G @ X[:, 0] + m.forcing(fjet)[0], atol=1e-11)
     np.testing.assert_allclose(c.rhs(0.5, X)[:, 1], c.rhs(0.5, X[:, 1]), atol=1e-11)
-    np.testing.assert_allclose(m.C @ p.exact(0.5) - m.cg, 0, atol=1e-11)
+    np.testing.assert_allclose(m.C @ p.exact(0.5) - m.Wc @ fjet, 0, atol=1e-11)
     R = c.constraint_residual(np.array([0.5, 0.5]), X)
     np.testing.assert_allclose(R[:, 0], 0, atol=1e-11)
     np.testing.assert_allclose(R[:, 1], m.C @ np.ones(c.n), atol=1e-11)
+
+
+def test_public_contract_maps_equal_the_dense_maps(family):
+    """`maps` and `lam_affine` of the sparse completion against the dense library's `CompletionMaps`/`LamAffine`."""
+    dae = family.dae
+    c = lsc.complete(dae, "alternative", lam=LAM)
+    assert "sparse factorizations" in c.setup_note and c.structure.describe() in c.setup_note
+    ts = np.array([0.2, 1.3])
+    m = c.maps(ts)
+    assert isinstance(m, lsc.CompletionMaps) and m.method == "alternative"
+    assert m.order == c.k + 1 and m.k == c.k and np.array_equal(m.t, ts) and np.all(m.lam == LAM)
+    dense = lsc.complete(_dense_twin(dae), "alternative", lam=LAM)
+    dm = dense.maps(ts)
+    assert dm.order == m.order and m.W.shape == dm.W.shape[1:] and m.Wc.shape[1] == dm.Wc.shape[2]
+    G = _balanced_dense(dae, LAM, "auto")
+    I = np.eye(dae.n)
+    assert np.abs(m.G @ I - G).max() <= 1e-10 * np.abs(G).max()
+    # the forcing map on random jets and on the DAE's own (dense g is as accurate as the existing comparison's)
+    V = np.random.default_rng(2).standard_normal((m.W.shape[1], 3))
+    scale = max(1.0, np.abs(G).max())
+    assert np.abs(m.W @ V - dm.W[0] @ V).max() <= 1e-9 * scale * np.abs(dm.W[0] @ V).max(initial=1.0)
+    fjets = np.array([dae.f_jet(t, m.order) for t in ts])
+    np.testing.assert_allclose(m.forcing(fjets), dm.forcing(fjets), rtol=0,
+                               atol=1e-10 * scale * (1 + np.abs(dm.forcing(fjets)).max()))
+    # the constraint rows: the dense ones' row space, and zero on the exact solution with their forcing map
+    a = c.n_constraints
+    C = m.C.toarray()
+    assert np.linalg.matrix_rank(np.vstack([C, dm.C[0]]), tol=1e-8 * np.abs(C).max(initial=1.0)) == a == dm.C.shape[1]
+    for t, fjet in zip(ts, fjets):
+        x = family.exact(t)
+        np.testing.assert_allclose(m.C @ x - m.Wc @ fjet.ravel(), 0, atol=1e-11 * (1 + np.abs(x).max()))
+    # the nearest consistent point through C^+ is `project`'s
+    x = family.exact(0.2) + 1e-3
+    np.testing.assert_allclose(x - m.C_pinv @ c.constraint_residual(0.2, x), c.project(0.2, x), atol=1e-12)
+    # lam_affine: the split reproduces the maps at another rate, and the dense split
+    aff = c.lam_affine(ts)
+    assert aff.residual < 1e-12 and isinstance(aff.maps, lsc.CompletionMaps)
+    G7 = lsc.complete(dae, "alternative", lam=7.0).operator() @ I
+    assert np.abs(aff.G0 @ I + 7.0 * (aff.G1 @ I) - G7).max() <= 1e-11 * np.abs(G7).max()
+    daff = dense.lam_affine(0.2)
+    for M, D in ((aff.W0, daff.W0[0]), (aff.W1, daff.W1[0])):
+        assert np.abs(M @ V - D @ V).max() <= 1e-9 * scale * np.abs(D @ V).max(initial=1.0)
+
+
+def test_solve_dae_takes_the_sparse_path():
+    p = gallery.msd_ind3(40)
+    res = lsc.solve_dae(p.dae, (0.0, 1.0), p.exact(0.0), lam=LAM, rtol=1e-8, atol=1e-10, t_eval=[0.0, 0.5, 1.0])
+    assert res.success and res.method == "DOP853", res.message
+    np.testing.assert_allclose(res.x, p.exact(res.t), atol=1e-6 * np.abs(p.exact(res.t)).max())
+
+
+def test_exact_steps_refuse_a_sparse_operator():
+    c = lsc.complete(gallery.msd_ind3(20).dae, "alternative", lam=LAM)
+    with pytest.raises(TypeError, match="LinearOperator of shape"):
+        lsc.ExactPropagator(c.maps().G, 2)

@@ -1,4 +1,4 @@
-"""A co-simulation master for FMI 2.0 Co-Simulation FMUs (fmpy's low-level API).
+"""A co-simulation master for FMI 2.0 and FMI 3.0 Co-Simulation FMUs (fmpy's low-level API).
 
 The master couples FMUs by their connections, at a fixed or controlled macro step ``H``:
 
@@ -7,10 +7,14 @@ The master couples FMUs by their connections, at a fixed or controlled macro ste
   per input, causality and type agreement, FMUs inside a packed archive
   (unless ``allow_external=True``), a size limit on everything unpacked, and
   every temporary folder removed on every exit path.
-- **Types**: Real, Integer, Boolean (and Enumeration as Integer) connections
-  are exchanged with the getter and setter of their type (value references
+- **Types**: Real (FMI 3.0: Float32, Float64), Integer (FMI 3.0: Int8 ...
+  UInt64; Enumeration too) and Boolean connections are exchanged with the
+  getter and setter of each variable's own type (FMI 2.0 value references
   are unique per type only); ``output`` and ``start_values`` may name any
-  type; a value that cannot be read as the variable's type is refused.
+  type (String, Binary too); a value that cannot be read as the variable's
+  type, or is outside its range, is refused. FMI 3.0 specifics (no Event
+  Mode, early return or input derivatives; clocks, arrays and terminals
+  refused) are in ``_fmi``.
 - **Ordering**: ``"jacobi"`` steps every FMU from the values of the last
   communication point; ``"gauss-seidel"`` steps them one after the other in
   the order of the connection graph (sources first; inside a cycle, the order

@@ -82,6 +82,26 @@ def callbacks():
         return structure
 
 
+def fmi3_logger(name):
+    """The Python side of an FMI 3.0 instance's log message callback: ``log(status, message)`` routes the
+    (formatted) message of instance ``name`` as `_log` routes FMI 2.0's. FMI 3.0 needs no proxy: fmpy keeps
+    the ctypes callback on the slave, alive as long as the instance."""
+
+    def log(status, message):
+        try:
+            text = message.decode(errors="replace") if isinstance(message, bytes) else str(message or "")
+            with _LOCK:
+                sink = next((s for s in reversed(_SINKS) if name in s.names), None)
+            if sink is not None:
+                sink(name, status, text)
+            else:
+                logger.log(_LEVELS.get(status, logging.INFO), "[%s] %s", name, text)
+        except Exception:  # noqa: BLE001 -- a logger must never raise into the FMU
+            pass
+
+    return log
+
+
 class attach:
     """Context manager: route the messages of the components ``names`` to a new sink while it is open.
 

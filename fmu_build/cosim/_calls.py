@@ -22,22 +22,39 @@ class Calls:
         except FMICallException as exc:
             self.fail(comp, f"{what} failed ({exc})", t_now, var)
 
+    def name(self, n, function):
+        """``function`` (FMI 2.0 spelling, without the prefix) as component ``n``'s FMI version spells it."""
+        fmu = self.comps[n].fmu
+        if fmu.prefix == "fmi3":
+            function = {"GetFMUstate": "GetFMUState", "SetFMUstate": "SetFMUState",
+                        "GetRealOutputDerivatives": "GetOutputDerivatives"}.get(function, function)
+        return fmu.prefix + function
+
+    def initialize(self, n, t, stop_time):
+        """Start and stop time, and Initialization Mode entered and left (FMI 3.0: the times go to
+        ``fmi3EnterInitializationMode``; the FMU is in Step Mode after it)."""
+        fmu = self.comps[n].fmu
+        self.call(n, lambda: fmu.setupExperiment(startTime=t, stopTime=stop_time), t, self.name(n, "SetupExperiment"))
+        self.comps[n].initialized = True  # from here on it is terminated before it is freed
+        self.call(n, fmu.enterInitializationMode, t, self.name(n, "EnterInitializationMode"))
+        self.call(n, fmu.exitInitializationMode, t, self.name(n, "ExitInitializationMode"))
+
     def do_step(self, n, t_start, H):
         from fmpy.fmi1 import FMICallException
 
         try:
             self.comps[n].fmu.doStep(currentCommunicationPoint=t_start, communicationStepSize=H)
         except FMICallException as exc:
-            self.fail(n, f"fmi2DoStep from t = {t_start!r} failed ({exc})", t_start)
+            self.fail(n, f"{self.name(n, 'DoStep')} from t = {t_start!r} failed ({exc})", t_start)
 
     def get(self, n, wire, refs, t_now):
-        return self.call(n, lambda: self.comps[n].get(wire, refs), t_now, f"fmi2Get{wire}")
+        return self.call(n, lambda: self.comps[n].get(wire, refs), t_now, self.comps[n].function("Get", wire, refs))
 
     def set(self, n, wire, refs, values, t_now, var=None, start=False):
         """Set values of ``n``; a start value (``start=True``) is in the variable's own unit, a coupling value is
         converted by its connection's unit map (`Component.set`)."""
         setter = self.comps[n].set_start if start else self.comps[n].set
-        self.call(n, lambda: setter(wire, refs, values), t_now, f"fmi2Set{wire}", var)
+        self.call(n, lambda: setter(wire, refs, values), t_now, self.comps[n].function("Set", wire, refs), var)
 
     def set_values(self, n, pairs, source, t_now):
         """Set the inputs ``pairs`` ((slot, vr, wire) of ``n``) from ``source`` (a value per slot), by type."""
@@ -46,5 +63,5 @@ class Calls:
                      t_now)
 
     def set_input_derivatives(self, n, refs, order, values, t_now):
-        self.call(n, lambda: self.comps[n].fmu.setRealInputDerivatives(refs, [order] * len(refs), values), t_now,
+        self.call(n, lambda: self.comps[n].set_input_derivatives(refs, order, values), t_now,
                   "fmi2SetRealInputDerivatives")

@@ -1,8 +1,9 @@
 """The layout of a run: coupling slots, value references, the exchange plan, loops and cycles.
 
 Coupling values live in one float array with a slot per connected output
-(Integer and Boolean values are exact in a double); only Real slots are
-extrapolated, differentiated and checked.
+(Boolean values, and integers up to 2^53, are exact in a double: a connected
+integer beyond is refused when read); only Real slots are extrapolated,
+differentiated and checked.
 """
 
 import numpy as np
@@ -12,7 +13,6 @@ from ._system import _split
 
 LSC_TOOL = "lsc fmu_build"  # generationTool (native) or author (pythonfmu) of the DAE FMUs lsc builds
 MAX_INPUT_ORDER = 8  # highest input-derivative order ever probed or sent
-DTYPES = {"Real": np.float64, "Integer": np.int64, "Boolean": np.bool_, "String": object}
 
 
 def built_by_lsc(md):
@@ -71,7 +71,7 @@ class Layout:
         for c, v in self.out_vars:
             comps[c].variable(v)
         self.result_fields = [("time", np.float64)] + [
-            (o, DTYPES[comps[c].wire(v)]) for o, (c, v) in zip(output, self.out_vars)]
+            (o, comps[c].dtype(v)) for o, (c, v) in zip(output, self.out_vars)]
         self.extra = [cv for cv in self.out_vars if cv not in self.slot]
         # recorded values a step produces (not parameters, which lambda_per_step may change with the step)
         self.watched = [i for i, (c, v) in enumerate(self.extra)
@@ -134,7 +134,7 @@ def lambda_targets(comps, lambda_per_step, controlled):
     refs = {}
     for n, c in comps.items():
         v = c.variables.get("lambda")
-        if built_by_lsc(c.md) and v is not None and v.causality == "parameter" and v.type == "Real":
+        if built_by_lsc(c.md) and v is not None and v.causality == "parameter" and c.wire("lambda") == "Real":
             if controlled and v.variability != "tunable":
                 raise ValueError(f"`lambda_per_step` with `step_control` needs a tunable {n}.lambda; "
                                  f"it is {v.variability}.")

@@ -9,6 +9,7 @@ import tempfile
 
 import numpy as np
 
+from .._values import steps_over
 from . import _callbacks
 from ._exchange import Component, check_types
 from ._result import CosimResult, _Progress, _Stop
@@ -25,7 +26,7 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
                start_values=None, output=None, start_time=0.0, rtol=1e-10, progress=None, exchange="ordered",
                step_control=False, atol=None, min_step=None, max_step=None, lambda_per_step=None,
                max_growth=None, max_input_order=None, allow_external=False, max_unpacked=MAX_UNPACKED):
-    """Co-simulate connected FMI 2.0 Co-Simulation FMUs, at a fixed or controlled macro step.
+    """Co-simulate connected FMI 2.0 and FMI 3.0 Co-Simulation FMUs, at a fixed or controlled macro step.
 
     Parameters
     ----------
@@ -151,9 +152,10 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
     try:
         with _callbacks.attach(system.components) as sink:
             for index, (name, path) in enumerate(system.components.items()):
-                comps[name] = Component(name, path, os.path.join(workdir, str(index)), _callbacks.callbacks(),
-                                        budget)
+                comps[name] = Component(name, path, os.path.join(workdir, str(index)), budget)
             check_types(comps, system.connections, system.connectors, system.origin, system)
+            for name, c in comps.items():
+                c.start(_callbacks.callbacks() if not c.is_fmi3 else None, _callbacks.fmi3_logger(name))
             start_values = {**_bound(comps, system), **(start_values or {})}  # given values take precedence
             _check_start_values(comps, start_values)
             run = Run(comps, system.connections, sink, algorithm=algorithm, p=extrapolation, iterations=iterations,
@@ -204,7 +206,6 @@ def _check_numbers(**values):
 def _check_horizon(start_time, stop_time, step_size):
     """A fixed-step run: a whole number of steps, at most MAX_STEPS, each of which advances time."""
     span = stop_time - start_time
-    n_steps = round(span / step_size)
     if span / step_size > MAX_STEPS:
         raise ValueError(f"`step_size` {step_size!r} over [{start_time!r}, {stop_time!r}] makes {span / step_size:.3g} "
                          f"macro steps; at most {MAX_STEPS:.0e} are taken (a larger `step_size`, or step_control).")
@@ -213,16 +214,15 @@ def _check_horizon(start_time, stop_time, step_size):
         raise ValueError(f"`step_size` {step_size!r} is below 1000 times the resolution of time at "
                          f"{max(abs(start_time), abs(stop_time))!r} ({resolution!r}): the communication points "
                          "cannot be represented.")
-    if abs(n_steps * step_size - span) > 1e-9 * span + 4 * resolution:
-        raise ValueError(f"`stop_time` - `start_time` must be a multiple of `step_size`; found {span!r} and "
-                         f"{step_size!r}.")
+    steps_over(start_time, stop_time, step_size, "`step_size`")
 
 
 def _bound(comps, system):
     """The SSD's parameter bindings as start values, each checked against its variable's type, a Real's
     value converted from its unit to the variable's (`_units.conversion`; no unit: the variable's own)."""
     from . import _units
-    from ._exchange import convert
+    from ._exchange import check_scalar, convert, ssp_type_matches
+    from ._fmi import access_type
     from ._system import _split
 
     values = {}
@@ -230,13 +230,15 @@ def _bound(comps, system):
         kind, text = binding.kind, binding.text
         cname, var = _split(key, comps)
         v = comps[cname].variables.get(var)
-        if v is None or v.type != kind or v.causality not in ("parameter", "input"):
+        if v is None or not ssp_type_matches(kind, v) or v.causality not in ("parameter", "input"):
             found = "no such variable" if v is None else f"a {v.causality} {v.type}"
             raise ValueError(f"{system.origin}: the ParameterBinding of {key} is a {kind}; the FMU has {found}.")
         what = f"{system.origin}: the ParameterBinding of {key}"
         # the text of an SSP file, in the XML Schema's syntax (Python's float() would read 1_000 as 1000)
         parse = {"Real": _units.xs_double, "Integer": _units.xs_int, "Boolean": _units.xs_boolean}.get(kind)
-        value = convert(parse(text, what) if parse else text, kind, what)
+        check_scalar(cname, v)
+        access = access_type(v, getattr(comps[cname], "is_fmi3", False))
+        value = convert(parse(text, what) if parse else text, access, what)
         if binding.unit is not None:
             # the variable's unit: the FMU's, else the one its connector in the SSD gives
             target = _units.variable_unit(v) or system.connector_units.get((cname, var))
@@ -265,7 +267,7 @@ def _check_start_values(comps, start_values):
         if v.causality == "output":
             raise ValueError(f"`start_values`[{key!r}]: {key} is an output; an output's value is computed by its "
                              "FMU and cannot be given.")
-        convert(value, v.type, f"`start_values`[{key!r}]")
+        convert(value, comps[cname].access(var), f"`start_values`[{key!r}]")
 
 
 def _check_order(max_input_order, extrapolation):
@@ -305,12 +307,4 @@ def _execute(run, start_values, t0, stop_time, H, progress):
 
 def _free(comps):
     for c in comps.values():
-        try:
-            c.fmu.terminate()
-        except Exception:  # noqa: BLE001 -- a failed FMU may refuse; freeing it is what matters
-            pass
-        try:
-            c.fmu.freeInstance()
-        except Exception:  # noqa: BLE001
-            pass
-
+        c.free()

@@ -2,7 +2,8 @@
 
 
 class Rollback:
-    """Saves and restores the states of all components (``fmi2GetFMUstate`` / ``fmi2SetFMUstate``).
+    """Saves and restores the states of all components (``fmi2GetFMUstate`` / ``fmi2SetFMUstate``, FMI 3.0's
+    ``fmi3GetFMUState`` / ``fmi3SetFMUState``).
 
     ``available`` is False when some component does not declare ``canGetAndSetFMUstate``: a step
     cannot be repeated then, and whatever would repeat it (step iteration, a rejected controlled
@@ -15,11 +16,12 @@ class Rollback:
         self.missing = [n for n, c in comps.items() if not c.can_rollback]
 
     def save(self, t):
-        return {n: self.calls.call(n, c.fmu.getFMUstate, t, "fmi2GetFMUstate") for n, c in self.comps.items()}
+        return {n: self.calls.call(n, c.fmu.getFMUstate, t, self.calls.name(n, "GetFMUstate"))
+                for n, c in self.comps.items()}
 
     def restore(self, states, t):
         for n, c in self.comps.items():
-            self.calls.call(n, lambda: c.fmu.setFMUstate(states[n]), t, "fmi2SetFMUstate")
+            self.calls.call(n, lambda: c.fmu.setFMUstate(states[n]), t, self.calls.name(n, "SetFMUstate"))
 
     def release(self, states):
         for n, s in states.items():

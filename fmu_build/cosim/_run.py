@@ -78,12 +78,10 @@ class Run:
             cname, var = _split(key, comps)
             mv = comps[cname].variable(var)
             calls.set(cname, comps[cname].wire(var), [mv.valueReference],
-                      [convert(v, mv.type, f"`start_values`[{key!r}]")], t, var, start=True)
+                      [convert(v, comps[cname].access(var), f"`start_values`[{key!r}]")], t, var, start=True)
         self.set_lambda(H, t)
-        for n, c in comps.items():
-            calls.call(n, lambda: c.fmu.setupExperiment(startTime=t, stopTime=stop_time), t, "fmi2SetupExperiment")
-            calls.call(n, c.fmu.enterInitializationMode, t, "fmi2EnterInitializationMode")
-            calls.call(n, c.fmu.exitInitializationMode, t, "fmi2ExitInitializationMode")
+        for n in comps:
+            calls.initialize(n, t, stop_time)
         self.loops.start(t)
         self.monitor.start(self.coupling.value)
         for n in self.layout.names:
@@ -276,16 +274,18 @@ class Run:
         they change by less than the tolerance; with ``converge`` a step that does not settle ends the run."""
         value = self.coupling.value
         snap = self.save(t)
-        band = self.step_all(t, H)
-        change = np.inf
-        for _ in range(repeats):
-            end = value.copy()
-            self.restore(snap, t)
-            self.step_all(t, H, end_values=end)
-            change = float(np.max(np.abs(value - end) / (self.atol + self.rtol * np.abs(end)), initial=0.0))
-            if change <= 1.0:
-                break
-        self.release(snap)
+        try:
+            band = self.step_all(t, H)
+            change = np.inf
+            for _ in range(repeats):
+                end = value.copy()
+                self.restore(snap, t)
+                self.step_all(t, H, end_values=end)
+                change = float(np.max(np.abs(value - end) / (self.atol + self.rtol * np.abs(end)), initial=0.0))
+                if change <= 1.0:
+                    break
+        finally:
+            self.release(snap)
         if converge and change > 1.0:
             s = int(np.argmax(np.abs(value - end) / (self.atol + self.rtol * np.abs(end))))
             raise _Stop(f"the step iteration from t = {t!r} did not converge in {repeats} repetitions: "

@@ -15,7 +15,7 @@ completion and a default experiment::
     m = { value = 1.0, unit = "kg", tunable = false, description = "mass" }
 
     [inputs]                       # optional; in A, B, f and outputs
-    p = { unit = "m", description = "path", start = 0.0 }
+    p = { unit = "m", description = "path", start = 0.0 }   # window = 0.3 (s, the derivative estimate's)
 
     [equations]
     A = [[1, 0, 0], [0, "m", 0], [0, 0, 0]]
@@ -51,12 +51,18 @@ import re
 import tomllib
 import unicodedata
 
+from lsc import COMPLETIONS
+
 from ._expressions import ExpressionError, evaluate, parse_expression
 from ._limits import MAX_K, MAX_MODEL_NAME, MAX_NAME, MAX_TEXT, MIN_RELATIVE_STEP, lam_problem
 
 __all__ = ["SpecError", "ModelSpec", "load_spec", "parse_spec", "model_name_problems"]
 
-METHODS = ("standard", "stabilized", "alternative")
+METHODS = tuple(COMPLETIONS)  # lsc's completions: the FMU's `method` values are their positions here
+# An input's derivative estimate averages over a window of this many experiment steps unless the spec says
+# `window` (docs/guide/inputs.md): 30 steps of a table at the experiment step make the least-squares fit of
+# degree 5 differentiate the table's linear interpolation to ~1e-4 in the second derivative (sin t, 0.01 s).
+DEFAULT_WINDOW_STEPS = 30
 # Names the FMU itself defines.
 RESERVED = {"t", "time", "lambda", "method", "constraint_residual", "project_initial", "rtol", "atol", "solver"}
 # The keys of every table; entries of [states], [parameters], [inputs], [outputs] are tables too.
@@ -65,7 +71,7 @@ KEYS = {
     "model": ("name", "description"),
     "states": ("start", "unit", "description"),
     "parameters": ("value", "tunable", "unit", "description"),
-    "inputs": ("start", "unit", "description"),
+    "inputs": ("start", "unit", "description", "window"),
     "equations": ("A", "B", "f"),
     "outputs": ("expr", "unit", "description"),
     "completion": ("method", "lam", "k"),
@@ -96,7 +102,8 @@ class ModelSpec:
     parameters : list of dict
         ``name``, ``value``, ``unit``, ``tunable``, ``description``.
     inputs : list of dict
-        ``name``, ``unit``, ``description``, ``start``.
+        ``name``, ``unit``, ``description``, ``start``, ``window`` (the span in
+        seconds of its derivative estimate's least-squares window).
     outputs : list of dict
         Custom outputs: ``name``, ``expr`` (sympy, in the states, parameters,
         inputs and ``t``), ``unit``, ``description``.
@@ -367,9 +374,11 @@ def parse_spec(data, source="spec"):
         start = _number(info.get("start", 0.0), f"{field}.start", problems, default=0.0)
         unit = _text(info, "unit", field, problems)
         desc = _text(info, "description", field, problems, default=f"input {iname}")
+        # the span of the least-squares window of the input's derivative estimate (None: the default, below)
+        window = _number(info["window"], f"{field}.window", problems, positive=True) if "window" in info else None
         if ok:
             input_symbols[iname] = sympy.Symbol(iname, real=True)
-            inputs.append({"name": iname, "unit": unit, "description": desc, "start": start})
+            inputs.append({"name": iname, "unit": unit, "description": desc, "start": start, "window": window})
 
     n = len(states)
     names = {"t": t, **symbols, **input_symbols}
@@ -384,6 +393,7 @@ def parse_spec(data, source="spec"):
     method, lam, k = _completion(data, problems)
 
     start, stop, step = _experiment(data, problems)
+    inputs = [dict(u, window=DEFAULT_WINDOW_STEPS * step) if u["window"] is None and step else u for u in inputs]
 
     if start is not None and all(M is not None for M in (A, B, f)):
         values = {t: start, **{symbols[p["name"]]: p["value"] for p in parameters},

@@ -12,7 +12,10 @@ from functools import partial
 
 import numpy as np
 
-from ..cosim._callbacks import attach, callbacks as process_callbacks
+from .._values import FMIValueError, article as _article, fmi_value as _fmi_value, steps_over
+from ..targets._runtime._variables import SOLVERS
+from ..cosim._callbacks import attach, callbacks as process_callbacks, fmi3_logger
+from ..cosim._fmi import access_type, is_refusal
 
 # Names of the grid that set how a run is computed rather than the model.
 NUMERICAL = ("lam", "step", "rtol", "atol", "method")
@@ -58,15 +61,12 @@ def warm_up(kind, payload, settings):
     try:
         import hashlib
 
-        from fmpy.fmi2 import FMU2Slave
-
         md, unzipped, refusal = _load_description(payload, settings)
         if refusal:
             return
-        slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
-                          instanceName="study")
+        slave = _slave(md, unzipped)
         with attach(["study"]):
-            slave.instantiate(callbacks=process_callbacks(), loggingOn=False)
+            slave.start(process_callbacks(), fmi3_logger("study"))
             slave.freeInstance()
         if isinstance(payload, (bytes, bytearray)):
             _WARMED.add(hashlib.sha256(payload).hexdigest())
@@ -180,13 +180,19 @@ def _extract(fmu, workdir=None):
 
 
 def run_fmu(fmu, point, settings):
-    """Run an FMI 2.0 Co-Simulation FMU (bytes or path) at one point of the grid."""
+    """Run an FMI 2.0 or FMI 3.0 Co-Simulation FMU (bytes or path) at one point of the grid."""
     return _guarded(_run_fmu, fmu, point, settings)
 
 
-def _run_fmu(fmu, point, settings, start):
-    from fmpy.fmi2 import FMU2Slave
+def _slave(md, unzipped):
+    """The FMU's slave under the master's interface (`fmu_build.cosim._fmi`: FMI 2.0 or 3.0), not instantiated."""
+    from ..cosim._fmi import fmi3, slave_class
 
+    return slave_class(fmi3(md))(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
+                                 instanceName="study")
+
+
+def _run_fmu(fmu, point, settings, start):
     md, unzipped, refusal = _load_description(fmu, settings)
     if refusal:
         return _failed(refusal, start)
@@ -199,14 +205,14 @@ def _run_fmu(fmu, point, settings, start):
     n_steps = steps_over(t0, t1, h)
     values = _fmu_values(point, var, states)
 
-    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
-                      instanceName="study")
-    read_vrs = [var[s].valueReference for s in states] + ([residual_var.valueReference] if residual_var else [])
+    slave = _slave(md, unzipped)
+    read_vrs = [var[s] for s in states] + ([residual_var] if residual_var else [])
     # the master's process-wide callbacks: fmpy's logger proxy keeps a pointer to the last logger it was
-    # given, so a logger dropped after the run would be called (freed) by the next FMU of this process
+    # given, so a logger dropped after the run would be called (freed) by the next FMU of this process;
+    # an FMI 3.0 FMU is instantiated without Event Mode, early return or intermediate update
     with attach(["study"]) as sink:
         logs = sink.messages.setdefault("study", [])
-        slave.instantiate(callbacks=process_callbacks(), loggingOn=True)
+        slave.start(process_callbacks(), fmi3_logger("study"))
         return _initialize_and_step(slave, var, values, states, residual_var, read_vrs, t0, t1, h, n_steps, logs,
                                     start)
 
@@ -218,9 +224,7 @@ def _initialize_and_step(slave, var, values, states, residual_var, read_vrs, t0,
         slave.enterInitializationMode()
         for name, value in values.items():
             v = var[name]
-            setter = {"Real": slave.setReal, "Integer": slave.setInteger, "Enumeration": slave.setInteger,
-                      "Boolean": slave.setBoolean, "String": slave.setString}[v.type]
-            setter([v.valueReference], [value])
+            getattr(slave, "set" + access_type(v, slave.prefix == "fmi3"))([v.valueReference], [value])
         slave.exitInitializationMode()
         t_out, x_out, r_out, steps, success, message = _step_through(
             slave, read_vrs, len(states), residual_var is not None, t0, h, n_steps, logs)
@@ -246,7 +250,8 @@ def compared_outputs(md):
     with a start value ``x_0``), else every Real output."""
     names = {v.name for v in md.modelVariables}
     outputs = [v for v in md.modelVariables if v.causality == "output"]
-    return [v.name for v in outputs if start_name(v.name) in names] or [v.name for v in outputs if v.type == "Real"]
+    return [v.name for v in outputs if start_name(v.name) in names] or [v.name for v in outputs
+                                                                         if v.type in ("Real", "Float64", "Float32")]
 
 
 def _load_description(fmu, settings):
@@ -272,12 +277,20 @@ def _load_description(fmu, settings):
 
 
 def _step_through(slave, read_vrs, n_states, has_residual, t0, h, n_steps, logs):
-    """Step `n_steps` of length `h` from `t0`, reading the states (and residual) after each step."""
+    """Step `n_steps` of length `h` from `t0`, reading the states (and residual: the variables `read_vrs`) after
+    each step."""
     t_out, x_out, r_out = [t0], [], []
     steps, success, message = 0, True, "the run reached the end of the horizon"
 
+    groups = {}  # the getter of each type (FMI 2.0: one getReal of them all)
+    for i, v in enumerate(read_vrs):
+        groups.setdefault(access_type(v, slave.prefix == "fmi3"), []).append(i)
+
     def read():
-        out = slave.getReal(read_vrs)
+        out = [0.0] * len(read_vrs)
+        for fmi_type, where in groups.items():
+            for i, x in zip(where, getattr(slave, "get" + fmi_type)([read_vrs[i].valueReference for i in where])):
+                out[i] = float(x)
         x_out.append(out[:n_states])
         r_out.append(out[n_states] if has_residual else math.nan)
 
@@ -288,7 +301,7 @@ def _step_through(slave, read_vrs, n_states, has_residual, t0, h, n_steps, logs)
             slave.doStep(currentCommunicationPoint=t, communicationStepSize=h)
         except Exception as exc:
             success = False
-            reason = logs[-1] if logs else f"{type(exc).__name__}: {exc}"
+            reason = str(exc) if is_refusal(exc) else logs[-1] if logs else f"{type(exc).__name__}: {exc}"
             message = f"doStep at t={t!r} failed: {reason}"
             break
         steps += 1
@@ -307,10 +320,9 @@ def _fmu_values(point, var, states):
         if fmi_name not in var:
             raise ValueError(f"the FMU has no variable {fmi_name!r} to set from the grid's `{name}`")
         if fmi_name == "solver" and isinstance(value, str):
-            solvers = ("RK45", "DOP853", "Radau", "BDF", "exact", "Magnus4")
-            if value not in solvers:
-                raise ValueError(f"`method` must be one of {solvers}; found {value!r}")
-            value = solvers.index(value)
+            if value not in SOLVERS:
+                raise ValueError(f"`method` must be one of {SOLVERS}; found {value!r}")
+            value = SOLVERS.index(value)
         values[fmi_name] = fmi_value(name, value, var[fmi_name].type, enumeration_items(var[fmi_name]))
     offset = float(point.get("offset", 0.0))
     states = [s for s in states if _start_name(s) in var]  # an FMU without start values is refused up front
@@ -321,89 +333,22 @@ def _fmu_values(point, var, states):
     return values
 
 
-def steps_over(t0, t1, h):
-    """The number of steps `h` from `t0` to `t1`; a ValueError if they do not end on `t1`."""
-    n = int(round((t1 - t0) / h))
-    if n < 1 or abs(t0 + n * h - t1) > 1e-9 * max(abs(t1 - t0), abs(t1), 1e-300):
-        raise ValueError(f"`step` {h!r} does not divide the horizon [{t0!r}, {t1!r}]: the run would end at "
-                         f"{t0 + max(n, 1) * h!r}; choose a step that divides it")
-    return n
-
-
-_TRUE, _FALSE = ("true", "1"), ("false", "0")
-
-
 def fmi_value(name, value, kind, items=None):
     """`value` of the grid's `name` as the FMI type `kind`, or a TypeError naming `name`.
 
-    `kind` is 'Real', 'Integer', 'Boolean', 'String' or 'Enumeration' (then
+    `kind` is 'Real', 'Integer', 'Boolean', 'String', an FMI 3.0 Float32,
+    Float64, Int8 ... UInt64 (each within its range), or 'Enumeration' (then
     `items` lists the type's ``(name, value)`` pairs, and `value` is an item's
-    name or value). Texts are read, never passed through ``bool()``: "false"
-    and "0" are False; a String takes only a text (a number is not guessed to
-    be one).
+    name or value); the rules are `fmu_build._values.fmi_value`'s.
     """
-    article = "an" if kind[0] in "AEIOU" else "a"
-    if kind == "Enumeration":
-        items = list(items or [])
-        listed = ", ".join(f"{n!r} = {v}" for n, v in items)
-
-        def refuse():
-            raise TypeError(f"`{name}` sets an Enumeration variable (items {listed}); found {value!r} "
-                            f"({type(value).__name__}).")
-
-        names = dict(items)
-        if isinstance(value, str):
-            text = value.strip()
-            if text in names:
-                return int(names[text])
-            try:
-                number = int(text)
-            except ValueError:
-                refuse()
-        elif isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-            refuse()
-        else:
-            number = value
-        if not (math.isfinite(number) and float(number) == int(number) and int(number) in names.values()):
-            refuse()
-        return _int32(name, int(number))
-
-    def refuse():
-        raise TypeError(f"`{name}` sets {article} {kind} variable; found {value!r} ({type(value).__name__}).")
-
-    if kind == "String":
-        if not isinstance(value, str):
-            refuse()
-        return value
-    if kind not in ("Real", "Integer", "Boolean"):
-        raise TypeError(f"`{name}` sets a variable of type {kind}, which a study cannot set.")
-    if isinstance(value, str):
-        text = value.strip().lower()
-        if kind == "Boolean" and text in _TRUE + _FALSE:
-            return text in _TRUE
-        try:
-            value = int(text) if kind == "Integer" else float(text)
-        except ValueError:
-            refuse()
-    if kind == "Boolean":
-        if isinstance(value, (bool, np.bool_)) or (isinstance(value, (int, np.integer)) and value in (0, 1)):
-            return bool(value)
-        refuse()
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
-        refuse()
-    if kind == "Integer":
-        if not math.isfinite(value) or float(value) != int(value):
-            refuse()
-        return _int32(name, int(value))
-    return float(value)
-
-
-def _int32(name, value):
-    """An FMI 2.0 Integer is 32 bits: ctypes would silently wrap a larger one (2**32 + 3 reaches the FMU as 3)."""
-    if not -2 ** 31 <= value < 2 ** 31:
-        raise TypeError(f"`{name}` sets an FMI Integer, a 32-bit integer; found {value!r}, outside "
-                        f"[{-2 ** 31}, {2 ** 31 - 1}].")
-    return value
+    article = _article(kind)
+    items = list(items or []) if kind == "Enumeration" else None
+    listed = f" (items {', '.join(f'{n!r} = {v}' for n, v in items)})" if items is not None else ""
+    try:
+        return _fmi_value(value, kind, items)
+    except FMIValueError as exc:
+        raise TypeError(f"`{name}` sets {article} {kind} variable{listed}; found {value!r} "
+                        f"({type(value).__name__}): {exc}.") from None
 
 
 def enumeration_items(variable):

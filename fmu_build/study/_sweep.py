@@ -319,7 +319,8 @@ def _setup(target, reference, t_span, x0, workdir):
 
 
 def _model_description(fmu):
-    """The model description of an FMU a study can run (FMI 2.0 Co-Simulation), or a ValueError saying why not."""
+    """The model description of an FMU a study can run (FMI 2.0 or 3.0 Co-Simulation), or a ValueError saying why
+    not."""
     import zipfile
 
     from fmpy import read_model_description
@@ -331,11 +332,16 @@ def _model_description(fmu):
         md = read_model_description(fmu)
     except Exception as exc:
         raise ValueError(f"`target` {label!r}: its modelDescription.xml cannot be read ({exc}).") from None
-    if md.fmiVersion != "2.0":
-        raise ValueError(f"studies run FMI 2.0 Co-Simulation FMUs; `target` {label!r} is FMI {md.fmiVersion}.")
+    if not str(md.fmiVersion).startswith(("2.", "3.")):
+        raise ValueError(f"studies run FMI 2.0 and 3.0 Co-Simulation FMUs; `target` {label!r} is FMI {md.fmiVersion}.")
     if md.coSimulation is None:
-        raise ValueError(f"studies run FMI 2.0 Co-Simulation FMUs; `target` {label!r} has no Co-Simulation "
-                         "interface (Model Exchange only).")
+        raise ValueError(f"studies run FMI 2.0 and 3.0 Co-Simulation FMUs; `target` {label!r} has no Co-Simulation "
+                         "interface.")
+    arrays = [v.name for v in md.modelVariables if getattr(v, "dimensions", None) and v.causality == "output"]
+    if arrays or any(v.type == "Clock" for v in md.modelVariables):
+        what = f"array outputs ({', '.join(arrays[:3])})" if arrays else "clocks (they need Event Mode)"
+        raise ValueError(f"`target` {label!r} has {what}; a study compares scalar outputs of an FMU stepped "
+                         "without Event Mode; refused.")
     return md
 
 
@@ -363,6 +369,9 @@ def _check_fmu_names(md, names, label):
         v = var.get(fmi_name)
         if v is None:
             raise ValueError(f"{called} is not a variable of the FMU {label!r} (nor `step`, `offset`).")
+        if getattr(v, "dimensions", None):
+            raise ValueError(f"{called} is an array ({v.type}, {len(v.dimensions)} dimensions) in {label!r}: a grid "
+                             "sets scalar variables only.")
         initial = v.initial or _DEFAULT_INITIAL.get(v.causality)
         if v.causality == "independent":
             what = "the independent variable"

@@ -8,14 +8,19 @@ __all__ = ["build_fmu"]
 
 
 def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, k=None, target="pythonfmu",
-              fix_parameters=False, fmi_version=2):
+              fix_parameters=False, fmi_version=2, x0=None):
     """Build an FMI 2.0 Co-Simulation FMU of a linear DAE's completion.
 
     Parameters
     ----------
     spec_or_dae : path, dict or lsc.LinearDAE
         A TOML spec file, a parsed spec, or a LinearDAE (constant or sympy
-        coefficients; states are named ``x1`` ... ``xn``).
+        coefficients; states are named ``x[1]`` ... ``x[n]``). A LinearDAE of
+        scipy.sparse coefficients (a large model) is built by the pythonfmu
+        target with lsc's sparse set-up: the alternative completion, its
+        forcing none, constant or an `lsc.InputForcing` whose inputs become
+        the FMU's inputs ``u[1]`` ... (docs/guide/sparse.md); the native
+        target refuses it.
     dest : path
         Folder (or ``.fmu`` file name) to write.
     method, lam, model_name, k : optional
@@ -32,6 +37,8 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
     fmi_version : {2, 3}, optional
         Native target: FMI 2.0 (default) or FMI 3.0 (Co-Simulation and Model
         Exchange over the same C core; see docs/native_fmu.md).
+    x0 : array_like, shape (n,), optional
+        A sparse LinearDAE's start values (default zeros; the FMU's parameters ``x_0[i]``).
 
     Returns
     -------
@@ -69,6 +76,10 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
     >>> path.name, validate_fmu(str(path))
     ('Lag.fmu', [])
     """
+    if getattr(spec_or_dae, "is_sparse", False):
+        return _build_sparse(spec_or_dae, dest, method, lam, model_name, k, target, x0)
+    if x0 is not None:
+        raise ValueError("`x0` is for a sparse LinearDAE; a spec gives its states' start values.")
     spec = _resolve(spec_or_dae)
     if method is not None:
         if method not in METHODS:
@@ -104,3 +115,33 @@ def build_fmu(spec_or_dae, dest=".", *, method=None, lam=None, model_name=None, 
     from .pythonfmu import build_pythonfmu
 
     return build_pythonfmu(spec, dest)
+
+
+def _build_sparse(dae, dest, method, lam, model_name, k, target, x0):
+    """`build_fmu` for a LinearDAE of scipy.sparse coefficients."""
+    n = dae.n
+    if target == "native":
+        from .native import NativeTargetError
+
+        raise NativeTargetError(
+            f"the native target refuses a sparse model (n = {n} unknowns): its C holds G and the forcing map as dense "
+            f"arrays ({8.0 * n * n / 2**20:.3g} MiB for G alone) and steps with their exponential. Build it with "
+            "target='pythonfmu' (lsc's sparse completion through sparse factorizations), or give dense arrays for a "
+            "model small enough to hold densely.")
+    if target != "pythonfmu":
+        raise ValueError(f"`target` must be one of ('pythonfmu', 'native'); found {target!r}.")
+    if method not in (None, "alternative"):
+        raise ValueError(f"a sparse model has the 'alternative' completion only (docs/guide/sparse.md); found "
+                         f"method={method!r}.")
+    if model_name is not None:
+        problems = model_name_problems(model_name, field="model_name")
+        if problems:
+            raise SpecError(problems, source="build_fmu")
+    if k is not None and (isinstance(k, bool) or not isinstance(k, int) or not 0 <= k <= MAX_K):
+        raise ValueError(f"`k` must be an integer from 0 to {MAX_K}; found {k!r}.")
+    rate = 1.0 if lam is None else lam_value(lam)
+    if lam_problem(rate):
+        raise ValueError(f"lam: {lam_problem(rate)}")
+    from .sparse_pythonfmu import build_sparse_pythonfmu
+
+    return build_sparse_pythonfmu(dae, dest, lam=rate, model_name=model_name, k=k, x0=x0)

@@ -37,7 +37,7 @@ import lsc
 
 from .._description import model_description
 from .._description3 import build_description3, model_description3
-from ._runtime import start_name
+from .._interface import native_interface
 from .._model import _input_derivatives, _mangled
 from . import _native_tv
 
@@ -96,6 +96,12 @@ def _c_array(name, values, ctype="double"):
         values = [0]
     body = ", ".join(repr(float(v)) if ctype == "double" else str(v) for v in values)
     return f"static const {ctype} {name}[{len(values)}] = {{{body}}};"
+
+
+def _c_string(text):
+    """A C string literal of `text` (any character escaped as a byte: a name may be any identifier)."""
+    return '"' + "".join(ch if ch.isascii() and (ch.isalnum() or ch in "_ .") else "".join(f"\\{b:03o}" for b in ch.encode())
+                         for ch in text) + '"'
 
 
 def _check_expressible(spec, fix_parameters):
@@ -165,23 +171,26 @@ def _ccode_block(exprs, targets, symbol_names):
     return lines
 
 
-def _is_linear_in_states(expr, state_symbols, spec):
-    import sympy
+def _input_estimates(spec, input_orders):
+    """``(UDEG, C lines)``: each input's estimate (highest derivative used, -1: none; polynomial degree;
+    least-squares window in s; name) for lsc_model.c, and the largest degree."""
+    from .._model import _input_degree, _input_window
 
-    free = {str(s) for s in expr.free_symbols}
-    if spec.t in expr.free_symbols or free & set(spec.input_symbols):
-        return False
-    syms = [s for s in expr.free_symbols if str(s) in state_symbols]
-    try:
-        return all(sympy.simplify(sympy.diff(expr, a, b)) == 0 for a in syms for b in syms)
-    except Exception:  # pragma: no cover - sympy cannot decide: no derivative offered
-        return False
+    orders = [int(input_orders.get(u["name"], -1)) for u in spec.inputs]
+    degrees = [_input_degree(order) for order in orders]
+    lines = ["/* the inputs' estimates: highest derivative used (-1: none), polynomial degree, least-squares window (s) */",
+             _c_array("U_ORDER", orders, "int"), _c_array("U_DEGREE", degrees, "int"),
+             _c_array("U_WINDOW", [_input_window(spec, u) for u in spec.inputs]),
+             "static const char *const U_NAME[{}] = {{{}}};".format(
+                 max(len(spec.inputs), 1), ", ".join(_c_string(u["name"]) for u in spec.inputs) or '""')]
+    return max(degrees, default=0), lines
 
 
-def _model_header(spec, *, ident, guid, G0, G1, W0, W1, maps, lam_tunable, fpars, kpars, f_jet=True):
+def _model_header(spec, *, ident, guid, G0, G1, W0, W1, maps, lam_tunable, fpars, kpars, input_orders, f_jet=True):
     """The generated part: sizes, value references, matrices and the C of f and the outputs (`f_jet` False: no
     C of f's jet, which the time-varying runtime does not call: its forcing is tabulated). `maps`: the
-    completion's `lsc.CompletionMaps` (its order, constraint rows and their forcing map)."""
+    completion's `lsc.CompletionMaps` (its order, constraint rows and their forcing map). `input_orders`: the
+    highest derivative of each input the completion uses (-1: none), from which the estimates' degrees."""
     import sympy
 
     n = spec.n
@@ -195,16 +204,8 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, maps, lam_tunable, fpars
     nu, no, nk = len(spec.inputs), len(spec.outputs), len(kpars)
     npar = len(fpars)
     Cpinv = maps.C_pinv[0] if nc else np.zeros((n, 1))
-    udeg = min(P + 3, 8)  # the history polynomial's degree: derivatives for g and its Taylor terms
-    vr = {"LAMBDA": 0, "PAR": 1}
-    vr["X0"] = 1 + npar
-    vr["U"] = vr["X0"] + n
-    vr["X"] = vr["U"] + nu
-    vr["Y"] = vr["X"] + n
-    vr["RES"] = vr["Y"] + no
-    vr["DX"] = vr["RES"] + 1
-    vr["K"] = vr["DX"] + n
-    nr = vr["K"] + nk
+    udeg, input_arrays = _input_estimates(spec, input_orders)
+    interface = native_interface(spec, fpars=fpars, kpars=kpars, lam_tunable=lam_tunable)
     values = {spec.symbols[name]: next(p["value"] for p in spec.parameters if p["name"] == name) for name in kpars}
     names = {spec.symbols[p]: f"p[{i}]" for i, p in enumerate(fpars)}
     names[spec.t] = "t"
@@ -218,18 +219,14 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, maps, lam_tunable, fpars
         f"#define NX {n}", f"#define NPAR {npar}", f"#define NU {nu}", f"#define NO {no}", f"#define NC {nc}",
         f"#define NK {nk}", f"#define NJ {nj}", f"#define NJC {njc}", f"#define NQ {TAYLOR_DEGREE}", f"#define NF {nf}", f"#define NFE {nfe}",
         f"#define UDEG {udeg}", f"#define MAX_OUTPUT_DERIVATIVE_ORDER {TAYLOR_DEGREE + 1}",
-        *[f"#define VR_{key} {value}" for key, value in vr.items()], f"#define NR {nr}", "#define VRB_PROJECT 0",
+        *interface.c_defines(),
         f"#define LAMBDA_START {float(spec.lam)!r}", f"#define LAMBDA_TUNABLE {int(lam_tunable)}",
         f"#define START_TIME {float(spec.experiment['start'])!r}",
         f"#define ME_INPUT_SPACING {float(spec.experiment['step'])!r}", "",
         _c_array("G0", G0), _c_array("G1", G1), _c_array("W0", W0), _c_array("W1", W1),
         _c_array("CC", C if nc else np.zeros((1, n))), _c_array("WC", Wc if nc else np.zeros((1, n))),
-        _c_array("CPINV", Cpinv),
-        _c_array("PAR_START", [next(p["value"] for p in spec.parameters if p["name"] == q) for q in fpars]),
-        _c_array("PAR_TUNABLE", [int(next(p["tunable"] for p in spec.parameters if p["name"] == q)) for q in fpars], "int"),
-        _c_array("X_START", [s["start"] for s in spec.states]),
-        _c_array("U_START", [u["start"] for u in spec.inputs]),
-        _c_array("K_VALUE", [values[spec.symbols[q]] for q in kpars]),
+        _c_array("CPINV", Cpinv), *(_c_array(*array) for array in interface.c_arrays()),
+        *input_arrays,
     ]
     # f and its derivatives, inputs' derivatives (named by the builder's `_mangled`) read from u[i * NFE + j]
     f = spec.f.subs(values)
@@ -254,7 +251,6 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, maps, lam_tunable, fpars
     out_names = dict(names)
     for i, (uname, usym) in enumerate(spec.input_symbols.items()):
         out_names[usym] = f"u[{i}]"
-    linear = []
     lines += ["", "/* custom output j at t from the states x, parameters p and input values u */",
               "static double model_output(int j, double t, const double *x, const double *p, const double *u) {",
               "    (void)t; (void)x; (void)p; (void)u;", "    switch (j) {"]
@@ -264,66 +260,10 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, maps, lam_tunable, fpars
         for s in expr.free_symbols:
             if str(s) in state_syms:
                 syms[s] = state_syms[str(s)]
-        linear.append(int(_is_linear_in_states(expr, state_syms, spec)))
         body = _ccode_block([expr], ["r"], syms)
         lines += [f"    case {j}: {{ /* {out['name']} */", "    double r;", *["    " + b for b in body], "    return r; }"]
-    lines += ["    default: return NAN;", "    }", "}", "", _c_array("OUT_LINEAR", linear, "int"), "", "#endif", ""]
-    return "\n".join(lines), dict(vr=vr, nr=nr, nf=nf, linear=linear, nc=nc)
-
-
-def _variables(spec, *, fpars, kpars, vr, lam_tunable, method, linear):
-    """The FMU's variables for the model description, in value-reference order."""
-    f_inputs = sorted({str(s) for s in spec.f.free_symbols} & set(spec.input_symbols))
-    variables = [{"name": "lambda", "type": "Real", "vr": 0, "causality": "parameter" if lam_tunable else "local",
-                  "variability": "tunable" if lam_tunable else "constant", "initial": "exact", "start": float(spec.lam),
-                  "unit": "1/s",
-                  "description": "stabilization rate lam (1/time): off-manifold errors decay like exp(-lam t)"
-                  + {"alternative": "", "stabilized": "; a constant of this native FMU (the stabilized completion is "
-                     "not affine in lambda: its matrices are computed at build time)",
-                     "standard": "; unused by the standard completion"}[method]}]
-    for i, name in enumerate(fpars):
-        p = next(q for q in spec.parameters if q["name"] == name)
-        variables.append({"name": name, "type": "Real", "vr": vr["PAR"] + i, "causality": "parameter",
-                          "variability": "tunable" if p["tunable"] else "fixed", "initial": "exact",
-                          "start": float(p["value"]), "unit": p["unit"], "description": p["description"]})
-    for i, s in enumerate(spec.states):
-        variables.append({"name": start_name(s["name"]), "type": "Real", "vr": vr["X0"] + i, "causality": "parameter",
-                          "variability": "fixed", "initial": "exact", "start": float(s["start"]), "unit": s["unit"],
-                          "description": f"initial value of {s['name']}"})
-    for i, u in enumerate(spec.inputs):
-        variables.append({"name": u["name"], "type": "Real", "vr": vr["U"] + i, "causality": "input",
-                          "variability": "continuous", "start": float(u["start"]), "unit": u["unit"],
-                          "description": u["description"]})
-    state_names = [s["name"] for s in spec.states]
-    for i, s in enumerate(spec.states):
-        variables.append({"name": s["name"], "type": "Real", "vr": vr["X"] + i, "causality": "output",
-                          "variability": "continuous", "unit": s["unit"], "description": s["description"],
-                          "dependencies": []})
-    for j, o in enumerate(spec.outputs):
-        reads = [str(x) for x in o["expr"].free_symbols if str(x) in spec.input_symbols or str(x) in state_names]
-        variables.append({"name": o["name"], "type": "Real", "vr": vr["Y"] + j, "causality": "output",
-                          "variability": "continuous", "unit": o["unit"],
-                          "description": o["description"] + (" (output derivatives available)" if linear[j] else ""),
-                          "dependencies": reads})
-    variables.append({"name": "constraint_residual", "type": "Real", "vr": vr["RES"], "causality": "output",
-                      "variability": "continuous",
-                      "description": "norm of the constraint residual Z2^T (F x - g): distance from the solution manifold",
-                      "dependencies": state_names + f_inputs})
-    for i, s in enumerate(spec.states):
-        variables.append({"name": f"der({s['name']})", "type": "Real", "vr": vr["DX"] + i, "causality": "local",
-                          "variability": "continuous", "derivative": s["name"],
-                          "unit": f"{s['unit']}/s" if s["unit"] else "",
-                          "description": f"x' = G x + g of {s['name']}", "dependencies": state_names + f_inputs})
-    for i, name in enumerate(kpars):
-        p = next(q for q in spec.parameters if q["name"] == name)
-        variables.append({"name": name, "type": "Real", "vr": vr["K"] + i, "causality": "local",
-                          "variability": "constant", "initial": "exact", "start": float(p["value"]), "unit": p["unit"],
-                          "description": f"{p['description']} (enters A or B: fixed at its spec value in this native FMU)"})
-    variables.append({"name": "project_initial", "type": "Boolean", "vr": 0, "causality": "parameter",
-                      "variability": "fixed", "initial": "exact", "start": False,
-                      "description": "project the initial state onto the solution manifold before the first step"})
-    # FMI lists variables in one sequence; value references are per type
-    return variables
+    lines += ["    default: return NAN;", "    }", "}", "", "#endif", ""]
+    return "\n".join(lines), dict(interface=interface, nf=nf, nc=nc)
 
 
 def _compile(src_dir, out_path, compiler, extra_flags=(), main="fmi2Functions.c"):
@@ -336,7 +276,7 @@ def _compile(src_dir, out_path, compiler, extra_flags=(), main="fmi2Functions.c"
 
 def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=False, fmi_version=2):
     """Build the native FMU of a resolved `ModelSpec` (see `fmu_build.build_fmu`, ``target='native'``)."""
-    from .._model import _numeric_dae
+    from .._model import _needed_input_orders, _numeric_dae
 
     if type(fmi_version) is not int or fmi_version not in (2, 3):
         raise ValueError(f"`fmi_version` must be 2 or 3; found {fmi_version!r}.")
@@ -349,6 +289,8 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     # only the rank at their own times, not the consistency of [J, F] where the equations nearly degenerate)
     span = None if dae.is_constant else (float(spec.experiment["start"]), float(spec.experiment["stop"]))
     comp = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else spec.lam, k=spec.k, t_span=span)
+    if span is not None:  # a rank drop between the sampled times too: the FMU cannot stop before it mid-run
+        lsc.check_solvability(dae, span, k=comp.k, rcond=comp.rcond)
     if dae.is_constant:
         G0, G1, W0, W1, maps, lam_tunable = _affine_maps(comp)
         tv = None
@@ -361,7 +303,8 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     # the fixed sources) and of the variables the model description declares: any change gives another GUID
     placeholder = "{00000000-0000-0000-0000-000000000000}"
     header, info = _model_header(spec, ident=ident, guid=placeholder, G0=G0, G1=G1, W0=W0, W1=W1, maps=maps,
-                                 lam_tunable=lam_tunable, fpars=fpars, kpars=kpars, f_jet=tv is None)
+                                 lam_tunable=lam_tunable, fpars=fpars, kpars=kpars, f_jet=tv is None,
+                                 input_orders=_needed_input_orders(spec, dae, comp.k))
     fixed_note = (f" Parameters in A or B fixed at their spec values: {', '.join(kpars)}." if kpars else "")
     lam_note = {"alternative": "lambda tunable (G and the forcing map are affine in lambda, checked at build time)",
                 "stabilized": "lambda fixed at build time (the stabilized completion is not affine in lambda)",
@@ -373,11 +316,9 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
             note = note.replace("native C,", "native C, FMI 3.0,", 1) + (
                 " Steps past the horizon: fmi3Discard with terminateSimulation, or an early return at its end "
                 "where the importer allows early return.")
-    variables = _variables(spec, fpars=fpars, kpars=kpars, vr=info["vr"], lam_tunable=lam_tunable,
-                           method=spec.method, linear=info["linear"])
+    interface = info["interface"]  # FMI 3.0: value references unique over all types; time is a variable
+    variables = (interface.fmi3() if fmi_version == 3 else interface).rows()
     digest = hashlib.sha256()
-    if fmi_version == 3:  # value references unique over all types; time is a variable
-        variables = _variables3(variables, info["nr"])
     for part in (header, *((_TEMPLATES / name).read_text() for name in sources), repr(variables),
                  repr(sorted(spec.experiment.items()))):
         digest.update(part.encode())
@@ -436,15 +377,6 @@ def _package(target, ident, sources, header, xml, compiler, extra_cflags, fmi_ve
         except BaseException:
             Path(part).unlink(missing_ok=True)
             raise
-
-
-def _variables3(variables, nr):
-    """The FMI 2.0 variable list for FMI 3.0: project_initial (a Boolean) at value reference `nr`, time at `nr` + 1."""
-    out = [{"name": "time", "type": "Real", "vr": nr + 1, "causality": "independent", "variability": "continuous",
-            "unit": "s", "description": "simulation time"}]
-    for v in variables:
-        out.append(dict(v, vr=nr) if v["type"] == "Boolean" else dict(v))
-    return out
 
 
 def _describe3(*, model_name, guid, description, model_identifier, variables, source_files, model_exchange,

@@ -19,9 +19,9 @@ import numpy as np
 
 import lsc
 
+from .._description import model_structure, unit_definitions
 from .._model import _complete_at_start, _numeric_dae
 from ._pythonfmu_source import _BUILD_PLACEHOLDER, _SLAVE, _model_source
-from ._runtime import start_name
 from ._vendor import _vendor_ivp
 
 __all__ = ["build_pythonfmu"]
@@ -45,7 +45,7 @@ def build_pythonfmu(spec, dest):
     folder = final.parent
     folder.mkdir(parents=True, exist_ok=True)
     _remove_stale_work_dirs(folder)
-    model_text = _model_source(spec, k_used, dae)
+    model_text, interface = _model_source(spec, k_used, dae)
     build = _build_id(name, model_text)
     prefix = f"lscfmu_{build}"
     script_module, model_module, package = prefix, f"{prefix}_model", f"{prefix}_lsc"
@@ -76,7 +76,7 @@ def build_pythonfmu(spec, dest):
             # description: drop those modules, and only those (their names are this build's own)
             for mod in [m for m in sys.modules if (m == prefix or m.startswith(prefix + "_")) and m not in own_modules]:
                 del sys.modules[mod]
-        _complete_model_description(Path(fmu), spec)
+        _complete_model_description(Path(fmu), interface)
         with open(fmu, "rb") as fh:
             os.fsync(fh.fileno())
         os.replace(fmu, final)
@@ -88,17 +88,25 @@ def build_pythonfmu(spec, dest):
 _WORK_PREFIX = ".lsc-build-"
 
 
-def _copy_runtime(dest):
-    """Copy lsc (its solver parts only), scipy's solvers and the runtime package to the package `dest`."""
+_SPARSE_IMPORTS = ("from ._sparse_problem import", "from ._sparse import")
+
+
+def _copy_runtime(dest, sparse=False):
+    """Copy lsc (its solver parts only), scipy's solvers and the runtime package to the package `dest`.
+
+    `sparse`: keep lsc's sparse set-up (a model of scipy.sparse coefficients); otherwise the copy never imports
+    scipy.sparse.
+    """
     shutil.copytree(Path(lsc.__file__).parent, dest, ignore=shutil.ignore_patterns("__pycache__", "gallery"))
     # The runtime needs neither the gallery (sympy) nor solve_ivp: importing
     # scipy.integrate in an embedded interpreter loads scipy._lib._uarray,
     # whose finalization crashes native hosts at exit (see _vendor_ivp).
+    # A dense model needs no sparse set-up either (scipy.sparse.linalg aborted a native host at exit once).
     lines = (dest / "__init__.py").read_text().splitlines(keepends=True)
-    dropped = ("from . import gallery", "from ._integrate import")
+    dropped = ("from . import gallery", "from ._integrate import") + (() if sparse else _SPARSE_IMPORTS)
     kept = [line for line in lines if not line.startswith(dropped)]
     if len(lines) - len(kept) != len(dropped):  # lsc's __init__ changed shape: fail at build, not in the FMU
-        raise RuntimeError("fmu_build could not strip the gallery and _integrate imports from lsc/__init__.py")
+        raise RuntimeError(f"fmu_build could not strip the imports {dropped} from lsc/__init__.py")
     (dest / "__init__.py").write_text("".join(kept))
     # inside the FMU the runtime is a subpackage of the lsc copy (its `_lsc` imports lsc's public names from there),
     # with scipy's solvers in a subpackage of its own
@@ -134,25 +142,59 @@ def _requirements():
     """What the host's Python needs to run the FMU (the versions it was built with)."""
     import scipy
 
-    return f"numpy>={np.__version__}\nscipy>={scipy.__version__}\n"
+    import threadpoolctl
+
+    return f"numpy>={np.__version__}\nscipy>={scipy.__version__}\nthreadpoolctl>={threadpoolctl.__version__}\n"
 
 
 
 
 
-def _complete_model_description(fmu, spec):
-    """Add units, UnitDefinitions, InitialUnknowns and output dependencies."""
+def _complete_model_description(fmu, interface):
+    """Add what pythonfmu does not write from the interface table: units, UnitDefinitions, ModelStructure.
+
+    pythonfmu wrote the variables from their registration, which follows the
+    table (`fmu_build.targets._runtime._variables.register_variables`); each
+    is checked against its row, so a description never declares what the FMU
+    does not do.
+    """
     with zipfile.ZipFile(fmu) as zf:
         contents = {n: zf.read(n) for n in zf.namelist()}
     root = ET.fromstring(contents["modelDescription.xml"])
-    units = {s["name"]: s["unit"] for s in spec.states if s["unit"]}
-    units.update({p["name"]: p["unit"] for p in spec.parameters if p["unit"]})
-    units.update({start_name(s["name"]): s["unit"] for s in spec.states if s["unit"]})
-    units.update({u["name"]: u["unit"] for u in spec.inputs if u["unit"]})
-    units.update({o["name"]: o["unit"] for o in spec.outputs if o["unit"]})
-    # a custom output that reads an input depends on it directly (feedthrough)
-    reads = {o["name"]: sorted(str(s) for s in o["expr"].free_symbols if str(s) in spec.input_symbols)
-             for o in spec.outputs}
+    rows = interface.rows()
+    written = root.find("ModelVariables").findall("ScalarVariable")
+    found = [(sv.get("name"), int(sv.get("valueReference")), sv.get("causality"), sv.get("variability"), sv[0].tag)
+             for sv in written]
+    declared = [(v["name"], v["vr"], v["causality"], v["variability"], v["type"]) for v in rows]
+    if found != declared:
+        raise RuntimeError(f"pythonfmu wrote the variables {found}; the interface table declares {declared}")
+    for sv, v in zip(written, rows):
+        if v["unit"]:
+            sv[0].set("unit", v["unit"])
+    # UnitDefinitions goes right after CoSimulation (FMI 2.0 element order).
+    root.insert(list(root).index(root.find("CoSimulation")) + 1, unit_definitions(rows))
+    structure = root.find("ModelStructure")
+    for child in list(structure):
+        structure.remove(child)
+    model_structure(structure, rows, {v["name"]: i for i, v in enumerate(rows, start=1)}, model_exchange=False)
+    ET.indent(root)
+    contents["modelDescription.xml"] = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as zf:
+        for n, data in contents.items():
+            zf.writestr(n, data)
+
+
+def _finish_description(fmu, units, reads):
+    """Add `units` ({variable: unit}; lambda's is 1/s), UnitDefinitions, InitialUnknowns and the outputs'
+    dependencies (`reads`: {output: inputs it reads}; no other output has direct feedthrough).
+
+    For the sparse target (`fmu_build.targets.sparse_pythonfmu`), whose variables are not in an interface
+    table (`_complete_model_description` does the same from the table for the dense one).
+    """
+    with zipfile.ZipFile(fmu) as zf:
+        contents = {n: zf.read(n) for n in zf.namelist()}
+    root = ET.fromstring(contents["modelDescription.xml"])
+    units = dict(units)
     all_units = sorted(set(units.values()) | {"1/s"})
     units["lambda"] = "1/s"
     variables = root.find("ModelVariables")

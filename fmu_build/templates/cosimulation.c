@@ -186,6 +186,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     c->s.t = t;
 #ifdef LSC_TIME_VARYING
     record_inputs(c, t);
+    estimate_inputs(c);
     switch (tv_do_step(c, t, h)) {
     case 0: c->s.t = t + h; changed(c); memset(c->s.u_fresh, 0, sizeof c->s.u_fresh); return fmi2OK;
     case 1: return discard(c, h, 0);
@@ -193,6 +194,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     }
 #endif
     record_inputs(c, t);
+    estimate_inputs(c);
     eval_f(c, t);
     for (j = 0; j < NX * NFE; j++) {
         if (!isfinite(c->fj[j])) {

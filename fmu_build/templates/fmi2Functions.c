@@ -165,6 +165,31 @@ static int first_invalid(Instance *c) {
     return -1;
 }
 
+/* The start report (logged with logAll): for each input whose derivatives the completion uses, which of them
+ * at the start time the importer gave (Co-Simulation: fmi2SetRealInputDerivatives before this call) and which
+ * are guessed: zero at the start, estimated from the values received afterwards. */
+static void start_report(Instance *c) {
+    int i, j;
+    for (i = 0; i < NU; i++) {
+        int given = 0, first_missing = 0;
+        if (U_ORDER[i] < 1) continue;
+        for (j = U_ORDER[i]; j >= 1; j--) {
+            const int sent = c->type == fmi2CoSimulation && c->s.ud_t == c->s.t && j < NUD && c->s.ud_set[i * NUD + j];
+            if (sent) given++;
+            else first_missing = j;
+        }
+        if (first_missing == 0)
+            logmsg(c, fmi2OK, "fmi2ExitInitializationMode: input %s: derivatives 1..%d at t = %g given by the importer",
+                   U_NAME[i], U_ORDER[i], c->s.t);
+        else
+            logmsg(c, fmi2OK, "fmi2ExitInitializationMode: input %s: %d of the derivatives 1..%d at t = %g guessed, "
+                   "not given (%s): taken as 0 there, then estimated from the values received (polynomial of degree "
+                   "%d, least-squares window %g s; docs/guide/inputs.md)", U_NAME[i], U_ORDER[i] - given, U_ORDER[i],
+                   c->s.t, c->type == fmi2CoSimulation ? "fmi2SetRealInputDerivatives" : "Model Exchange cannot receive them",
+                   U_DEGREE[i], U_WINDOW[i]);
+    }
+}
+
 fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
     Instance *c = (Instance *)comp;
     int i, j, bad;
@@ -175,8 +200,11 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
         return fmi2Error;
     }
     memcpy(c->s.x, c->s.x0, sizeof c->s.x);
-    c->s.hist_n = 0;
+    reset_inputs(c);
     record_inputs(c, c->s.t);
+    estimate_inputs(c);
+    c->s.est_new = 0;
+    start_report(c);
     if (c->s.project_initial && NC > 0) {
         /* the nearest consistent point: x - C^+ (C x - W_c [f; f'; ...]) */
         double r[A1(NC)];
@@ -205,6 +233,7 @@ fmi2Status fmi2Reset(fmi2Component comp) {
     int i;
     if (!allowed(c, "fmi2Reset", ANY_ALIVE)) return fmi2Error;
     memset(&c->s, 0, sizeof c->s);
+    memset(c->fit_ok, 0, sizeof c->fit_ok);
     c->s.magic = STATE_MAGIC;
     c->s.size = (unsigned int)sizeof(State);
     c->s.token = token_hash();

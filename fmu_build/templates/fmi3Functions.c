@@ -10,8 +10,9 @@
  * to the FMI 3.0 logger, naming the FMI 3.0 functions.
  *
  * Value references: the Float64 variables keep the core's (0 .. NR-1);
- * project_initial (a Boolean) is NR and time (the independent variable) NR + 1,
- * since FMI 3.0 asks for value references unique over all types.
+ * project_initial (a Boolean) is VR3_PROJECT and time (the independent
+ * variable) VR3_TIME, after them (model.h), since FMI 3.0 asks for value
+ * references unique over all types.
  */
 #include <stdint.h>
 #include "fmi3Functions.h"
@@ -27,9 +28,6 @@
 #if defined(__GNUC__)
 #pragma GCC visibility pop
 #endif
-
-#define VR3_PROJECT ((fmi3ValueReference)NR)
-#define VR3_TIME ((fmi3ValueReference)(NR + 1))
 
 /* fmi3GetOutputDerivatives hands the orders to the core as they are */
 typedef char lsc3_int32_is_fmi2Integer[sizeof(fmi3Int32) == sizeof(fmi2Integer) ? 1 : -1];

@@ -37,7 +37,19 @@ static int state_valid(const State *s, int type, const char **why) {
     if (!isfinite(s->ud_t)) return 0;
     for (k = 0; k < s->hist_n; k++) {
         if (!isfinite(s->hist_t[k]) || (k > 0 && !(s->hist_t[k] < s->hist_t[k - 1]))) return 0;
+        if (!(s->hist_w[k] >= 0.0) || !isfinite(s->hist_w[k])) return 0;
         for (i = 0; i < NU; i++) if (!isfinite(s->hist_u[k * A1(NU) + i])) return 0;
+    }
+    if (!isfinite(s->in_origin) || !isfinite(s->in_first) || !isfinite(s->est_t) || !is_flag(s->est_new)) return 0;
+    for (i = 0; i < A1(NU) * (UDEG + 1); i++) if (!isfinite(s->est[i])) return 0;
+    for (i = 0; i < NU; i++) {
+        for (k = 0; k < NLEVELS * NSLOTS; k++) {
+            const InputBin *b = &s->bins[i][k / NSLOTS][k % NSLOTS];
+            int p;
+            if (b->n < 0 || (b->n > 0 && (!isfinite(b->k) || b->k != floor(b->k) || !isfinite(b->first)))) return 0;
+            for (p = 0; p < NTM; p++) if (!isfinite(b->m[p])) return 0;
+            for (p = 0; p < NVM; p++) if (!isfinite(b->r[p])) return 0;
+        }
     }
     for (i = 0; i < NR; i++) if (!is_flag(s->invalid[i])) return 0;
     return 1;
@@ -103,6 +115,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate FMUstate) {
     s = checked_state(c, "fmi2SetFMUstate", FMUstate);
     if (s == NULL) return fmi2Error;
     memcpy(&c->s, s, sizeof(State));
+    memset(c->fit_ok, 0, sizeof c->fit_ok); /* the inputs' fits are remade from the restored bins */
     return fmi2OK;
 }
 

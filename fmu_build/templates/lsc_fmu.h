@@ -23,7 +23,17 @@
 #define NXJ (NX * NJ)            /* columns of W */
 #define MB (NX * (NQ + 4))       /* order of the block matrix: phi_0 .. phi_(NQ+3) */
 #define NUD (NF)                 /* length of an input jet: u, u', ..., u^(NF-1) */
-#define HN (UDEG + 1)            /* input history points */
+#define HN (UDEG + 1)            /* the newest input values, kept as received */
+#define NBINS 8                  /* complete bins per least-squares window of an input (lsc_model.c, the estimator) */
+#define NSLOTS (NBINS + 1)       /* the window's bins and the one being filled */
+#define NLEVELS 3                /* the windows tried: U_WINDOW[i] times 1/2, 1, 2 */
+#define MIDDLE_LEVEL 1           /* the window U_WINDOW[i] itself */
+#define UB (UDEG + 3)            /* the fits' basis: Chebyshev polynomials of degree <= UDEG + 2 */
+#define NTM (NU > 0 ? 2 * UDEG + 9 : 1) /* time moments of a bin: the fits of degree <= UDEG + 2, tapered */
+#define NVM (NU > 0 ? UDEG + 7 : 1)      /* value moments of a bin */
+#define INPUT_MARGIN 3.0         /* the interpolant is taken within this many times the fit's uncertainty */
+#define INPUT_AGREE 1e-8         /* E_I and E_S this close (relative) agree whatever the fit's uncertainty */
+#define INPUT_SWITCH 3.0         /* another window than U_WINDOW[i] where its uncertainty is this many times less */
 #define STEP_RTOL 1e-10          /* step sizes this close share one set of step matrices */
 #define STATE_MAGIC 0x4c534332u  /* "LSC2" */
 #define STATE_FREED 0x4c534346u  /* "LSCF": a state given back by fmi2FreeFMUstate */
@@ -37,6 +47,16 @@ typedef enum {
 } ModelPhase;
 
 #define ANY_ALIVE (Instantiated | InitializationMode | EventMode | ContinuousTimeMode | StepComplete | Terminated | Error)
+
+/* The values of one input received in a bin of its least-squares window: weighted moments in the bin's time
+ * s = (t - center) / width (lsc_model.c) */
+typedef struct {
+    double k;                    /* the bin's index, (t - in_origin) / width rounded down */
+    int n;                       /* values in it (0: empty) */
+    double first;                /* the earliest of their times */
+    double m[NTM];               /* sum of w s^p */
+    double r[NVM];               /* sum of w u s^p */
+} InputBin;
 
 /* Everything the next step depends on: a snapshot is a copy of this struct. */
 typedef struct {
@@ -56,9 +76,16 @@ typedef struct {
     int u_fresh[A1(NU)];         /* the input was set since the last step (Co-Simulation) */
     double discard_h;            /* the size of the step last discarded from t (0: none since a change) */
     int terminal;                /* no step from t can succeed as things are: fmi2Terminated is true */
-    double hist_t[HN];
+    double hist_t[HN];           /* the newest values received, newest first, with the weight each has in the bins */
     double hist_u[HN * A1(NU)];
+    double hist_w[HN];
     int hist_n;
+    double in_origin;            /* the time of bin 0 */
+    double in_first;             /* the first value's time since the history began */
+    InputBin bins[A1(NU)][NU > 0 ? NLEVELS : 1][NU > 0 ? NSLOTS : 1];
+    double est_t;                /* the estimate's time: derivatives 0..UDEG of each input there */
+    double est[A1(NU) * (UDEG + 1)];
+    int est_new;                 /* Model Exchange: an estimate the host has not restarted its integrator on */
     int project_initial;
     int invalid[NR];             /* a value was rejected: steps are discarded until a valid one is set */
     int type;                    /* fmi2CoSimulation or fmi2ModelExchange: a state belongs to one interface */
@@ -106,6 +133,12 @@ typedef struct {
     double tv_lam;
     double tv_coef[TV_NCOMB];    /* Chebyshev coefficients of G0 + lambda G1 and g0 + lambda g1, per piece */
 #endif
+    /* each input's least-squares fits, per window: a function of the complete bins, made once per bin
+     * (fit_key: the bin index and degree it was made for; fit_ok 1: fit_d holds it, -1: too few values) */
+    double fit_key[A1(NU)][NLEVELS][2];
+    int fit_ok[A1(NU)][NLEVELS];
+    double fit_t[A1(NU)][NLEVELS];            /* the window's end, where fit_d holds the fits' derivatives */
+    double fit_d[A1(NU)][NLEVELS][3][UB];     /* derivatives 0..q of the fits of degree q = e, e + 1, e + 2 */
 } Instance;
 
 /* ---- logging ------------------------------------------------------------ */

@@ -1,6 +1,6 @@
-/* Model Exchange: x' = G x + g(t) for the host's integrator; no events, a step
- * event where the input history (the derivative estimates) changes. Part of the
- * one translation unit of fmi2Functions.c. */
+/* Model Exchange: x' = G x + g(t) for the host's integrator; no events but a step
+ * event where the inputs' estimate changes. Part of the one translation unit of
+ * fmi2Functions.c. */
 
 fmi2Status fmi2EnterEventMode(fmi2Component comp) {
     Instance *c = (Instance *)comp;
@@ -17,7 +17,12 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component comp, fmi2EventInfo *info) {
     info->newDiscreteStatesNeeded = fmi2False;
     info->terminateSimulation = fmi2False;
     info->nominalsOfContinuousStatesChanged = fmi2False;
-    info->valuesOfContinuousStatesChanged = fmi2False;
+    /* A new estimate of the inputs changed the right-hand side here: the host's integrator must restart (FMI 3.0
+     * 3.1 asks that on leaving Event Mode anyway). fmusim 0.0.39 restarts CVODE only when the states or their
+     * nominals are reported changed: reported as changed, with the values the host has (re-reading them is
+     * harmless). */
+    info->valuesOfContinuousStatesChanged = c->s.est_new ? fmi2True : fmi2False;
+    c->s.est_new = 0;
     info->nextEventTimeDefined = fmi2False;
     info->nextEventTime = 0.0;
     return fmi2OK;
@@ -37,14 +42,16 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component comp, fmi2Boolean noSetFMUS
     if (!allowed(c, "fmi2CompletedIntegratorStep", ContinuousTimeMode) || wrong_type(c, "fmi2CompletedIntegratorStep", fmi2ModelExchange)) return fmi2Error;
     if (nullarg(c, "fmi2CompletedIntegratorStep", enterEventMode, "enterEventMode")
         || nullarg(c, "fmi2CompletedIntegratorStep", terminateSimulation, "terminateSimulation")) return fmi2Error;
-    /* the input history for the derivative estimates: points at least the default experiment's step
-     * apart (divided differences over the integrator's tiny steps would amplify rounding noise) */
+    /* every accepted step's input values go into the estimate's history; a new estimate at most every default
+     * experiment step, each a step event: the right-hand side changes there, and the integrator restarts */
     *enterEventMode = fmi2False;
-    if (NU > 0 && (c->s.hist_n == 0 || c->s.t - c->s.hist_t[0] >= ME_INPUT_SPACING)) {
+    if (NU > 0) {
         record_inputs(c, c->s.t);
-        /* the forcing's input derivatives changed: a step event, so that the integrator restarts
-         * here instead of carrying history from the old right-hand side */
-        *enterEventMode = fmi2True;
+        if (c->s.t < c->s.est_t || c->s.t - c->s.est_t >= ME_INPUT_SPACING * (1.0 - 1e-9)) {
+            estimate_inputs(c);
+            c->s.est_new = 1;
+            *enterEventMode = fmi2True;
+        }
     }
     *terminateSimulation = fmi2False;
 #ifdef LSC_TIME_VARYING

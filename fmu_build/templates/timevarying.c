@@ -103,7 +103,7 @@ static void tv_clenshaw_nodes(const double *coef, int deg, const double *s, doub
 
 /* The input-jet entries u_i^(j), j <= TV_P, at t into uv (TV_NUJ values; none without inputs): the constant
  * runtime's jets (input_jets: in Co-Simulation the polynomial of the step's jet shifted to t, the master's
- * derivatives where sent, else the history estimate; in Model Exchange the history polynomial at t) */
+ * derivatives where sent, else the estimate's; in Model Exchange the estimate's polynomial at t) */
 static void tv_input_vector(Instance *c, double t, double *uv) {
     int i, j;
     if (NU == 0 || TV_NUJ == 0) return;

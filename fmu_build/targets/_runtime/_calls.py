@@ -46,6 +46,13 @@ class CallSequence:
         self._t_start = self.t
         self.x = np.array([self.values[start_name(s["name"])] for s in self.model.MODEL["states"]], dtype=float)
         self._solver = None
+        for name, signal in self.inputs.items():  # the start report: derivatives guessed (pythonfmu takes none)
+            if signal.order >= 1:
+                self._log_info(f"exitInitializationMode: input {name}: {signal.order} of the derivatives "
+                               f"1..{signal.order} at t = {self.t:g} guessed, not given (a pythonfmu FMU cannot "
+                               f"receive them): taken as 0 there, then estimated from the values received "
+                               f"(polynomial of degree {signal.degree}, least-squares window {signal.window:g} s; "
+                               "docs/guide/inputs.md)")
         if self.values["project_initial"] and not self.errors:
             try:
                 self.x = self.completion().project(self.t, self.x)

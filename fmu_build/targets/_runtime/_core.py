@@ -26,10 +26,8 @@ class LscRuntime(CallSequence, Stepping, Snapshot):
         M = model.MODEL
         self.n = len(M["states"])
         # exact stepping for constant coefficients A, B (the default there); scipy's solvers otherwise
-        self.exact_capable = "exact_degree" in M and not (M["A_varies"] or M["B_varies"])
-        solver_start = EXACT if self.exact_capable else 0
-        self.values = {"lambda": M["lam"], "method": METHODS.index(M["method"]), "project_initial": False,
-                       "rtol": 1e-6, "atol": 1e-9, "solver": solver_start}
+        self.exact_capable = M["exact_capable"]
+        self.values = {}  # every setting, parameter and start value, from its variable's start (register_variables)
         self._exact = None  # _ExactStepper of the current completion
         self._t_start = M["start"]  # the experiment's start (set again at exitInitializationMode)
         self._magnus_history, self._magnus_key = [], None  # (t, A) at the last step ends of the Magnus step
@@ -44,10 +42,12 @@ class LscRuntime(CallSequence, Stepping, Snapshot):
         self._dense = None  # _Interpolant of the solver's last step
 
         order_max = M.get("f_order_max", M["k"] + 2)
-        self.inputs = {u["name"]: _InputSignal(M["input_orders"].get(u["name"], -1), u["start"], order_max)
+        windows = M.get("input_windows", {})
+        self.inputs = {u["name"]: _InputSignal(M["input_orders"].get(u["name"], -1), u["start"], order_max,
+                                               window=windows.get(u["name"], 0.3))
                        for u in M.get("inputs", [])}
         # value reference -> input name (the fast set_real), -> state index (the fast get_real)
-        self._input_of_vr, self._state_of_vr = register_variables(self, slave, solver_start)
+        self._input_of_vr, self._state_of_vr = register_variables(self, slave)
         self._good_values = self._model_values()  # the build checked that these run
         self._fastest_rate = None
 
@@ -104,8 +104,14 @@ class LscRuntime(CallSequence, Stepping, Snapshot):
         self.inputs[name].value = float(value)
 
     def _check(self, name, value):
+        sparse = self.model.MODEL.get("sparse", False)
         if name == "method":
+            if sparse and value != METHODS.index("alternative"):
+                return "a sparse model has the alternative completion only (method 2)"
             return None if value in (0, 1, 2) else "method must be 0 (standard), 1 (stabilized) or 2 (alternative)"
+        if name == "solver" and sparse and value not in (SOLVERS.index("RK45"), SOLVERS.index("DOP853")):
+            return (f"a sparse model (n = {self.n}) takes solver 0 (RK45) or 1 (DOP853): its completion is an operator "
+                    "applied through sparse factorizations, and solvers 2..5 need G as an n x n matrix")
         if name == "solver":
             if value == EXACT and not self.exact_capable:
                 return "solver 4 (exact) needs constant coefficients A and B; use 0..3 or 5"
@@ -122,6 +128,11 @@ class LscRuntime(CallSequence, Stepping, Snapshot):
 
     def _log_error(self, msg):
         self._log(msg)
+
+    def _log_info(self, msg):
+        from pythonfmu.enums import Fmi2Status
+
+        self.slave.log(msg, status=Fmi2Status.ok, category="logAll")
 
     def _log(self, msg, warning=False):
         from pythonfmu.enums import Fmi2Status
@@ -171,10 +182,13 @@ class LscRuntime(CallSequence, Stepping, Snapshot):
                 # the generated code takes the input jets [u, u', ...] estimated at t as a 4th argument
                 return JetCallable(lambda t, order: jet_fn(t, params, order, {n: s.jet(t) for n, s in inputs.items()}))
 
-            A = with_inputs(model.A_jet) if M.get("A_inputs") else coefficient(model.A_jet, M["A_varies"])
-            B = with_inputs(model.B_jet) if M.get("B_inputs") else coefficient(model.B_jet, M["B_varies"])
-            f = with_inputs(model.f_jet) if inputs else coefficient(model.f_jet, M["f_varies"])
-            dae = LinearDAE(A, B, f)
+            if M.get("sparse"):
+                dae = self._sparse_dae()
+            else:
+                A = with_inputs(model.A_jet) if M.get("A_inputs") else coefficient(model.A_jet, M["A_varies"])
+                B = with_inputs(model.B_jet) if M.get("B_inputs") else coefficient(model.B_jet, M["B_varies"])
+                f = with_inputs(model.f_jet) if inputs else coefficient(model.f_jet, M["f_varies"])
+                dae = LinearDAE(A, B, f)
             span = (M["start"], M["stop"]) if not dae.is_constant else None
             if M.get("A_inputs") or M.get("B_inputs"):
                 # Inputs are known only up to now (beyond, the estimate is an extrapolation), so
@@ -187,6 +201,23 @@ class LscRuntime(CallSequence, Stepping, Snapshot):
         self._dirty = False
         self._good_values = self._model_values()
         return self._completion
+
+    def _sparse_dae(self):
+        """The sparse model's DAE: scipy.sparse ``A``, ``B``; ``f = f0 + B_u u`` with the inputs' estimated jets."""
+        A, B, B_u, f0 = self.model.sparse_data()
+        if B_u is None:
+            return LinearDAE(A, B, f0)
+        inputs = list(self.inputs.values())  # in the order of B_u's columns (u[1], u[2], ...)
+
+        def jet(t, order):
+            U = np.array([s.jet(t)[: order + 1] for s in inputs]).reshape(len(inputs), -1)
+            out = np.zeros((order + 1, A.shape[0]))
+            out[: U.shape[1]] = (B_u @ U).T
+            if f0 is not None:
+                out[0] += f0
+            return out
+
+        return LinearDAE(A, B, JetCallable(jet))
 
     def _output(self, function):
         """A custom output at the current time, state, parameters and latest input values."""

@@ -14,8 +14,8 @@ except ImportError:
     from scipy.integrate import BDF, DOP853, RK45, Radau
 
 try:  # inside a built FMU this package sits in the private copy of lsc
-    from .. import ExactPropagator, JetCallable, LinearDAE, complete
+    from .. import COMPLETIONS, ExactPropagator, JetCallable, LinearDAE, complete
 except ImportError:  # imported from fmu_build itself (documentation, tests)
-    from lsc import ExactPropagator, JetCallable, LinearDAE, complete
+    from lsc import COMPLETIONS, ExactPropagator, JetCallable, LinearDAE, complete
 
-__all__ = ["BDF", "DOP853", "RK45", "Radau", "LinearDAE", "complete", "ExactPropagator", "JetCallable"]
+__all__ = ["BDF", "DOP853", "RK45", "Radau", "LinearDAE", "complete", "ExactPropagator", "JetCallable", "COMPLETIONS"]

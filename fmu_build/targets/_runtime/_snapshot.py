@@ -15,7 +15,7 @@ class Snapshot:
         self._magnus_history.clear()
         return {"model": self.model.MODEL.get("build"), "t": self.t, "x": self.x.tolist(), "values": dict(self.values),
                 "errors": dict(self.errors), "t_stop": self.t_stop,
-                "inputs": {n: {"value": s.value, "history": [list(h) for h in s.history]} for n, s in self.inputs.items()}}
+                "inputs": {n: s.state() for n, s in self.inputs.items()}}
 
     def check_state(self, state):
         """Why `state` cannot be restored in this FMU (a message), or None."""
@@ -49,10 +49,10 @@ class Snapshot:
         inputs = state["inputs"]
         if not isinstance(inputs, dict) or set(inputs) != set(self.inputs):
             return "its inputs are not this FMU's"
-        for saved in inputs.values():
-            if not (isinstance(saved, dict) and finite(saved.get("value")) and isinstance(saved.get("history"), list)
-                    and all(isinstance(h, list) and len(h) == 2 and all(finite(v) for v in h) for h in saved["history"])):
-                return "its input history is malformed"
+        for name, saved in inputs.items():
+            problem = self.inputs[name].check(saved)
+            if problem:
+                return problem
         return None
 
     def set_state(self, state):
@@ -68,15 +68,7 @@ class Snapshot:
         self.errors = dict(state["errors"])
         self.t_stop = float(state["t_stop"])
         for name, saved in state.get("inputs", {}).items():
-            signal = self.inputs[name]
-            signal.value = saved["value"]
-            signal.history = [tuple(h) for h in saved["history"]]
-            signal._derivs = None
-            if signal.history:  # rebuild the polynomial from the saved points
-                last_t, last_v = signal.history.pop()
-                current, signal.value = signal.value, last_v
-                signal.record(last_t)
-                signal.value = current
+            self.inputs[name].restore(saved)
         self._solver = None
         self._magnus_history.clear()
         self._dirty = True

@@ -30,6 +30,8 @@ class Stepping:
     def _solver_name(self, c, h):
         """The solver asked for, or Radau where an explicit one would be limited by stability (logged)."""
         name = SOLVERS[self.values["solver"]]
+        if self.model.MODEL.get("sparse"):  # no implicit solver takes the operator (the explicit one asked runs)
+            return name
         if name in ("RK45", "DOP853") and h > 0:
             try:
                 stiffness = self._fastest(c) * h
