@@ -44,9 +44,12 @@ Masters
 Errors are ``max |y - y*| / max |y*|`` over the communication points and the listed outputs, against
 the monolithic solution. Every setting is stated in the report.
 
-Run: ``python examples/bench_master_peers.py [--quick] [--only SCENARIO] [--out DIR] [--docs]``
-(``--quick``: the chain only, short, one run per master; ``--docs``: the report and figure to
-docs/_generated/bench_master_peers.*). libcosimpy (``pip install -e ".[cosim]"``) and gcc are needed.
+Run: ``python examples/bench_master_peers.py [--full | --quick] [--only SCENARIO] [--out DIR] [--docs]``.
+The default runs every scenario at two or three settings per master (a few minutes on two cores);
+``--full`` at the settings listed in each scenario (down to tolerances where the zero-order-hold
+masters take hundreds of thousands of steps: tens of minutes); ``--quick`` the chain only on [0, 2],
+one run per master (the test's case). ``--docs``: the report and figure to
+docs/_generated/bench_master_peers.* instead of out/. libcosimpy (``pip install -e ".[cosim]"``) and gcc are needed.
 """
 
 import os
@@ -55,6 +58,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
 import contextlib  # noqa: E402
+import importlib.util  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import platform  # noqa: E402
@@ -78,7 +82,7 @@ import plants  # noqa: E402
 
 TARGET = 1e-6  # the error at which the FMU calls are compared
 
-# -- the chain: masses 1, 2, 3 on springs k0 (wall), k1, k2, k3 (wall) with dampers c0 ... c3 ---------------------------
+# -- the chain: masses 1, 2, 3 on springs k0 (wall), k1, k2, k3 (wall) with dampers c0 ... c3 ---------------------
 MASSES = (1.0, 0.5, 1.0)
 SPRINGS = (4.0, 10.0, 6.0, 2.0)
 DAMPERS = (0.1, 0.3, 0.2, 0.05)
@@ -168,15 +172,19 @@ class Scenario:
     """
 
     def __init__(self, name, title, build, reference, outputs, bonds, stop_time, h0, max_step, ours, control, fixed,
-                 ecco, zoh, start_values=None, quick=None):
+                 ecco, zoh, start_values=None, quick=None, default=None):
         self.name, self.title, self.build, self.reference = name, title, build, reference
         self.outputs, self.bonds, self.stop_time, self.h0, self.max_step = outputs, bonds, stop_time, h0, max_step
         self.ours, self.control, self.fixed, self.ecco, self.zoh = ours, control, fixed, ecco, zoh
         self.start_values = dict(start_values or {})
-        self.quick = quick or {}
+        self.sizes = {"quick": quick or {}, "default": default or {}, "full": {}}
         t = np.linspace(0.0, stop_time, 2001)
         self._amplitude = None
         self._grid = t
+
+    def settings(self, key, size):
+        """The settings ``key`` (``"control"``, ``"fixed"``, ``"ecco"``, ``"zoh"``) of a run of this ``size``."""
+        return self.sizes[size].get(key, getattr(self, key))
 
     @property
     def amplitude(self):
@@ -201,24 +209,28 @@ SCENARIOS = {
         [("A.v", "A.F", "B.F1", "B.v1"), ("C.v", "C.F", "B.F3", "B.v3")], 10.0, 0.01, 0.5,
         {"extrapolation": 2}, [1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8], [0.04, 0.02, 0.01, 0.005],
         [1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8], [1e-1, 1e-2, 1e-3],
-        quick={"stop_time": 2.0, "control": [1e-5], "fixed": [0.01], "ecco": [1e-4], "zoh": [1e-2]}),
+        quick={"stop_time": 2.0, "control": [1e-5], "fixed": [0.01], "ecco": [1e-4], "zoh": [1e-2]},
+        default={"control": [1e-4, 1e-6, 1e-8], "fixed": [0.02, 0.005], "ecco": [1e-3, 1e-5, 1e-7]}),
     "chain-values": Scenario(
         "chain-values", "the same chain, FMUs without output derivatives or input interpolation",
         lambda dest: build_chain(dest, False), chain_reference, ["A.v", "C.v"],
         [("A.v", "A.F", "B.F1", "B.v1"), ("C.v", "C.F", "B.F3", "B.v3")], 10.0, 0.01, 0.5,
         {"extrapolation": 0}, [1e-1, 1e-2, 1e-3], [0.01, 0.001, 0.0001],
-        [1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8], [1e-1, 1e-2, 1e-3]),
+        [1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8], [1e-1, 1e-2, 1e-3],
+        default={"fixed": [0.01, 0.001], "ecco": [1e-3, 1e-5, 1e-7]}),
     "loop": Scenario(
         "loop", f"loop through a differentiated input (C lag, native follower, g = {LOOP_GAIN})",
         build_loop, loop_reference, ["plant.w", "dae.x2"], [("plant.w", "plant.u", "dae.x2", "dae.w")], 2.0, 0.01,
         0.5, {"algorithm": "jacobi", "extrapolation": 2, "lambda_per_step": 1.0},
         [1e-3, 1e-4, 1e-5, 1e-6, 1e-7], [0.04, 0.02, 0.01, 0.005], [1e-3, 1e-5, 1e-7], [1e-1, 1e-2, 1e-3],
-        start_values={"plant.substeps": 200.0}),
+        start_values={"plant.substeps": 200.0},
+        default={"control": [1e-3, 1e-5, 1e-7], "fixed": [0.04, 0.01]}),
     "path": Scenario(
         "path", "prescribed-path DAE FMU (index 3, native) driving a C mass-spring-damper",
         build_path, path_reference, ["plant.x", "plant.v"], [("plant.v", "plant.F", "dae.F", "dae.vm")], 10.0,
         0.01, 0.5, {"extrapolation": 2}, [1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8], [0.04, 0.02, 0.01, 0.005],
-        [1e-3, 1e-4, 1e-5, 1e-6, 1e-7], [1e-1, 1e-2, 1e-3], start_values={"plant.substeps": 200.0}),
+        [1e-3, 1e-4, 1e-5, 1e-6, 1e-7], [1e-1, 1e-2, 1e-3], start_values={"plant.substeps": 200.0},
+        default={"control": [1e-4, 1e-6, 1e-8], "fixed": [0.04, 0.01], "ecco": [1e-3, 1e-5, 1e-7]}),
 }
 
 # ECCO's settings: libcosim's own ECCO test (tests/ecco_algorithm_test.cpp: safety 0.99, change rate 0.2 ... 1.5,
@@ -230,6 +242,13 @@ ECCO_TEST = {"safety_factor": 0.99, "step_size": 1e-4, "min_step_size": 1e-6, "m
 ECCO_DEFAULTS = {"safety_factor": 0.8, "step_size": 0.01, "min_step_size": 1e-4, "max_step_size": 0.1,
                  "min_change_rate": 0.01, "max_change_rate": 0.2, "abs_tolerance": 1e-4, "rel_tolerance": 1e-4,
                  "p_gain": 0.2, "i_gain": 0.15}
+# the peers that no package registry installs: re-implemented from their sources (the classes below)
+NOT_INSTALLABLE = {
+    "OMSimulator (oms-mav, oms-mav2)": "its PyPI package is a source archive that downloads the OMSimulator binaries "
+                                       "from the OpenModelica build server while it installs (no wheel on PyPI)",
+    "MasterSim": "a C++ application with no package on PyPI",
+}
+ECCO_MISSING = "ECCO not run: libcosimpy is not installed (pip install -e \".[cosim]\")"
 KEEP_TRAJECTORIES = False  # rows keep the time and outputs of their run (set by --quick)
 PEER_MIN_STEP = 1e-8  # min_step of the re-implemented peers
 PEER_BUDGET = 400_000  # attempts a peer run may take (a zero-order hold at a tight tolerance needs millions)
@@ -427,7 +446,8 @@ class MasterSimDoubling(Peer):
             progress.update(t - t0)
 
 
-PEERS = {"oms-mav": (OmsMav, "jacobi"), "oms-mav2": (OmsMav2, "jacobi"), "MasterSim": (MasterSimDoubling, "gauss-seidel")}
+PEERS = {"oms-mav": (OmsMav, "jacobi"), "oms-mav2": (OmsMav2, "jacobi"),
+         "MasterSim": (MasterSimDoubling, "gauss-seidel")}
 
 
 @contextlib.contextmanager
@@ -471,20 +491,20 @@ def run_cosimulate(sc, system, master, setting, peer=None, **options):
                   [r[o] for o in sc.outputs], seconds=time.perf_counter() - t0, warnings=notes)
 
 
-def run_ours(sc, system, quick):
+def run_ours(sc, system, size):
     rows = []
-    for rtol in (sc.quick.get("control", sc.control) if quick else sc.control):
+    for rtol in sc.settings("control", size):
         rows.append(run_cosimulate(sc, system, "ours", f"step control, rtol = {rtol:g}", step_size=sc.h0,
                                    step_control=True, rtol=rtol, max_step=sc.max_step, **sc.ours))
-    for H in (sc.quick.get("fixed", sc.fixed) if quick else sc.fixed):
+    for H in sc.settings("fixed", size):
         rows.append(run_cosimulate(sc, system, "ours-fixed", f"H = {H:g}", step_size=H, **sc.ours))
     return rows
 
 
-def run_peers(sc, system, quick):
+def run_peers(sc, system, size):
     rows = []
     for name, (peer, algorithm) in PEERS.items():
-        for tol in (sc.quick.get("zoh", sc.zoh) if quick else sc.zoh):
+        for tol in sc.settings("zoh", size):
             atol = tol / 10 if name == "MasterSim" else tol  # MasterSim's defaults: relTol 1e-5, absTol 1e-6
             setting = f"rtol = {tol:g}" + (f", atol = {atol:g}" if name == "MasterSim" else "")
             rows.append(run_cosimulate(sc, system, name, setting, peer=peer, step_size=sc.h0, step_control=True,
@@ -538,14 +558,17 @@ for params in sc["runs"]:
 '''
 
 
-def run_ecco(sc, system, quick):
-    """ECCO at each tolerance of the scenario (one subprocess for all of them)."""
+def run_ecco(sc, system, size):
+    """ECCO at each tolerance of the scenario (one subprocess for all of them); none without libcosimpy."""
+    if importlib.util.find_spec("libcosimpy") is None:
+        print(f"  {ECCO_MISSING}", flush=True)
+        return []
     runs, settings = [], []
-    for tol in (sc.quick.get("ecco", sc.ecco) if quick else sc.ecco):
+    for tol in sc.settings("ecco", size):
         runs.append({**ECCO_TEST, "max_step_size": sc.max_step, "abs_tolerance": tol,
                      "rel_tolerance": tol})
         settings.append(f"libcosim test settings, tol = {tol:g}")
-    if not quick:
+    if size != "quick":
         runs.append(dict(ECCO_DEFAULTS))
         settings.append("libcosimpy EccoParams() defaults")
     job = {"components": system["components"], "connections": system["connections"], "bonds": sc.bonds,
@@ -601,9 +624,10 @@ def family_rows(rows, family):
     return [r for r in rows if r["master"] == family]
 
 
-def report(rows, scenarios, quick):
+def report(rows, scenarios, size):
+    flag = "" if size == "default" else f" --{size}"
     lines = [f"Measured {time.strftime('%Y-%m-%d')} on {platform.machine()} ({os.cpu_count()} cores), Python "
-             f"{platform.python_version()}; `python examples/bench_master_peers.py{' --quick' if quick else ''}`. "
+             f"{platform.python_version()}; `python examples/bench_master_peers.py{flag}`. "
              "FMU calls: `fmi2DoStep` calls summed over the FMUs, rolled-back attempts included. Error: "
              "`max |y - y*| / max |y*|` over the communication points and the listed outputs.", ""]
     lines += ["### FMU calls at an error of 1e-6", "",
@@ -627,16 +651,24 @@ def report(rows, scenarios, quick):
     for sc in scenarios:
         lines += [f"### {sc.name}: {sc.title}", "",
                   f"`[0, {sc.stop_time:g}]`, error in {', '.join(f'`{o}`' for o in sc.outputs)}; first step "
-                  f"{sc.h0:g} (ECCO: {ECCO_TEST['step_size']:g}), largest {sc.max_step:g} for every adaptive master.", "",
+                  f"{sc.h0:g} (ECCO: {ECCO_TEST['step_size']:g}), largest {sc.max_step:g} for every adaptive "
+                  "master.", "",
                   "| master | setting | macro steps | rejected | FMU calls | error | outcome |",
                   "|---|---|---|---|---|---|---|"]
         for r in rows:
             if r["scenario"] != sc.name:
                 continue
-            outcome = "ok" if r["success"] else r["message"][:110].replace("|", "/")
+            if not r["success"]:
+                outcome = "failed: " + r["message"][:110].replace("|", "/")
+            elif r["error"] > 1.0:  # the master's word is reported, and beside it what the reference says
+                outcome = "the master reports success; its error is above 1: diverged"
+            else:
+                outcome = "ok"
             lines.append(f"| {r['master']} | {r['setting']} | {r['steps']} | {r['rejected']} | {r['calls']} | "
                          f"{r['error']:.2e} | {outcome} |")
         lines.append("")
+    if not any(r["master"] == "ECCO" for r in rows):
+        lines += [f"{ECCO_MISSING}.", ""]
     lines += ["### Settings", "",
               f"- **ours**: `fmu_build.cosimulate` with " + "; ".join(
                   f"{sc.name}: `{', '.join(f'{k}={v!r}' for k, v in sc.ours.items())}`" for sc in scenarios)
@@ -651,7 +683,9 @@ def report(rows, scenarios, quick):
               "0.9, change 0.5 ... 1.5, error exponent 1/2, `atol = rtol` (see the classes `OmsMav`, `OmsMav2`).",
               f"- **MasterSim**: Gauss-Seidel with zero-order hold, step doubling, `atol = rtol / 10`, "
               f"`min_step = {PEER_MIN_STEP:g}`, scale `0.9 / err^(1/2)` within 0.2 ... 2 (class "
-              "`MasterSimDoubling`).", ""]
+              "`MasterSimDoubling`).",
+              "- **Not installed, re-implemented**: " + "; ".join(f"{k}: {v}" for k, v in NOT_INSTALLABLE.items())
+              + ".", ""]
     return "\n".join(lines)
 
 
@@ -682,7 +716,9 @@ def plot(rows, scenarios, path):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="the chain only, [0, 2], one run per master")
+    sizes = parser.add_mutually_exclusive_group()
+    sizes.add_argument("--quick", action="store_true", help="the chain only, [0, 2], one run per master")
+    sizes.add_argument("--full", action="store_true", help="every setting listed in the scenarios (tens of minutes)")
     parser.add_argument("--only", action="append", choices=sorted(SCENARIOS), help="this scenario only (repeatable)")
     parser.add_argument("--out", type=Path, help="write here instead of out/ (not with --docs)")
     parser.add_argument("--docs", action="store_true", help=HELP)
@@ -690,20 +726,20 @@ def main(argv=None):
                         help="write the report and figure of a saved run (its bench_master_peers.json), run nothing")
     args = parser.parse_args(argv)
     if args.docs and (args.quick or args.out or args.only):
-        parser.error("--docs regenerates the full report: no --quick, --out or --only with it")
-    if args.report and (args.quick or args.only):
-        parser.error("--report writes the report of the saved run as it is: no --quick or --only with it")
+        parser.error("--docs regenerates the report of every scenario: no --quick, --out or --only with it")
+    if args.report and (args.quick or args.full or args.only):
+        parser.error("--report writes the report of the saved run as it is: no --quick, --full or --only with it")
+    size = "quick" if args.quick else "full" if args.full else "default"
     names = args.only or (["chain"] if args.quick else list(SCENARIOS))
     scenarios = [SCENARIOS[n] for n in names]
     global KEEP_TRAJECTORIES
     KEEP_TRAJECTORIES = args.quick
-    if args.quick:
-        for sc in scenarios:
-            sc.stop_time = sc.quick.get("stop_time", sc.stop_time)
+    for sc in scenarios:
+        sc.stop_time = sc.sizes[size].get("stop_time", sc.stop_time)
     rows = []
     if args.report:
         saved = json.loads(args.report.read_text())
-        rows, args.quick = saved["rows"], saved.get("quick", False)
+        rows, size = saved["rows"], saved.get("size", "default")
         names = list(dict.fromkeys(r["scenario"] for r in rows))
         scenarios = [SCENARIOS[n] for n in names]
         for sc in scenarios:
@@ -713,10 +749,10 @@ def main(argv=None):
             for sc in scenarios:
                 print(f"{sc.name}: {sc.title}", flush=True)
                 system = sc.build(Path(tmp) / sc.name)
-                rows += run_ours(sc, system, args.quick)
-                rows += run_ecco(sc, system, args.quick)
-                rows += run_peers(sc, system, args.quick)
-    text = report(rows, scenarios, args.quick)
+                rows += run_ours(sc, system, size)
+                rows += run_ecco(sc, system, size)
+                rows += run_peers(sc, system, size)
+    text = report(rows, scenarios, size)
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
         md, png, raw = (args.out / f"bench_master_peers.{ext}" for ext in ("md", "png", "json"))
@@ -727,7 +763,7 @@ def main(argv=None):
     md.write_text(text + "\n")
     plot(rows, scenarios, png)
     if not args.report:
-        raw.write_text(json.dumps({"target": TARGET, "quick": args.quick, "rows": rows}, indent=None))
+        raw.write_text(json.dumps({"target": TARGET, "size": size, "rows": rows}, indent=None))
     print(text)
     for p in (md, png, raw):
         print(f"wrote {p}")
