@@ -129,10 +129,13 @@ def _package(dest, name, source_file, defines, xml):
     return out
 
 
-def _scalar_xml(name, description, variables, outputs, derivatives, interpolate, rollback):
+def _scalar_xml(name, description, variables, outputs, derivatives, interpolate, rollback, initial=None):
+    """``initial``: the ``(index, dependencies)`` of the initial unknowns (default: ``outputs``)."""
     flags = (f'canInterpolateInputs="{str(interpolate).lower()}" maxOutputDerivativeOrder="{2 if derivatives else 0}" '
              f'canGetAndSetFMUstate="{str(rollback).lower()}" canSerializeFMUstate="{str(rollback).lower()}"')
     unknowns = "".join(f'<Unknown index="{i}" dependencies="{deps}"/>' for i, deps in outputs)
+    initial = unknowns if initial is None else "".join(f'<Unknown index="{i}" dependencies="{deps}"/>'
+                                                       for i, deps in initial)
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{{{uuid.uuid4()}}}"
   description="{escape(description)}" generationTool="lsc examples/plants" numberOfEventIndicators="0">
@@ -140,7 +143,7 @@ def _scalar_xml(name, description, variables, outputs, derivatives, interpolate,
   <ModelVariables>
     {chr(10).join(variables)}
   </ModelVariables>
-  <ModelStructure><Outputs>{unknowns}</Outputs><InitialUnknowns>{unknowns}</InitialUnknowns></ModelStructure>
+  <ModelStructure><Outputs>{unknowns}</Outputs>{f"<InitialUnknowns>{initial}</InitialUnknowns>" if initial else ""}</ModelStructure>
 </fmiModelDescription>
 """
 
@@ -363,3 +366,45 @@ def build_typed_pair(dest):
                                                     canSerializeFMUstate=True))
         sys.modules.pop(name, None)
     return paths["Counter"], paths["Sink"]
+
+
+def _c_array(rows):
+    return ", ".join(repr(float(v)) for row in rows for v in (row if hasattr(row, "__len__") else [row]))
+
+
+def build_lti(dest, name, A, B, C, D, x0, inputs, outputs, derivatives=True, interpolate=True, rollback=True,
+              description="linear block x' = A x + B u, y = C x + D u"):
+    """A C FMU ``dest/name.fmu`` of ``x' = A x + B u, y = C x + D u`` (source: ``lti.c``), stepped exactly
+    for the received input polynomial (so every error of a co-simulation with it is the master's).
+
+    ``inputs``, ``outputs``: the variables' names; an output depends directly on the inputs whose column
+    of ``D`` is nonzero in its row (declared in the model structure). ``derivatives``: output derivatives
+    of orders 1 and 2 (``maxOutputDerivativeOrder = 2``); ``interpolate``: ``canInterpolateInputs``;
+    ``rollback``: ``canGetAndSetFMUstate``. The Integer output ``nDoStep`` counts the fmi2DoStep calls.
+    """
+    import numpy as np
+
+    A, B, C, D = (np.atleast_2d(np.asarray(M, dtype=float)) for M in (A, B, C, D))
+    nx, nu, ny = A.shape[0], len(inputs), len(outputs)
+    if A.shape != (nx, nx) or B.shape != (nx, nu) or C.shape != (ny, nx) or D.shape != (ny, nu) or len(x0) != nx:
+        raise ValueError(f"`A`, `B`, `C`, `D`, `x0` must be ({nx}, {nx}), ({nx}, {nu}), ({ny}, {nx}), ({ny}, {nu}), "
+                         f"({nx},); found {A.shape}, {B.shape}, {C.shape}, {D.shape}, ({len(x0)},).")
+    defines = [f"-DLTI_NX={nx}", f"-DLTI_NU={nu}", f"-DLTI_NY={ny}", f"-DLTI_A={_c_array(A)}",
+               f"-DLTI_B={_c_array(B)}", f"-DLTI_C={_c_array(C)}", f"-DLTI_D={_c_array(D)}",
+               f"-DLTI_X0={_c_array(x0)}"]
+    variables = [f'<ScalarVariable name="{escape(u)}" valueReference="{j}" causality="input" '
+                 f'variability="continuous"><Real start="0.0"/></ScalarVariable>' for j, u in enumerate(inputs)]
+    y0 = C @ np.asarray(x0, dtype=float)
+    variables += [f'<ScalarVariable name="{escape(y)}" valueReference="{nu + i}" causality="output" '
+                  f'variability="continuous" initial="exact"><Real start="{float(y0[i])!r}"/></ScalarVariable>'
+                  if not D[i].any() else
+                  f'<ScalarVariable name="{escape(y)}" valueReference="{nu + i}" causality="output" '
+                  f'variability="continuous"><Real/></ScalarVariable>' for i, y in enumerate(outputs)]
+    variables.append('<ScalarVariable name="nDoStep" valueReference="0" causality="output" variability="discrete" '
+                     'initial="exact"><Integer start="0"/></ScalarVariable>')
+    outs = [(nu + i + 1, " ".join(str(j + 1) for j in range(nu) if D[i, j] != 0.0)) for i in range(ny)]
+    outs.append((nu + ny + 1, ""))
+    # outputs with a start value (no feedthrough) are known before initialization; the others are computed
+    initial = [(index, deps) for (index, deps), i in zip(outs, range(ny)) if D[i].any()]
+    xml = _scalar_xml(name, description, variables, outs, derivatives, interpolate, rollback, initial)
+    return _package(dest, name, "lti.c", defines, xml)
