@@ -1,0 +1,142 @@
+"""fmu_build.cosim under attack: runs that must end with the right answer or ``success=False``.
+
+The partners are small C FMUs generated here from C expressions (examples/plants/expression.c):
+sources ``y = expr(t)``, algebraic loops ``z = g(t) u + 1`` whose gain changes with time, FMUs that
+return NaN. Every run is in a fresh Python (``attempt``), so a crash of the host is a failed test,
+not a lost session; references are exact.
+"""
+import shutil
+import sys
+
+import numpy as np
+import pytest
+
+from test_cosim import PLANTS
+from test_cosim_attacks import attempt
+
+pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="the test FMUs are compiled with gcc")
+sys.path.insert(0, str(PLANTS))
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory):
+    import plants
+
+    d = tmp_path_factory.mktemp("attack2_fmus")
+    build = plants.build_expression_fmu
+    out = {
+        # z = g(t) u + 1 fed back to u: the loop's exact value is 1 / (1 - g(t))
+        "grows": build(d, "Grows", {"z": "(0.5 + 0.6 * t) * U(0) + 1.0"}, inputs=["u"]),
+        "swings": build(d, "Swings", {"z": "(-0.5 - t) * U(0) + 1.0"}, inputs=["u"]),
+        "plus": build(d, "Plus", {"y": "U(0) + 1.0"}, inputs=["u"]),
+        "gain": build(d, "TimeGain", {"y": "(0.5 + 0.6 * t) * U(0)"}, inputs=["u"]),
+        "nan_late": build(d, "NanLate", {"y": "t > 0.5 ? NAN : t"}),
+        "lag": build(d, "Lag", {"y": "x[0]", "w": "t > 0.5 ? NAN : x[0]"}, inputs=["u"], states=[0.0],
+                     deriv="dx[0] = -x[0] + U(0);"),
+    }
+    return {k: str(v) for k, v in out.items()}
+
+
+def ends_or_is_right(got, check):
+    """The process lived and ended in time; the run is right (``check(out)``) or says success=False."""
+    assert not got["timeout"], "hang: still running at the timeout"
+    assert got["rc"] == 0, f"host process exit {got['rc']}: {got['stderr']}"
+    assert got["raised"] is None, got
+    out = got["out"]
+    if out["success"]:
+        check(out)
+    return out
+
+
+RUN = """
+r = cosimulate({system!r}, {stop!r}, {step!r}{extra})
+out = {{'success': bool(r.success), 'message': r.message, 't': r['time'].tolist(), 'v': r[{var!r}].tolist(),
+        'steps': int(r.steps)}}
+"""
+
+
+# -- algebraic loops whose gain changes during the run ------------------------------------------------
+
+def _loop_system(fmus, kind):
+    if kind == "self":
+        return {"components": {"a": fmus["grows"]}, "connections": [("a.z", "a.u")]}, "a.z"
+    return {"components": {"one": fmus["plus"], "g": fmus["gain"]},
+            "connections": [("one.y", "g.u"), ("g.y", "one.u")]}, "one.y"
+
+
+@pytest.mark.parametrize("kind", ["self", "two"])
+@pytest.mark.parametrize("algorithm,exchange", [("gauss-seidel", "ordered"), ("gauss-seidel", "simultaneous"),
+                                                ("jacobi", "ordered"), ("jacobi", "simultaneous")])
+def test_a_cut_loop_whose_gain_grows_past_one_is_not_success(fmus, kind, algorithm, exchange):
+    """z = (0.5 + 0.6 t) u + 1 fed back, cut (iterations=0): gain 0.5 at the start, 1 at t = 5/6, exact
+    z = 1 / (0.5 - 0.6 t) = -10 at t = 1. Found: success with z(1) = 28 ... 245 in every ordering and
+    exchange (the gain was measured at the start only; the cut recursion then grows monotonically,
+    which the divergence monitor, looking for swings, does not see)."""
+    system, var = _loop_system(fmus, kind)
+    got = attempt(RUN.format(system=system, stop=1.0, step=0.01, var=var,
+                             extra=f", algorithm={algorithm!r}, exchange={exchange!r}, output=[{var!r}]"))
+
+    def check(out):
+        t, z = np.array(out["t"]), np.array(out["v"])
+        exact = 1.0 / (0.5 - 0.6 * t)
+        assert np.max(np.abs(z - exact) / np.abs(exact)) < 0.05, (z[-1], exact[-1])
+
+    out = ends_or_is_right(got, check)
+    if not out["success"]:
+        assert "gain" in out["message"] and "loop" in out["message"], out["message"]
+        assert 0.8 <= out["t"][-1] <= 0.9, out["t"][-1]  # stopped where the gain reaches 1, not before
+
+
+def test_a_cut_loop_whose_gain_falls_below_minus_one_is_not_success(fmus):
+    """z = (-0.5 - t) u + 1 fed back to itself: gain -1 at t = 0.5. Found: success with z(1) = 1.7e8
+    against 0.4 (two passes per Gauss-Seidel step make the recursion's gain g^2 > 0: no swing)."""
+    system = {"components": {"a": fmus["swings"]}, "connections": [("a.z", "a.u")]}
+    got = attempt(RUN.format(system=system, stop=1.0, step=0.01, var="a.z", extra=""))
+
+    def check(out):
+        t, z = np.array(out["t"]), np.array(out["v"])
+        assert np.max(np.abs(z - 1.0 / (1.5 + t))) < 0.05 * 0.4, z[-1]
+
+    out = ends_or_is_right(got, check)
+    if not out["success"]:
+        assert "gain" in out["message"] and out["t"][-1] <= 0.6, (out["message"], out["t"][-1])
+
+
+def test_step_control_on_a_time_varying_algebraic_loop_ends_in_time_within_the_tolerance(fmus):
+    """The same loop (gain 0.5 ... 0.8 on [0, 0.5]) under step control at rtol 1e-6. Found: cut, its
+    error is O(H), so the control took steps of 1e-6 (11,456 steps for [0, 0.01]; [0, 0.05] did not end
+    in 60 s)."""
+    system, var = _loop_system(fmus, "self")
+    got = attempt(RUN.format(system=system, stop=0.5, step=0.01, var=var,
+                             extra=", step_control=True, rtol=1e-6, atol=1e-6"), timeout=60)
+
+    def check(out):
+        t, z = np.array(out["t"]), np.array(out["v"])
+        exact = 1.0 / (0.5 - 0.6 * t)
+        assert np.max(np.abs(z - exact)) <= 10 * 1e-6 * np.max(np.abs(exact)), np.max(np.abs(z - exact))
+        assert out["steps"] < 1000, out["steps"]
+
+    ends_or_is_right(got, check)
+
+
+# -- non-finite values ------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("step_control", [False, True])
+def test_a_recorded_output_that_becomes_nan_is_not_success(fmus, step_control):
+    """A recorded (not connected) output turns NaN at t > 0.5. Found: success=True with NaN rows (the
+    coupling values are checked, the recorded ones were not)."""
+    system = {"components": {"a": fmus["nan_late"]}, "connections": []}
+    got = attempt(RUN.format(system=system, stop=1.0, step=0.1, var="a.y",
+                             extra=f", output=['a.y'], step_control={step_control}, rtol=1e-3"))
+    out = ends_or_is_right(got, lambda out: pytest.fail("success with NaN values" if np.isnan(out["v"]).any()
+                                                        else "NaN never recorded"))
+    assert "a.y" in out["message"] and "nan" in out["message"].lower(), out["message"]
+    assert np.isfinite(out["v"]).all() and 0.5 <= out["t"][-1] <= 0.6 + 1e-12, (out["t"][-1], out["message"])
+
+
+def test_a_recorded_output_of_a_plant_that_becomes_nan_is_not_success(fmus):
+    """The same for a recorded output of a plant fed by a source (y connected, w recorded)."""
+    system = {"components": {"src": fmus["plus"], "lag": fmus["lag"]}, "connections": [("src.y", "lag.u")]}
+    got = attempt(RUN.format(system=system, stop=1.0, step=0.1, var="lag.w", extra=", output=['lag.w']"))
+    out = ends_or_is_right(got, lambda out: pytest.fail("success with NaN values"))
+    assert "lag.w" in out["message"], out["message"]
