@@ -122,6 +122,7 @@ class Run:
         history: what the step's produced values are measured against."""
         coupling, history, names = self.coupling, self.history, self.layout.names
         value, real = coupling.value, self.layout.real
+        self.loops.check_cuts(t)  # a cut loop's gain may have reached 1 since the last step
         hold = value.copy()
         band = self.band(t, H)
         jet, has = band.jet, band.has
