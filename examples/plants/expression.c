@@ -11,8 +11,8 @@
  * Runge-Kutta 4 on substeps of at most EX_SUBSTEP (its error is far below the tests' tolerances for the
  * smooth right-hand sides they use). EX_DISCARD(t, h) is a condition under which fmi2DoStep returns
  * fmi2Discard (the state unchanged). Value references: inputs 0..2, outputs 10..12, parameters
- * 20..23 (tunable Reals P(0..3)). State get/set always work; the model description declares them as
- * asked. Every FMI call with a bad argument returns fmi2Error with a logged reason.
+ * 20..23 (tunable Reals P(0..3)). State get/set always work (EX_FAKE_ROLLBACK=1: fmi2SetFMUstate
+ * returns fmi2OK and restores nothing, a broken FMU); the model description declares them as asked. Every FMI call with a bad argument returns fmi2Error with a logged reason.
  */
 #include <math.h>
 #include <stdarg.h>
@@ -75,6 +75,9 @@
 #endif
 #ifndef EX_DISCARD
 #define EX_DISCARD(t, h) 0
+#endif
+#ifndef EX_FAKE_ROLLBACK
+#define EX_FAKE_ROLLBACK 0
 #endif
 #ifndef EX_SUBSTEP
 #define EX_SUBSTEP 1e-3
@@ -304,6 +307,7 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state) {
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
     if (!state) return fmi2Error;
+    if (EX_FAKE_ROLLBACK) return fmi2OK; /* a broken FMU: reports success and restores nothing */
     ((Expr *)c)->s = *(State *)state;
     return fmi2OK;
 }

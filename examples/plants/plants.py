@@ -366,7 +366,8 @@ def build_typed_pair(dest):
 
 
 def build_expression_fmu(dest, name, outputs, inputs=(), states=(), deriv="", derivatives=None, dependencies=None,
-                         parameters=None, interpolate=True, rollback=True, discard=None, substep=1e-3):
+                         parameters=None, interpolate=True, rollback=True, discard=None, substep=1e-3,
+                         fake_rollback=False):
     """A C FMU ``dest/name.fmu`` (source: ``expression.c``) whose behaviour is given by C expressions.
 
     ``outputs``: ``{name: expression}`` (at most 3) of ``t``, the states ``x[i]``, the inputs ``U(i)``
@@ -378,7 +379,8 @@ def build_expression_fmu(dest, name, outputs, inputs=(), states=(), deriv="", de
     ``{output: [inputs]}`` as declared in the model description (default: every input for an output whose
     expression reads ``U(``, else none; ``None`` as a value: the attribute left out); ``parameters``:
     ``{name: start}`` (at most 4, tunable); ``discard``: a C condition of ``t`` and ``h`` under which a
-    step is discarded; ``interpolate``, ``rollback``: ``canInterpolateInputs``, ``canGetAndSetFMUstate``.
+    step is discarded; ``interpolate``, ``rollback``: ``canInterpolateInputs``, ``canGetAndSetFMUstate``;
+    ``fake_rollback``: ``fmi2SetFMUstate`` returns fmi2OK and restores nothing (a broken FMU).
     """
     inputs, names = list(inputs), list(outputs)
     parameters = dict(parameters or {})
@@ -389,7 +391,7 @@ def build_expression_fmu(dest, name, outputs, inputs=(), states=(), deriv="", de
                "-DEX_X0=" + (",".join(repr(float(v)) for v in states) or "0.0"),
                "-DEX_P0=" + ",".join(repr(float(v)) for v in (list(parameters.values()) + [0.0] * 4)[:4]),
                f"-DEX_DERIV={deriv}", f"-DEX_SUBSTEP={float(substep)!r}",
-               f"-DEX_DERIVATIVES={2 if derivatives else 0}",
+               f"-DEX_DERIVATIVES={2 if derivatives else 0}", f"-DEX_FAKE_ROLLBACK={int(bool(fake_rollback))}",
                f"-DEX_HASD={sum(1 << k for k, n in enumerate(names) if n in derivatives)}"]
     for k, n in enumerate(names):
         defines.append(f"-DEX_Y{k}=({outputs[n]})")
