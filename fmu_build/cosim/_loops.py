@@ -1,8 +1,8 @@
 """Fixed points of a communication point: algebraic loops of values, and loops of output derivatives.
 
-An algebraic loop (a cycle of direct feedthrough) is cut at one connection per loop: with the value
-``x`` given to the cut input, one pass of the exchange plan produces the loop's new value ``G(x)`` at
-the cut's source. A consistent exchange is a fixed point ``x = G(x)``; near it ``G(x) - x`` behaves
+An algebraic loop (a strongly connected set of direct feedthrough) is cut at one connection per cycle
+(a loop of several cycles through one output needs a cut on each): with the values ``x`` given to the
+cut inputs, one pass of the exchange plan produces the loop's new values ``G(x)`` at the cuts' sources. A consistent exchange is a fixed point ``x = G(x)``; near it ``G(x) - x`` behaves
 like ``(g - 1)(x - x*)`` with ``g = dG/dx`` the loop gain (for a loop of several variables, the product
 of the gains around it). Plain repetition converges only for ``|g| < 1``, at the rate ``|g|`` per pass
 (0.999: thousands of passes); the master uses Anderson acceleration, which for a linear loop of ``m``
@@ -114,10 +114,7 @@ class LoopSolver:
         fp = self.solve(t, self.iterations or MAX_SWEEPS)
         one_pass = self._pass(t)
         if self.layout.real[self.slots].all():
-            # a cut per loop and the loops in topological order: the Jacobian is triangular, its diagonal
-            # holds each loop's gain
-            for (loop, _), g in zip(self.layout.cuts, np.diag(jacobian(one_pass, fp.x, fp.gx))):
-                self.gains[loop] = float(g)
+            self.gains = self._loop_gains(jacobian(one_pass, fp.x, fp.gx))
             one_pass(fp.x)  # the FMUs back at the solution
             if any(abs(1.0 - g) < 0.1 for g in self.gains):  # within the tolerance of the distance, not of the step
                 self.solve(t, self.iterations or MAX_SWEEPS)
@@ -136,11 +133,22 @@ class LoopSolver:
         saved = value.copy()
         one_pass = self._pass(t)
         x = saved[self.slots].copy()
-        gains = [np.nan] * len(self.layout.loops)
-        for (loop, _), g in zip(self.layout.cuts, np.diag(jacobian(one_pass, x, one_pass(x)))):
-            gains[loop] = float(g)
+        gains = self._loop_gains(jacobian(one_pass, x, one_pass(x)))
         value[:] = saved
         self._refuse(gains, t)
+
+    def _loop_gains(self, J):
+        """Each loop's gain from the Jacobian ``J`` of one pass in the cut values: no pass leads from one loop
+        back into another, so a loop's gain is the eigenvalue of largest magnitude of its own block (the
+        block's one entry for a loop cut once), signed when it is real."""
+        gains = [np.nan] * len(self.layout.loops)
+        of = np.array([loop for loop, _ in self.layout.cuts])
+        for loop in sorted(set(of.tolist())):
+            idx = np.flatnonzero(of == loop)
+            ev = np.linalg.eigvals(J[np.ix_(idx, idx)])
+            top = ev[int(np.argmax(np.abs(ev)))]
+            gains[loop] = float(top.real) if abs(top.imag) <= 1e-12 * abs(top) else float(abs(top))
+        return gains
 
     def _refuse(self, gains, t):
         for loop, _ in self.layout.cuts:
