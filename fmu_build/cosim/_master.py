@@ -79,7 +79,9 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         Bounds of the controlled step (default ``1e-12 * step_size`` and the
         whole interval); a step the control would make smaller than
         ``min_step``, or a pace that would take more than 1e7 steps, ends the
-        run with ``success=False``.
+        run with ``success=False``. Values are seen at communication points
+        only: a change that starts and ends inside one step (a short pulse)
+        is not seen; bound ``max_step`` below the shortest such event.
     max_input_order : int, optional
         Highest input-derivative order sent to an FMU that interpolates
         (default: every order the master has, the sources' exact derivatives
