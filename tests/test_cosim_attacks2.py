@@ -37,6 +37,9 @@ def fmus(tmp_path_factory):
         "two": build(d, "Two", {"z": "P(0) * U(0) + P(0) * U(1) + 1.0"}, inputs=["u1", "u2"],
                      parameters={"g": 0.3}),
         "pass": build(d, "Pass", {"y": "U(0)"}, inputs=["u"]),
+        # fmi2DoStep returns fmi2Discard (state unchanged) for steps longer than 0.05
+        "sin_short": build(d, "SinShort", {"y": "sin(t)"}, derivatives={"y": ("cos(t)", "-sin(t)")},
+                           discard="h > 0.05"),
         "sin": build(d, "Sin", {"y": "sin(t)"}, derivatives={"y": ("cos(t)", "-sin(t)")}),
         # declares canGetAndSetFMUstate; its fmi2SetFMUstate returns fmi2OK and restores nothing
         "fake_rollback": build(d, "LagFake", {"y": "x[0]"}, inputs=["u"], states=[0.0],
@@ -195,3 +198,29 @@ def test_an_fmu_whose_rollback_restores_nothing_is_not_success(fmus, extra):
     out = ends_or_is_right(got, check)
     if not out["success"]:
         assert "fmi2SetFMUstate" in out["message"] and "lag" in out["message"], out["message"]
+
+
+@pytest.mark.parametrize("rollback", [True, False])
+def test_step_control_repeats_a_discarded_step_smaller(fmus, tmp_path, rollback):
+    """sin(t) whose fmi2DoStep returns fmi2Discard for steps over 0.05 -> lag, step control from a first
+    step of 0.1. Found: 'fmi2DoStep ... failed (discard)' at t = 0 although every FMU can roll back (FMI
+    2.0: the master decides whether to go on; a smaller step is what the FMU asks for). Without rollback
+    the run must still end with success=False naming the discard."""
+    import plants
+
+    lag = fmus["lag"] if rollback else str(plants.build_expression_fmu(
+        tmp_path, "LagNoRollback", {"y": "x[0]"}, inputs=["u"], states=[0.0], deriv="dx[0] = -x[0] + U(0);",
+        rollback=False))
+    system = {"components": {"src": fmus["sin_short"], "lag": lag}, "connections": [("src.y", "lag.u")]}
+    got = attempt(RUN.format(system=system, stop=3.0, step=0.1, var="lag.y",
+                             extra=", extrapolation=2, step_control=True, rtol=1e-4, output=['lag.y']"))
+
+    def check(out):
+        t, y = np.array(out["t"]), np.array(out["v"])
+        assert t[-1] == 3.0 and np.max(np.diff(t)) <= 0.05 + 1e-12
+        assert np.max(np.abs(y - 0.5 * (np.sin(t) - np.cos(t) + np.exp(-t)))) <= 10 * 1e-4
+
+    out = ends_or_is_right(got, check)
+    assert out["success"] == rollback, out["message"]
+    if not rollback:
+        assert "discard" in out["message"].lower(), out["message"]
