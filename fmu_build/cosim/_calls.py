@@ -1,6 +1,6 @@
 """FMI calls of a run: each failure stops the run with a message naming the component, variable and time."""
 
-from ._result import _Stop
+from ._result import _Discarded, _Stop
 
 
 class Calls:
@@ -28,6 +28,11 @@ class Calls:
         try:
             self.comps[n].fmu.doStep(currentCommunicationPoint=t_start, communicationStepSize=H)
         except FMICallException as exc:
+            if getattr(exc, "status", None) == 2:  # fmi2Discard: the FMU asks for another (smaller) step
+                try:
+                    self.fail(n, f"fmi2DoStep from t = {t_start!r} with the step {H!r} was discarded ({exc})", t_start)
+                except _Stop as stop:
+                    raise _Discarded(str(stop)) from None
             self.fail(n, f"fmi2DoStep from t = {t_start!r} failed ({exc})", t_start)
 
     def get(self, n, wire, refs, t_now):

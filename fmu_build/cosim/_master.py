@@ -72,7 +72,9 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         crossed (docs/cosimulation.md, 'Step control'); a rejected step is
         repeated smaller after rollback, or, if some FMU cannot roll back,
         kept with a warning (the estimate is then an indicator, and a step
-        kept beyond 10 times the tolerance ends the run).
+        kept beyond 10 times the tolerance ends the run). A step an FMU
+        discards (``fmi2Discard``) is repeated with half the step after
+        rollback.
     atol : float, optional
         Absolute tolerance (default ``rtol``).
     min_step, max_step : float, optional
