@@ -8,6 +8,8 @@
 - :func:`build_source`, :func:`build_scalar_plant`: scalar C FMUs (source: ``scalar.c``), a source
   ``y = expr(t)`` and a plant ``x' = a x + b u, y = x, z = c x + d u + e`` stepped exactly, each
   with or without output derivatives, input interpolation and rollback (test cases for the master).
+- :func:`build_expression_fmu`: a C FMU whose states, outputs and output derivatives are C expressions
+  (source: ``expression.c``), with optional discarded steps and a broken rollback (attack cases).
 - :func:`write_ssp`: an ``.ssp`` archive (``SystemStructure.ssd`` + the FMUs).
 """
 import os
