@@ -8,6 +8,8 @@
 - :func:`build_source`, :func:`build_scalar_plant`: scalar C FMUs (source: ``scalar.c``), a source
   ``y = expr(t)`` and a plant ``x' = a x + b u, y = x, z = c x + d u + e`` stepped exactly, each
   with or without output derivatives, input interpolation and rollback (test cases for the master).
+- :func:`build_expression_fmu`: a C FMU whose states, outputs and output derivatives are C expressions
+  (source: ``expression.c``), with optional discarded steps and a broken rollback (attack cases).
 - :func:`write_ssp`: an ``.ssp`` archive (``SystemStructure.ssd`` + the FMUs).
 """
 import os
@@ -408,3 +410,68 @@ def build_lti(dest, name, A, B, C, D, x0, inputs, outputs, derivatives=True, int
     initial = [(index, deps) for (index, deps), i in zip(outs, range(ny)) if D[i].any()]
     xml = _scalar_xml(name, description, variables, outs, derivatives, interpolate, rollback, initial)
     return _package(dest, name, "lti.c", defines, xml)
+
+
+def build_expression_fmu(dest, name, outputs, inputs=(), states=(), deriv="", derivatives=None, dependencies=None,
+                         parameters=None, interpolate=True, rollback=True, discard=None, substep=1e-3,
+                         fake_rollback=False):
+    """A C FMU ``dest/name.fmu`` (source: ``expression.c``) whose behaviour is given by C expressions.
+
+    ``outputs``: ``{name: expression}`` (at most 3) of ``t``, the states ``x[i]``, the inputs ``U(i)``
+    and the parameters ``P(i)``; ``inputs``: input names (at most 3); ``states``: the states' start
+    values; ``deriv``: C statements setting ``dx[i]`` (integrated by RK4 on substeps of at most
+    ``substep``, the inputs on the polynomial received); ``derivatives``: ``{output: (d1, d2)}``
+    expressions of the output's first and second derivatives (``DU(i, j)``: input ``i``'s derivative of
+    order ``j`` received; ``maxOutputDerivativeOrder = 2``, the other outputs refuse); ``dependencies``:
+    ``{output: [inputs]}`` as declared in the model description (default: every input for an output whose
+    expression reads ``U(``, else none; ``None`` as a value: the attribute left out); ``parameters``:
+    ``{name: start}`` (at most 4, tunable); ``discard``: a C condition of ``t`` and ``h`` under which a
+    step is discarded; ``interpolate``, ``rollback``: ``canInterpolateInputs``, ``canGetAndSetFMUstate``;
+    ``fake_rollback``: ``fmi2SetFMUstate`` returns fmi2OK and restores nothing (a broken FMU).
+    """
+    inputs, names = list(inputs), list(outputs)
+    parameters = dict(parameters or {})
+    derivatives = dict(derivatives or {})
+    if len(names) > 3 or len(inputs) > 3 or len(parameters) > 4 or len(states) > 4:
+        raise ValueError("at most 3 outputs, 3 inputs, 4 parameters and 4 states")
+    defines = [f"-DEX_NX={len(states)}", f"-DEX_NU={len(inputs)}", f"-DEX_NY={len(names)}",
+               "-DEX_X0=" + (",".join(repr(float(v)) for v in states) or "0.0"),
+               "-DEX_P0=" + ",".join(repr(float(v)) for v in (list(parameters.values()) + [0.0] * 4)[:4]),
+               f"-DEX_DERIV={deriv}", f"-DEX_SUBSTEP={float(substep)!r}",
+               f"-DEX_DERIVATIVES={2 if derivatives else 0}", f"-DEX_FAKE_ROLLBACK={int(bool(fake_rollback))}",
+               f"-DEX_HASD={sum(1 << k for k, n in enumerate(names) if n in derivatives)}"]
+    for k, n in enumerate(names):
+        defines.append(f"-DEX_Y{k}=({outputs[n]})")
+        if n in derivatives:
+            d1, d2 = derivatives[n]
+            defines += [f"-DEX_D1_{k}=({d1})", f"-DEX_D2_{k}=({d2})"]
+    if discard is not None:
+        defines.append(f"-DEX_DISCARD(t,h)=({discard})")
+    variables = [f'<ScalarVariable name="{escape(u)}" valueReference="{i}" causality="input" '
+                 'variability="continuous"><Real start="0.0"/></ScalarVariable>' for i, u in enumerate(inputs)]
+    variables += [f'<ScalarVariable name="{escape(n)}" valueReference="{10 + k}" causality="output" '
+                  'variability="continuous"><Real/></ScalarVariable>' for k, n in enumerate(names)]
+    variables += [f'<ScalarVariable name="{escape(n)}" valueReference="{20 + k}" causality="parameter" '
+                  f'variability="tunable"><Real start="{float(v)!r}"/></ScalarVariable>'
+                  for k, (n, v) in enumerate(parameters.items())]
+    unknowns = []
+    for k, n in enumerate(names):
+        deps = (dependencies or {}).get(n, inputs if "U(" in outputs[n] else [])
+        attr = "" if deps is None else f' dependencies="{" ".join(str(inputs.index(u) + 1) for u in deps)}"'
+        unknowns.append(f'<Unknown index="{len(inputs) + k + 1}"{attr}/>')
+    flags = (f'canInterpolateInputs="{str(bool(interpolate)).lower()}" '
+             f'maxOutputDerivativeOrder="{2 if derivatives else 0}" '
+             f'canGetAndSetFMUstate="{str(bool(rollback)).lower()}" '
+             f'canSerializeFMUstate="{str(bool(rollback)).lower()}"')
+    description = "; ".join(f"{n} = {e}" for n, e in outputs.items()) + (f"; {deriv}" if deriv else "")
+    xml = f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{{{uuid.uuid4()}}}"
+  description="{escape(description, {'"': '&quot;'})}" generationTool="lsc examples/plants" numberOfEventIndicators="0">
+  <CoSimulation modelIdentifier="{name}" canHandleVariableCommunicationStepSize="true" {flags}/>
+  <ModelVariables>
+    {chr(10).join(variables)}
+  </ModelVariables>
+  <ModelStructure><Outputs>{"".join(unknowns)}</Outputs></ModelStructure>
+</fmiModelDescription>
+"""
+    return _package(dest, name, "expression.c", defines, xml)

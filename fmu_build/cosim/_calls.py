@@ -1,6 +1,6 @@
 """FMI calls of a run: each failure stops the run with a message naming the component, variable and time."""
 
-from ._result import _Stop
+from ._result import _Discarded, _Stop
 
 
 class Calls:
@@ -45,6 +45,12 @@ class Calls:
         try:
             self.comps[n].fmu.doStep(currentCommunicationPoint=t_start, communicationStepSize=H)
         except FMICallException as exc:
+            if getattr(exc, "status", None) == 2:  # fmi2Discard / fmi3Discard: the FMU asks for another (smaller) step
+                try:
+                    self.fail(n, f"{self.name(n, 'DoStep')} from t = {t_start!r} with the step {H!r} was discarded "
+                                 f"({exc})", t_start)
+                except _Stop as stop:
+                    raise _Discarded(str(stop)) from None
             self.fail(n, f"{self.name(n, 'DoStep')} from t = {t_start!r} failed ({exc})", t_start)
 
     def get(self, n, wire, refs, t_now):

@@ -94,6 +94,12 @@ class Coupling:
                 items = [(ref, cv) for ref, w, cv in self.layout.extra_of[n] if w == wire]
                 got = self.calls.get(n, wire, [r for r, _ in items], t_now)
                 values.update({cv: x for (_, cv), x in zip(items, got)})
+                if wire != "Real":
+                    continue
+                for (_, cv), x in zip(items, got):
+                    # a computed value (an output or a local) that is no number is no answer
+                    if not math.isfinite(x) and self.layout.comps[n].variables[cv[1]].causality in ("output", "local"):
+                        self.calls.fail(n, f"non-finite recorded value {x!r}", t_now, cv[1])
         for i, k in enumerate(self.layout.watched):
             self.extras[i] = values[self.layout.extra[k]]
         return values

@@ -114,6 +114,7 @@ class OutputDerivatives:
 
             fp = anderson(sweep, d[known], tolerance, MAX_SWEEPS) if not settled or self.gain is None else None
             if fp is None:
+                self._drop_non_finite(d, t)
                 d[:, ~self.trusted] = np.nan
                 return d
             if not fp.converged:
@@ -123,8 +124,24 @@ class OutputDerivatives:
                 sweep(fp.x)  # the FMUs back at the fixed point
                 self._check_gain(known, t)
             d[known] = fp.gx
+        self._drop_non_finite(d, t)
         d[:, ~self.trusted] = np.nan
         return d
+
+    def _drop_non_finite(self, d, t):
+        """An FMU that gives output derivatives and returns one that is not finite: that output's derivatives
+        are no longer used, and the run says so (``dropped``, a warning), rather than take it for unknown."""
+        for n in self.layout.names:
+            top = min(self.nder, self.layout.comps[n].max_derivative)
+            for s, _ in self.derivable.get(n, []):
+                if self.trusted[s] and not np.all(np.isfinite(d[:top, s])):
+                    name = self.layout.name(s)
+                    self.trusted[s] = False
+                    self.dropped[name] = t
+                    message = (f"the output derivatives of {name} are not finite at t = {t!r} "
+                               f"({', '.join(repr(float(x)) for x in d[:top, s])}); the master no longer uses them")
+                    logger.warning(message)
+                    warnings.warn(message, RuntimeWarning, stacklevel=2)
 
     def _check_gain(self, known, t):
         """The derivatives are consistent at ``t``, but the values they belong to are still exchanged once per

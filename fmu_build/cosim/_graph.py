@@ -25,15 +25,16 @@ def _graph(components, connections):
                 edges.setdefault((b, out), [])
     sccs = _strongly_connected(edges)
     loops = [sorted(s) for s in sccs if len(s) > 1]
-    # cut connection edges inside a loop (the destination input then lags one exchange)
-    in_loop = {v: i for i, s in enumerate(loops) for v in s}
+    # cut connection edges until no cycle is left (the destination input then lags one exchange): a loop may
+    # hold several cycles, each needs a cut; on each cycle found the connection listed first is cut
+    rank = {((a, y), (b, u)): i for i, (a, y, b, u) in reversed(list(enumerate(connections)))}
     cut = set()
-    for a, y, b, u in connections:
-        if (a, y) in in_loop and in_loop.get((b, u)) == in_loop[(a, y)]:
-            cut.add(((a, y), (b, u)))
-            break_loop = in_loop.pop((a, y))
-            for v in [k for k, val in in_loop.items() if val == break_loop]:
-                in_loop.pop(v)
+    while True:
+        cycle = _cycle(edges, cut)
+        if cycle is None:
+            break
+        # every cycle holds a connection (an output's only successors are the inputs it feeds)
+        cut.add(min((e for e in zip(cycle, cycle[1:] + cycle[:1]) if e in rank), key=rank.get))
     # Kahn's topological sort on the rest
     indeg = {v: 0 for v in edges}
     for v, ws in edges.items():
@@ -51,9 +52,36 @@ def _graph(components, connections):
             indeg[w] -= 1
             if indeg[w] == 0:
                 ready.append(w)
-    if len(order) < len(edges):  # more than one cycle through one loop: fall back to any order
-        order += [v for v in edges if v not in order]
     return loops, order, cut
+
+
+def _cycle(edges, removed):
+    """A cycle (its nodes in order) of the graph ``edges`` without the edges ``removed``, or None (iterative
+    depth-first search)."""
+    state, parent = {}, {}  # state: 1 on the current path, 2 done
+    for root in edges:
+        if root in state:
+            continue
+        state[root] = 1
+        work = [(root, iter(edges[root]))]
+        while work:
+            node, it = work[-1]
+            for w in it:
+                if (node, w) in removed:
+                    continue
+                if state.get(w) == 1:  # a back edge: the path from w to node closes a cycle
+                    path = [node]
+                    while path[-1] != w:
+                        path.append(parent[path[-1]])
+                    return path[::-1]
+                if w not in state:
+                    state[w], parent[w] = 1, node
+                    work.append((w, iter(edges[w])))
+                    break
+            else:
+                state[node] = 2
+                work.pop()
+    return None
 
 
 def _strongly_connected(edges):

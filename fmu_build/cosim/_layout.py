@@ -58,7 +58,7 @@ class Layout:
         self._per_component()
         self._cycles()
         self.cuts = [(next(i for i, lp in enumerate(self.loops) if src in lp), self.slot[src])
-                     for src, _ in sorted(self.cut)]
+                     for src in sorted({src for src, _ in self.cut})]
 
     def name(self, s):
         """``"component.variable"`` of slot ``s``."""

@@ -1,8 +1,8 @@
 """Fixed points of a communication point: algebraic loops of values, and loops of output derivatives.
 
-An algebraic loop (a cycle of direct feedthrough) is cut at one connection per loop: with the value
-``x`` given to the cut input, one pass of the exchange plan produces the loop's new value ``G(x)`` at
-the cut's source. A consistent exchange is a fixed point ``x = G(x)``; near it ``G(x) - x`` behaves
+An algebraic loop (a strongly connected set of direct feedthrough) is cut at one connection per cycle
+(a loop of several cycles through one output needs a cut on each): with the values ``x`` given to the
+cut inputs, one pass of the exchange plan produces the loop's new values ``G(x)`` at the cuts' sources. A consistent exchange is a fixed point ``x = G(x)``; near it ``G(x) - x`` behaves
 like ``(g - 1)(x - x*)`` with ``g = dG/dx`` the loop gain (for a loop of several variables, the product
 of the gains around it). Plain repetition converges only for ``|g| < 1``, at the rate ``|g|`` per pass
 (0.999: thousands of passes); the master uses Anderson acceleration, which for a linear loop of ``m``
@@ -80,17 +80,21 @@ def jacobian(G, x, gx, scale=1e-6):
 class LoopSolver:
     """The algebraic loops at an exchange: solved (``iterations > 0``), or cut after a solved start.
 
-    Cut (``iterations = 0``, as libcosim and ecos do): at each exchange the cut input receives the value
-    of the previous exchange, a recursion ``e_(n+1) = g e_n`` per macro step; it is solved once at the
-    start (initialization may iterate without rollback), where its gain ``g`` is measured, and a run whose
-    cut loop has ``|g| >= 1`` stops there: its error would not decay.
+    Cut (``cut=True``: ``iterations = 0``, as libcosim and ecos do): at each exchange the cut input
+    receives the value of the previous exchange, a recursion ``e_(n+1) = g e_n`` per macro step; it is
+    solved once at the start (initialization may iterate without rollback), where its gain ``g`` is
+    measured, and a run whose cut loop has ``|g| >= 1`` stops there: its error would not decay. The gain
+    of a loop may change with time or with the state: it is measured again at every macro step's start
+    (``check_cuts``), and the run stops where it reaches 1.
     """
 
-    def __init__(self, layout, coupling, rtol, atol, iterations):
+    def __init__(self, layout, coupling, rtol, atol, iterations, cut=None):
         self.layout, self.coupling = layout, coupling
         self.rtol, self.atol, self.iterations = rtol, atol, iterations
+        self.cut = not iterations if cut is None else bool(cut)
         self.slots = np.array([s for _, s in layout.cuts], dtype=int)
         self.gains = [np.nan] * len(layout.loops)
+        self.checked = None  # the time of the last check of the cut loops' gains
 
     def tolerance(self, x):
         return 0.1 * (self.atol + self.rtol * np.abs(x))
@@ -110,17 +114,45 @@ class LoopSolver:
         fp = self.solve(t, self.iterations or MAX_SWEEPS)
         one_pass = self._pass(t)
         if self.layout.real[self.slots].all():
-            # a cut per loop and the loops in topological order: the Jacobian is triangular, its diagonal
-            # holds each loop's gain
-            for (loop, _), g in zip(self.layout.cuts, np.diag(jacobian(one_pass, fp.x, fp.gx))):
-                self.gains[loop] = float(g)
+            self.gains = self._loop_gains(jacobian(one_pass, fp.x, fp.gx))
             one_pass(fp.x)  # the FMUs back at the solution
             if any(abs(1.0 - g) < 0.1 for g in self.gains):  # within the tolerance of the distance, not of the step
                 self.solve(t, self.iterations or MAX_SWEEPS)
-        if self.iterations:
+        self.checked = t
+        if self.cut:
+            self._refuse(self.gains, t)
+
+    def check_cuts(self, t):
+        """At a macro step's start ``t``, before the inputs are set: the gain of every cut loop measured again
+        (one pass of the plan per cut and one more; the coupling values are put back, and every input a pass
+        set is set again for the step), and the run stopped if one has reached magnitude 1."""
+        if not self.cut or not len(self.slots) or t == self.checked or not self.layout.real[self.slots].all():
             return
+        self.checked = t
+        value = self.coupling.value
+        saved = value.copy()
+        one_pass = self._pass(t)
+        x = saved[self.slots].copy()
+        gains = self._loop_gains(jacobian(one_pass, x, one_pass(x)))
+        value[:] = saved
+        self._refuse(gains, t)
+
+    def _loop_gains(self, J):
+        """Each loop's gain from the Jacobian ``J`` of one pass in the cut values: no pass leads from one loop
+        back into another, so a loop's gain is the eigenvalue of largest magnitude of its own block (the
+        block's one entry for a loop cut once), signed when it is real."""
+        gains = [np.nan] * len(self.layout.loops)
+        of = np.array([loop for loop, _ in self.layout.cuts])
+        for loop in sorted(set(of.tolist())):
+            idx = np.flatnonzero(of == loop)
+            ev = np.linalg.eigvals(J[np.ix_(idx, idx)])
+            top = ev[int(np.argmax(np.abs(ev)))]
+            gains[loop] = float(top.real) if abs(top.imag) <= 1e-12 * abs(top) else float(abs(top))
+        return gains
+
+    def _refuse(self, gains, t):
         for loop, _ in self.layout.cuts:
-            g = self.gains[loop]
+            g = gains[loop]
             if np.isfinite(g) and abs(g) >= 1.0 - 1e-9:
                 raise _Stop(f"the algebraic loop through {', '.join(self.layout.loop_names[loop])} has the gain "
                             f"{g:.6g} (measured at t = {t!r}): cut (iterations=0), one connection takes the "

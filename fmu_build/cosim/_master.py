@@ -73,14 +73,18 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         crossed (docs/cosimulation.md, 'Step control'); a rejected step is
         repeated smaller after rollback, or, if some FMU cannot roll back,
         kept with a warning (the estimate is then an indicator, and a step
-        kept beyond 10 times the tolerance ends the run).
+        kept beyond 10 times the tolerance ends the run). A step an FMU
+        discards (``fmi2Discard``) is repeated with half the step after
+        rollback.
     atol : float, optional
         Absolute tolerance (default ``rtol``).
     min_step, max_step : float, optional
         Bounds of the controlled step (default ``1e-12 * step_size`` and the
         whole interval); a step the control would make smaller than
         ``min_step``, or a pace that would take more than 1e7 steps, ends the
-        run with ``success=False``.
+        run with ``success=False``. Values are seen at communication points
+        only: a change that starts and ends inside one step (a short pulse)
+        is not seen; bound ``max_step`` below the shortest such event.
     max_input_order : int, optional
         Highest input-derivative order sent to an FMU that interpolates
         (default: every order the master has, the sources' exact derivatives

@@ -83,3 +83,8 @@ class _Progress:
 
 class _Stop(Exception):
     """Ends the run: the message names the component, the variable and the time."""
+
+
+class _Discarded(_Stop):
+    """An FMU returned fmi2Discard from fmi2DoStep: the step was not taken; the run ends unless it can be
+    repeated smaller after a rollback (step control)."""

@@ -120,6 +120,7 @@ class Run:
         history: what the step's produced values are measured against."""
         coupling, history, names = self.coupling, self.history, self.layout.names
         value, real = coupling.value, self.layout.real
+        self.loops.check_cuts(t)  # a cut loop's gain may have reached 1 since the last step
         hold = value.copy()
         band = self.band(t, H)
         jet, has = band.jet, band.has
@@ -223,8 +224,31 @@ class Run:
 
     def restore(self, snap, t):
         self.rollback.restore(snap[0], t)
+        self._check_restored(snap, t)
         self.coupling.value[:] = snap[1]
         self.coupling.extras[:] = snap[2]
+
+    def _check_restored(self, snap, t):
+        """An FMU whose ``fmi2SetFMUstate`` returns OK but restores nothing would integrate every repeated step
+        twice: its outputs that depend on its state only (no direct feedthrough; connected or recorded) must
+        read again what they were when the state was saved."""
+        layout = self.layout
+        saved = {layout.sources[s]: snap[1][s] for s in range(len(layout.sources)) if layout.real[s]}
+        saved.update({layout.extra[k]: snap[2][i] for i, k in enumerate(layout.watched)})
+        for n in layout.names:
+            comp = layout.comps[n]
+            names = [v for (c, v) in saved if c == n and comp.variables[v].causality == "output"
+                     and not comp.feedthrough.get(v)]
+            if not names:
+                continue
+            got = self.calls.get(n, "Real", [comp.variables[v].valueReference for v in names], t)
+            for v, x in zip(names, got):
+                was = saved[(n, v)]
+                if not abs(x - was) <= 1e-12 * (1.0 + abs(was)):
+                    raise _Stop(f"fmi2SetFMUstate of {n} returned OK but did not restore the state saved at t = {t!r}: "
+                                f"{n}.{v} reads {x!r} after it and was {was!r} when the state was saved; its rollback "
+                                "cannot be trusted (a step repeated from there would be integrated twice): a fixed "
+                                "step with extrapolation=0, or an FMU whose rollback works")
 
     def release(self, snap):
         self.rollback.release(snap[0])

@@ -32,7 +32,7 @@ import warnings
 
 import numpy as np
 
-from ._result import _Stop
+from ._result import _Discarded, _Stop
 
 MAX_STEPS = 10 ** 7  # macro steps one run may take (attempts of a controlled run included)
 PACE = 1000  # steps over which the pace of a controlled run is measured against MAX_STEPS
@@ -144,7 +144,15 @@ class Controller:
         run.check_time(t, H)
         run.set_lambda(H, t)
         snap = run.save(t) if run.rollback.available else None
-        band = run.step_all(t, H)
+        try:
+            band = run.step_all(t, H)
+        except _Discarded:
+            # an FMU refused a step this long (fmi2Discard): repeated smaller after the rollback, if there is one
+            if snap is None or H <= self.control.min_step * (1 + 1e-12):
+                raise
+            run.restore(snap, t)
+            run.release(snap)
+            return None, None
         floor = self.floor[1] if self.floor is not None and self.floor[0] == t else None
         return run.measure(band, t, H, floor), snap
 
@@ -154,6 +162,10 @@ class Controller:
         H_ref = H if self.jump is None else self.jump.H_ref
         while True:
             m, snap = self._attempt(t, H)
+            if m is None:  # discarded by an FMU: half the step
+                run.rejected += 1
+                self.after_reject, H = True, max(0.5 * H, self.control.min_step)
+                continue
             if m.dropped and snap is not None:  # derivatives that are no Taylor coefficients: again without them
                 run.restore(snap, t)
                 run.release(snap)
@@ -224,9 +236,10 @@ class Controller:
         i = m.worst
         if run.has_inputs(i) and (self.floor is None or self.floor[0] != t):  # one floor per point
             probe, snap = self._attempt(t, max(1e-6 * H, control.min_step))
-            run.restore(snap, t)
-            run.release(snap)
-            if abs(probe.change[i]) >= 0.5 * m.defect[i]:
+            if probe is not None:  # (a discarded probe was rolled back already)
+                run.restore(snap, t)
+                run.release(snap)
+            if probe is not None and abs(probe.change[i]) >= 0.5 * m.defect[i]:
                 return self._floor(t, probe.change, m, H_ref)
         # a jump inside the step: located by bisection
         self.jump = _Jump(i, m.defect[i], t + H, max(control.min_step, H_ref / m.err), H_ref)
