@@ -405,7 +405,7 @@ class _InputSignal:
                 and all(isinstance(h, list) and len(h) == 3 and all(finite(v) for v in h) for h in history)
                 and all(a[0] < b[0] for a, b in zip(history, history[1:]))):
             return malformed
-        if not history:
+        if not history or self.order < 0:  # an input whose derivatives are not used keeps its last value only
             return None
         if not (finite(saved.get("origin")) and finite(saved.get("first"))):
             return malformed
@@ -429,13 +429,13 @@ class _InputSignal:
         self.history = [tuple(h) for h in saved["history"]]
         if not self.history:
             return
+        if self.order < 0:
+            self._t0, self._derivs = self.history[-1][0], np.array([self.history[-1][1]])
+            return
         self._origin, self._first = saved["origin"], saved["first"]
         self._k = np.array(saved["k"], dtype=float)
         self._n = np.array(saved["n"], dtype=int)
         self._lo = np.array(saved["lo"], dtype=float)
         self._m = np.array(saved["m"], dtype=float)
         self._r = np.array(saved["r"], dtype=float)
-        if self.order < 0:
-            self._t0, self._derivs = self.history[-1][0], np.array([self.history[-1][1]])
-        else:
-            self._estimate()
+        self._estimate()
