@@ -155,7 +155,8 @@ print(json.dumps({{"success": bool(r.success), "message": r.message, "t": r["tim
 """)
     assert not out["success"], out["message"]
     message = out["message"]
-    assert "the coupling diverged" in message and "t = " in message, message
+    # diverged (swinging) or grown monotonically past what the step resolves: a refusal either way
+    assert ("the coupling diverged" in message or "is not resolved by the macro step" in message) and "t = " in message, message
     assert "plant.w" in message or "dae.x2" in message
     assert "docs/cosimulation.md recommends" in message
     assert max(abs(w) for w in out["w"]) < 1e7  # stopped early, not at an overflow

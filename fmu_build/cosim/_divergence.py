@@ -11,11 +11,12 @@ and calls a value divergent when, over the last ``WINDOW`` steps, its defect exc
 magnitude it had before in all but two of them, it changed sign, and it grew ``GROWTH``-fold. A root above
 +1 makes an exponential like any physical one and cannot be told from the values; the loops that make one
 (an algebraic loop cut with gain above 1) are checked at the start (``LoopSolver.start``). What can be told
-is whether the step resolves the growth: a value along a cycle that grew ``GROWTH``-fold over the window
-while its defect stayed above ``UNRESOLVED`` of its size in all but two steps changes faster than the
-extrapolation follows (for ``e^(mu t)`` the relative defect of a degree-q extrapolation is about
+is whether the step resolves the growth: a value along a cycle that grew past ``FAR`` times the coupling's
+start scale while its defect stayed above ``UNRESOLVED`` of its size in all but two of the last ``WINDOW``
+steps changes faster than the extrapolation follows (for ``e^(mu t)`` the relative defect of a degree-q extrapolation is about
 ``(mu H)^(q + 1)``): the run stops, naming it, whether the growth is the coupling's own instability (a
-root ``r > 1`` gives ``(r - 1)^(q + 1) / r``) or a physical one the macro step is too long for.
+root ``r > 1`` gives ``(r - 1)^(q + 1) / r``) or a physical one the macro step is too long for. A
+``max_growth`` the user sets replaces this check.
 """
 
 import math
@@ -30,6 +31,7 @@ RECOMMENDED = ("docs/cosimulation.md recommends, for a loop through a differenti
 WINDOW = 8  # consecutive steps of a value off its extrapolation by more than its size that mean divergence
 GROWTH = 2.0  # growth of the value over those steps
 UNRESOLVED = 0.05  # a defect above this fraction of the value, step after step: the step does not resolve it
+FAR = 1e3  # ... of a value grown past this multiple of the coupling's start scale
 
 
 class DivergenceMonitor:
@@ -77,14 +79,16 @@ class DivergenceMonitor:
             self._diverged(s, t, f"{self.layout.name(s)} left its extrapolation by more than the largest magnitude "
                                  f"it had before in {int(self.off[:, s].sum())} of the last {WINDOW} steps, swinging "
                                  f"through zero and growing {mag[s] / first[s]:.3g}-fold (to {value[s]:.3g})")
-        grows = np.flatnonzero((self.fast.sum(axis=0) >= WINDOW - 2) & (mag > GROWTH * first))
-        if grows.size:
-            s = int(grows[0])
-            self._diverged(s, t, f"{self.layout.name(s)} grew {mag[s] / first[s]:.3g}-fold (to {value[s]:.3g}) over the "
-                                 f"last {WINDOW} steps, off its extrapolation by more than {UNRESOLVED:.0%} of its size "
-                                 f"in {int(self.fast[:, s].sum())} of them: the macro step does not resolve a growth "
-                                 "that fast (a physical one needs a shorter step; one the components do not have is "
-                                 "the coupling's own instability)")
+        if self.max_growth is None:  # (a bound the user set replaces this one)
+            grows = np.flatnonzero((self.fast.sum(axis=0) >= WINDOW - 2) & (mag > FAR * self.scale))
+            if grows.size:
+                s = int(grows[0])
+                raise _Stop(f"the coupling is not resolved by the macro step: {self.layout.name(s)} grew to "
+                            f"{value[s]:.3g} ({mag[s] / self.scale:.3g} times the coupling's start scale), off its "
+                            f"extrapolation by more than {UNRESOLVED:.0%} of its size in {int(self.fast[:, s].sum())} of "
+                            f"the last {WINDOW} steps, at t = {t!r}: a physical growth that fast needs a shorter step "
+                            "(or step_control=True); one the components do not have is the coupling's own instability: "
+                            f"{RECOMMENDED}")
 
     def _diverged(self, s, t, what):
         name = self.layout.name(s)
