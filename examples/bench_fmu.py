@@ -154,7 +154,8 @@ def c_master(native, steps, repeats):
         root = ET.fromstring(zf.read("modelDescription.xml"))
     vrs = {sv.get("name"): sv.get("valueReference") for sv in root.iter("ScalarVariable")}
     exe = work / "master"
-    subprocess.run(["cc", "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-I", str(ROOT / "fmu_build" / "templates"),
+    headers = ROOT / "fmu_build" / "templates" / "fmi2" / "headers"
+    subprocess.run(["cc", "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-I", str(headers),
                     "-o", str(exe), str(ROOT / "tests" / "native_master.c"), "-ldl"], check=True)
     lib = next((work / "binaries").rglob("*.so"))
     best, y_end = float("inf"), None

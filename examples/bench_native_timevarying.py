@@ -200,7 +200,8 @@ def _run(out_dir, work):
 
     (work / "master.c").write_text(MASTER)
     exe = work / "master"
-    subprocess.run(["cc", "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-I", str(ROOT / "fmu_build" / "templates"),
+    headers = ROOT / "fmu_build" / "templates" / "fmi2" / "headers"
+    subprocess.run(["cc", "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-I", str(headers),
                     "-o", str(exe), str(work / "master.c"), "-ldl"], check=True)
     rows, notes, ratios = [], [], []
     for blocks in SIZES:

@@ -24,7 +24,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 MASTER = ROOT / "tests" / "host_exit_master.c"
-FMI_HEADERS = ROOT / "fmu_build" / "templates"
+FMI_HEADERS = ROOT / "fmu_build" / "templates" / "fmi2" / "headers"
 STEPS, DT = 10, 0.01
 
 

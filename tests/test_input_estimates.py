@@ -1,5 +1,5 @@
 """The inputs' derivative estimate (docs/guide/inputs.md): `fmu_build.targets._runtime._inputs._InputSignal`,
-and the native runtime's same estimator (templates/lsc_model.c) against it.
+and the native runtime's same estimator (templates/inputs.c) against it.
 
 The signal is p = sin t given either as exact samples (a master passing another FMU's output) or as a
 table's linear interpolation sampled below the table's spacing (fmusim, fmuCheck, fmpy with a table): the

@@ -28,7 +28,7 @@ HERE = Path(__file__).parent
 ROOT = HERE.parent
 RUNNER = HERE / "native_runner.py"
 MASTER = HERE / "native_master.c"
-FMI_HEADERS = ROOT / "fmu_build" / "templates"
+FMI_HEADERS = ROOT / "fmu_build" / "templates" / "fmi2" / "headers"
 
 
 def run(scenario, timeout=120):

@@ -6,6 +6,7 @@ runs in a subprocess (tests/native_runner.py, fmpy) and is compared with
 `lsc.solve_completion` or the pythonfmu FMU on the same DAE.
 """
 import json
+import re
 import subprocess
 import sys
 import textwrap
@@ -171,18 +172,40 @@ def test_study_worker_runs_native_and_pythonfmu_fmus_of_one_model(tmp_path):
 # -- the C runtime's shape -----------------------------------------------------------------------
 
 
-def test_c_runtime_is_one_small_file_per_responsibility(path_input):
-    from fmu_build.targets.native import _FIXED_SOURCES, _TEMPLATES
+def _code(text):
+    """C source without its comments and string literals: what the compiler reads as code."""
+    text = re.sub(r"/\*.*?\*/", " ", text, flags=re.S)
+    return re.sub(r'"(?:\\.|[^"\\])*"', '""', text)
+
+
+def test_c_runtime_is_two_api_layers_over_one_core(path_input):
+    """The Reference-FMUs' layering: fmi2Functions.c and fmi3Functions.c each check their API's arguments and call
+    sequence and call the one core (lsc_core.c and the files it includes), which knows neither FMI version; the
+    model backend (constant or time-varying coefficients) is chosen once, in lsc_core.c; the FMI headers are
+    vendored in their own folders."""
+    from fmu_build.targets.native import _CORE_SOURCES, _API_SOURCES, _BACKEND_SOURCES, _TEMPLATES
 
     with zipfile.ZipFile(path_input) as zf:
         shipped = {n.split("/", 1)[1] for n in zf.namelist() if n.startswith("sources/")}
-    assert shipped == set(_FIXED_SOURCES) | {"model.h"}
-    ours = [name for name in _FIXED_SOURCES if not name.startswith("fmi2Function") or name == "fmi2Functions.c"]
+    assert shipped == set(_CORE_SOURCES) | set(_API_SOURCES[2]) | {_BACKEND_SOURCES[False], "model.h"}
+    assert all(name.startswith("fmi2/headers/") for name in _API_SOURCES[2] if name.endswith(".h"))
+    assert all(name.startswith("fmi3/headers/") for name in _API_SOURCES[3] if name.endswith(".h"))
+    ours = [*_CORE_SOURCES, *_BACKEND_SOURCES.values(), "fmi2Functions.c", "fmi3Functions.c"]
     for name in ours:
         lines = (_TEMPLATES / name).read_text().count("\n")
         assert lines <= 700, (name, lines)
-    # one translation unit: fmi2Functions.c includes every other C file
-    main = (_TEMPLATES / "fmi2Functions.c").read_text()
-    for name in ours:
-        if name.endswith(".c") and name != "fmi2Functions.c":
-            assert f'#include "{name}"' in main, name
+    core = (_TEMPLATES / "lsc_core.c").read_text()
+    for name in _CORE_SOURCES:
+        if name.endswith(".c") and name != "lsc_core.c":
+            assert f'#include "{name}"' in core, name
+    for version in (2, 3):
+        api = (_TEMPLATES / f"fmi{version}Functions.c").read_text()
+        assert '#include "lsc_core.c"' in api and f'#include "fmi{version}/headers/fmi{version}Functions.h"' in api
+        assert f"fmi{5 - version}" not in api  # neither layer is built from the other nor rewrites its names
+    # the core is version-free: no FMI 2.0 or 3.0 name in its code (each layer passes its function's name)
+    for name in [*_CORE_SOURCES, *_BACKEND_SOURCES.values()]:
+        if name.endswith((".c", ".h")):
+            assert not re.search(r"\bfmi[23]\w*", _code((_TEMPLATES / name).read_text())), name
+    # the backend is chosen once: one #if on LSC_TIME_VARYING in all the fixed sources
+    uses = {name: _code((_TEMPLATES / name).read_text()).count("LSC_TIME_VARYING") for name in ours}
+    assert uses == {**dict.fromkeys(ours, 0), "lsc_core.c": 1}, uses

@@ -23,7 +23,7 @@ from lsc import gallery
 HERE = Path(__file__).parent
 ROOT = HERE.parent
 MASTER = HERE / "native_attack_master.c"
-HEADERS = ROOT / "fmu_build" / "templates"
+HEADERS = ROOT / "fmu_build" / "templates" / "fmi2" / "headers"
 SAN = ["-g", "-O1", "-fsanitize=address,undefined", "-fno-omit-frame-pointer"]
 
 

@@ -112,6 +112,22 @@ def test_simulate_equals_fmi2_build(built, name, fmi_type, tol):
         assert np.abs(a - b).max() <= tol * max(np.abs(a).max(), 1.0), key
 
 
+def test_start_report_names_fmi3_only(built):
+    """The start report of an input whose derivatives are estimated says why they were not given in FMI 3.0's
+    terms (FMI 3.0 has no function to send input derivatives), and names no FMI 2.0 function."""
+    code = ("import json, sys\nfrom fmpy import simulate_fmu\nlogs = []\n"
+            "simulate_fmu(sys.argv[1], fmi_type=sys.argv[2], stop_time=0.05, output_interval=0.01, debug_logging=True,"
+            " logger=lambda *a: logs.append(a[-1].decode()))\nprint(json.dumps(logs))")
+    for fmi_type in ("CoSimulation", "ModelExchange"):
+        proc = subprocess.run([sys.executable, "-c", code, str(built["path_input", 3]), fmi_type], capture_output=True,
+                              text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        report = [m for m in json.loads(proc.stdout) if "guessed" in m]
+        assert len(report) == 1 and report[0].startswith("fmi3ExitInitializationMode: input p: 3 of the derivatives"), report
+        assert "fmi2" not in report[0] and "InputDerivatives" not in report[0], report
+        assert ("FMI 3.0 interface takes no input derivatives" in report[0]) == (fmi_type == "CoSimulation"), report
+
+
 def test_lambda_from_start_values_sets_the_decay(built):
     """The residual of an inconsistent start decays exactly like exp(-lambda t) (Co-Simulation)."""
     sc = {"kind": "simulate", "fmus": [str(built["prescribed_path", 3])], "fmi_type": "CoSimulation", "stop": 1.0,
@@ -265,7 +281,8 @@ def test_c_master_under_address_and_ub_sanitizers(built, tmp_path):
                  "-o", str(tmp_path / "san.so"), str(src / "fmi3Functions.c"), "-lm"],
                 # the master without -pedantic: ISO C has no cast from dlsym's pointer to a function pointer
                 ["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", *san, "-D_POSIX_C_SOURCE=200809L",
-                 "-I", str(src), "-o", str(tmp_path / "master"), str(HERE / "native3_master.c"), "-ldl"]):
+                 "-I", str(src / "fmi3" / "headers"), "-o", str(tmp_path / "master"), str(HERE / "native3_master.c"),
+                 "-ldl"]):
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
         assert proc.returncode == 0, proc.stderr[-3000:]
     proc = subprocess.run([str(tmp_path / "master"), str(tmp_path / "san.so"), root.get("instantiationToken"), "200",

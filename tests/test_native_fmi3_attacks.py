@@ -23,7 +23,7 @@ HERE = Path(__file__).parent
 ROOT = HERE.parent
 SPECS = ROOT / "examples" / "specs"
 MASTER = HERE / "native3_attack_master.c"
-HEADERS = ROOT / "fmu_build" / "templates"
+HEADERS = ROOT / "fmu_build" / "templates" / "fmi3" / "headers"
 SAN = ["-g", "-O1", "-fsanitize=address,undefined", "-fno-sanitize-recover=undefined", "-fno-omit-frame-pointer"]
 OK, WARNING, DISCARD, ERROR = 0, 1, 2, 3
 

@@ -23,7 +23,7 @@ from test_native_timevarying import PROBLEMS, _exact
 
 HERE = Path(__file__).parent
 MASTER = HERE / "native_tv_attack_master.c"
-HEADERS = HERE.parent / "fmu_build" / "templates"
+HEADERS = HERE.parent / "fmu_build" / "templates" / "fmi2" / "headers"
 SAN = ["-g", "-O1", "-fsanitize=address,undefined", "-fno-omit-frame-pointer"]
 OK, WARNING, DISCARD, ERROR = 0, 1, 2, 3
 T1 = 2.2  # the horizon's end: experiment stop 2 plus the 10 % margin

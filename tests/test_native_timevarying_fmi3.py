@@ -242,7 +242,8 @@ def test_c_master_under_address_and_ub_sanitizers(built, tmp_path):
     for cmd in (["cc", "-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", *san, "-shared", "-fPIC", "-I", str(src),
                  "-o", str(tmp_path / "san.so"), str(src / "fmi3Functions.c"), "-lm"],
                 ["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", *san, "-D_POSIX_C_SOURCE=200809L",
-                 "-I", str(src), "-o", str(tmp_path / "master"), str(HERE / "native3_master.c"), "-ldl"]):
+                 "-I", str(src / "fmi3" / "headers"), "-o", str(tmp_path / "master"), str(HERE / "native3_master.c"),
+                 "-ldl"]):
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
         assert proc.returncode == 0, proc.stderr[-3000:]
     proc = subprocess.run([str(tmp_path / "master"), str(tmp_path / "san.so"), root.get("instantiationToken"), "200",

@@ -614,7 +614,7 @@ def test_model_exchange_in_a_c_master_under_sanitizers(fmus, tmp_path):
     (tmp_path / "master.c").write_text(_ME_MASTER)
     san = ["-fsanitize=address,undefined", "-fno-sanitize-recover=undefined", "-g"]
     src = tmp_path / "sources"
-    proc = subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", *san, "-I", str(src), "-o",
+    proc = subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", *san, "-I", str(src / "fmi2" / "headers"), "-o",
                            str(tmp_path / "me"), str(tmp_path / "master.c"), str(src / "fmi2Functions.c"), "-lm"],
                           capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr

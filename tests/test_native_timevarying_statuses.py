@@ -129,7 +129,7 @@ def test_failing_magnus_steps_read_no_uninitialized_value(fmu, tmp_path):
     src, here = tmp_path / "sources", Path(__file__).parent
     for cmd in (["cc", "-g", "-O1", "-std=c99", "-shared", "-fPIC", "-I", str(src), "-o", str(tmp_path / "plain.so"),
                  str(src / "fmi2Functions.c"), "-lm"],
-                ["cc", "-g", "-O1", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(src), "-o",
+                ["cc", "-g", "-O1", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(src / "fmi2" / "headers"), "-o",
                  str(tmp_path / "master"), str(here / "native_tv_valgrind_master.c"), "-ldl"]):
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
         assert proc.returncode == 0, proc.stderr[-3000:]

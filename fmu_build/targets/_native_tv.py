@@ -252,7 +252,7 @@ def _expansion_at_points(coef, lo, hi, l, h, m):
 
 
 def header_section(tab):
-    """The C of the tables: macros and arrays for templates/timevarying.c."""
+    """The C of the tables: macros and arrays for templates/model_timevarying.c."""
     pieces = tab["pieces"]
     nv = tab["nv"]
     breaks = [lo for lo, _, _ in pieces] + [pieces[-1][1]]
@@ -263,7 +263,7 @@ def header_section(tab):
     coffs = np.concatenate([[0], np.cumsum([(d + 1) * ng for d in degs])[:-1]]).astype(int)
     fmt = lambda vals: ", ".join(repr(float(v)) for v in vals)  # noqa: E731 - local formatter
     return "\n".join([
-        "/* time-varying coefficients: piecewise Chebyshev tables over the horizon (templates/timevarying.c) */",
+        "/* time-varying coefficients: piecewise Chebyshev tables over the horizon (templates/model_timevarying.c) */",
         "#define LSC_TIME_VARYING 1",
         f"#define TV_NPIECE {len(pieces)}", f"#define TV_NV {nv}", f"#define TV_NDYN {tab['ndyn']}",
         f"#define TV_MAXDEG {max(degs)}",

@@ -44,10 +44,18 @@ from . import _native_tv
 __all__ = ["build_native", "NativeTargetError", "C_FLAGS"]
 
 _TEMPLATES = Path(__file__).parent.parent / "templates"  # fmu_build/templates
-_FIXED_SOURCES = ("fmi2Functions.c", "lsc_fmu.h", "lsc_model.c", "fmu_state.c", "model_exchange.c", "cosimulation.c", "lsc_linalg.h",
-                  "timevarying.c", "fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
-# FMI 3.0: a thin API layer over the same core (fmi3Functions.c includes fmi2Functions.c) and its headers
-_FMI3_SOURCES = ("fmi3Functions.c", "fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
+# The C runtime (templates/, laid out as the Modelica Reference-FMUs are; docs/architecture.md): one core that
+# knows neither FMI version, one model backend of the two, and the API layer of the FMI version built with its
+# vendored headers. The layer is the one file compiled: it includes the core, which includes the rest.
+_CORE_SOURCES = ("lsc_core.c", "lsc_fmu.h", "lsc_linalg.h", "inputs.c", "instance.c", "cosimulation.c",
+                 "model_exchange.c", "fmu_state.c")
+_BACKEND_SOURCES = {False: "model_constant.c", True: "model_timevarying.c"}  # by time-varying coefficients
+_API_SOURCES = {
+    2: ("fmi2Functions.c", "fmi2/headers/fmi2Functions.h", "fmi2/headers/fmi2FunctionTypes.h",
+        "fmi2/headers/fmi2TypesPlatform.h"),
+    3: ("fmi3Functions.c", "fmi3/headers/fmi3Functions.h", "fmi3/headers/fmi3FunctionTypes.h",
+        "fmi3/headers/fmi3PlatformTypes.h"),
+}
 TAYLOR_DEGREE = 3  # the forcing over a step is its Taylor polynomial of this degree (as lsc's method='expm')
 # any warning is an error: a C compiler that truncates a constant or converts a value only warns
 C_FLAGS = ("-O2", "-shared", "-fPIC", "-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror")
@@ -240,12 +248,13 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, maps, lam_tunable, fpars
             if D[i] != 0:
                 exprs.append(D[i])
                 targets.append(f"fj[{d * n + i}]")
-    lines += ["", "/* fj[d * NX + i] = d-th derivative of f_i at t (d < NFE); u[i * NFE + j] = j-th derivative of input i */",
-              "static void model_f_jet(double t, const double *p, const double *u, double *fj) {",
-              "    int i;", "    (void)t; (void)p; (void)u;", f"    for (i = 0; i < {nfe * n}; i++) fj[i] = 0.0;"]
-    if exprs:
-        lines += _ccode_block(exprs, targets, names)
-    lines.append("}")
+    if f_jet:  # the time-varying backend's forcing is tabulated: it has no model_f_jet to call
+        lines += ["", "/* fj[d * NX + i] = d-th derivative of f_i at t (d < NFE); u[i * NFE + j] = j-th derivative of input i */",
+                  "static void model_f_jet(double t, const double *p, const double *u, double *fj) {",
+                  "    int i;", "    (void)t; (void)p; (void)u;", f"    for (i = 0; i < {nfe * n}; i++) fj[i] = 0.0;"]
+        if exprs:
+            lines += _ccode_block(exprs, targets, names)
+        lines.append("}")
     # custom outputs
     state_syms = {s["name"]: f"x[{i}]" for i, s in enumerate(spec.states)}
     out_names = dict(names)
@@ -280,7 +289,6 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
 
     if type(fmi_version) is not int or fmi_version not in (2, 3):
         raise ValueError(f"`fmi_version` must be 2 or 3; found {fmi_version!r}.")
-    sources = _FIXED_SOURCES + (_FMI3_SOURCES if fmi_version == 3 else ())
     kpars = _check_expressible(spec, fix_parameters)
     compiler = find_compiler()
     _platform()  # an unknown platform is refused before any work
@@ -298,6 +306,7 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
         tv = _native_tv.prepare(comp, spec, NativeTargetError)
         G0, G1, W0, W1, maps, lam_tunable = tv["placeholders"]
     fpars = [p["name"] for p in spec.parameters if p["name"] not in kpars]
+    sources = _API_SOURCES[fmi_version] + _CORE_SOURCES + (_BACKEND_SOURCES[tv is not None],)
     ident = spec.name
     # the GUID is a hash of everything compiled into the binary (model.h: matrices, start values, formulas;
     # the fixed sources) and of the variables the model description declares: any change gives another GUID
@@ -357,6 +366,7 @@ def _package(target, ident, sources, header, xml, compiler, extra_cflags, fmi_ve
         src = Path(tmp) / "sources"
         src.mkdir()
         for name in sources:
+            (src / name).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy(_TEMPLATES / name, src / name)
         (src / "model.h").write_text(header)
         platform, suffix = _platform3() if fmi_version == 3 else _platform()
@@ -371,8 +381,8 @@ def _package(target, ident, sources, header, xml, compiler, extra_cflags, fmi_ve
             with zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as zf:
                 zf.writestr("modelDescription.xml", xml)
                 zf.write(lib, f"binaries/{platform}/{ident}{suffix}")
-                for f in sorted(src.iterdir()):
-                    zf.write(f, f"sources/{f.name}")
+                for f in sorted(p for p in src.rglob("*") if p.is_file()):
+                    zf.write(f, f"sources/{f.relative_to(src).as_posix()}")
             os.replace(part, target)
         except BaseException:
             Path(part).unlink(missing_ok=True)

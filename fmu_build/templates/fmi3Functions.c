@@ -1,97 +1,37 @@
 /* FMI 3.0 Co-Simulation and Model Exchange for an lsc completion x' = G x + g(t).
  *
- * A thin layer over the one core of the FMI 2.0 API (fmi2Functions.c and the
- * files it includes: the instance, the call sequence, the stepping, the FMU
- * states). That core is compiled into this translation unit under the names
- * lsc2_fmi2* with hidden visibility, so this library exports the fmi3*
- * functions only; each fmi3 function checks what FMI 3.0 adds (array sizes,
- * output flags, the arguments of the instantiation) and calls the core. The
- * core logs through the FMI 2.0 callback; this file forwards those messages
- * to the FMI 3.0 logger, naming the FMI 3.0 functions.
+ * The FMI 3.0 API layer: each function checks the FMI 3.0 call sequence and its arguments
+ * (array sizes, output flags, the arguments of the instantiation), then calls the core
+ * (lsc_core.c: the instance, stepping, the model backend, FMU states), which it compiles
+ * into this one translation unit, so the library exports the fmi3 functions only.
+ * The FMI 2.0 layer is the same over the same core.
  *
- * Value references: the Float64 variables keep the core's (0 .. NR-1);
- * project_initial (a Boolean) is VR3_PROJECT and time (the independent
- * variable) VR3_TIME, after them (model.h), since FMI 3.0 asks for value
- * references unique over all types.
+ * Value references: the Float64 variables keep the core's (0 .. NR-1); project_initial
+ * (a Boolean) is VR3_PROJECT and time (the independent variable) VR3_TIME, after them
+ * (model.h), since FMI 3.0 asks for value references unique over all types.
  */
-#include <stdint.h>
-#include "fmi3Functions.h"
-#include "lsc_fmu.h"
+#include "fmi3/headers/fmi3Functions.h"
+#include "lsc_core.c"
 
-/* the core's FMI 2.0 functions are renamed lsc2_fmi2* (fmi2FullName is expanded where a name is used) */
-#undef fmi2FullName
-#define fmi2FullName(name) lsc2_##name
-#if defined(__GNUC__)
-#pragma GCC visibility push(hidden)
-#endif
-#include "fmi2Functions.c"
-#if defined(__GNUC__)
-#pragma GCC visibility pop
-#endif
-
-/* fmi3GetOutputDerivatives hands the orders to the core as they are */
-typedef char lsc3_int32_is_fmi2Integer[sizeof(fmi3Int32) == sizeof(fmi2Integer) ? 1 : -1];
-
-/* the host's FMI 3.0 logger, reached from the core's FMI 2.0 logger through componentEnvironment */
-typedef struct {
-    fmi3InstanceEnvironment env;
-    fmi3LogMessageCallback log;
-    int early_return;            /* earlyReturnAllowed of fmi3InstantiateCoSimulation */
-} Host3;
-
-/* core function names (the start of a message) and their FMI 3.0 counterparts, longest first */
-static const char *const NAMES3[][2] = {
-    {"fmi2GetRealOutputDerivatives", "fmi3GetOutputDerivatives"}, {"fmi2GetReal", "fmi3GetFloat64"},
-    {"fmi2SetReal", "fmi3SetFloat64"}, {"fmi2GetDerivatives", "fmi3GetContinuousStateDerivatives"},
-    {"fmi2SetupExperiment", "fmi3EnterInitializationMode"}, {"fmi2NewDiscreteStates", "fmi3UpdateDiscreteStates"},
-    {"fmi2SerializedFMUstateSize", "fmi3SerializedFMUStateSize"}, {"fmi2SerializeFMUstate", "fmi3SerializeFMUState"},
-    {"fmi2DeSerializeFMUstate", "fmi3DeserializeFMUState"}, {"fmi2GetFMUstate", "fmi3GetFMUState"},
-    {"fmi2SetFMUstate", "fmi3SetFMUState"}, {"fmi2FreeFMUstate", "fmi3FreeFMUState"},
-    {"fmi2Instantiate", "fmi3Instantiate"},
+static const Api API3 = {
+    "FMI 3.0", "terminateSimulation is now true", "this FMU's FMI 3.0 interface takes no input derivatives",
+    "it was freed by fmi3FreeFMUState", "fmi3EnterInitializationMode",
 };
 
-/* the core's message with every FMI 2.0 function named by its FMI 3.0 counterpart */
-static void to_fmi3(const char *raw, char *text, size_t size) {
-    size_t n = 0, k;
-    while (*raw != '\0' && n + 1 < size) {
-        const char *to = NULL;
-        size_t len = 0;
-        if (strncmp(raw, "fmi2", 4) != 0) { text[n++] = *raw++; continue; }
-        for (k = 0; k < sizeof NAMES3 / sizeof NAMES3[0] && to == NULL; k++) {
-            len = strlen(NAMES3[k][0]);
-            if (strncmp(raw, NAMES3[k][0], len) == 0) to = NAMES3[k][1];
-        }
-        if (to == NULL) { to = "fmi3"; len = 4; } /* fmi2DoStep -> fmi3DoStep, ... */
-        for (; *to != '\0' && n + 1 < size; to++) text[n++] = *to;
-        raw += len;
-    }
-    text[n] = '\0';
-}
-
-static void forward_log(fmi2ComponentEnvironment env, fmi2String instanceName, fmi2Status status, fmi2String category,
-                        fmi2String message, ...) {
-    const Host3 *host = (const Host3 *)env;
-    char raw[512], text[600];
-    char *p;
-    va_list ap;
+/* the core's messages to the host's fmi3LogMessageCallback */
+static void host_log3(const Host *host, const char *instanceName, Status status, const char *category,
+                      const char *message) {
     (void)instanceName;
-    if (host == NULL || host->log == NULL) return;
-    va_start(ap, message);
-    vsnprintf(raw, sizeof raw, message, ap);
-    va_end(ap);
-    to_fmi3(raw, text, sizeof text);
-    for (p = strstr(text, "FMI 2.0"); p != NULL; p = strstr(p, "FMI 2.0")) p[4] = '3';
-    p = strstr(text, "fmi3Terminated is now true"); /* FMI 3.0 says it through fmi3DoStep's terminateSimulation */
-    if (p != NULL) snprintf(p, sizeof text - (size_t)(p - text), "terminateSimulation is now true");
-    host->log(host->env, (fmi3Status)status, category, text);
+    ((fmi3LogMessageCallback)host->logger)(host->env, (fmi3Status)status, category, message);
 }
 
-static fmi3Status status3(fmi2Status s) { return (fmi3Status)s; } /* OK .. Fatal have the same values */
+#define ALL_STATES (StepComplete | Terminated | ErrorPhase)
+#define SETTABLE (Instantiated | InitializationMode | EventMode | ContinuousTimeMode | StepComplete)
 
 /* what fmi3 adds to a get or set: the array sizes */
 static int scalar_sizes(Instance *c, const char *f, size_t nvr, size_t nValues) {
     if (nValues != nvr) {
-        logmsg(c, fmi2Error, "%s: nValues = %lu, expected nValueReferences = %lu (every variable of this FMU is a "
+        logmsg(c, Error, "%s: nValues = %lu, expected nValueReferences = %lu (every variable of this FMU is a "
                "scalar)", f, (unsigned long)nValues, (unsigned long)nvr);
         return 0;
     }
@@ -106,13 +46,12 @@ static int nullargs(Instance *c, const char *f, const void *a, const char *an, c
 
 const char *fmi3GetVersion(void) { return fmi3Version; }
 
-static fmi3Instance instantiate(fmi3String instanceName, fmi2Type type, fmi3String token, fmi3Boolean loggingOn,
+static fmi3Instance instantiate(fmi3String instanceName, InterfaceType type, fmi3String token, fmi3Boolean loggingOn,
                                 fmi3InstanceEnvironment instanceEnvironment, fmi3LogMessageCallback logMessage,
                                 fmi3Boolean earlyReturnAllowed) {
-    Host3 *host;
-    fmi2CallbackFunctions cb;
+    Host host;
     Instance *c;
-    const char *f = type == fmi2ModelExchange ? "fmi3InstantiateModelExchange" : "fmi3InstantiateCoSimulation";
+    const char *f = type == ModelExchange ? "fmi3InstantiateModelExchange" : "fmi3InstantiateCoSimulation";
     char text[600];
     text[0] = '\0';
     if (instanceName == NULL || instanceName[0] == '\0')
@@ -124,18 +63,13 @@ static fmi3Instance instantiate(fmi3String instanceName, fmi2Type type, fmi3Stri
         if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError", text);
         return NULL;
     }
-    host = (Host3 *)calloc(1, sizeof(Host3));
-    if (host == NULL) return NULL;
-    host->env = instanceEnvironment;
-    host->log = logMessage;
-    host->early_return = earlyReturnAllowed ? 1 : 0;
-    cb.logger = forward_log;
-    cb.allocateMemory = calloc;
-    cb.freeMemory = free;
-    cb.stepFinished = NULL;
-    cb.componentEnvironment = host;
-    c = (Instance *)fmi2Instantiate(instanceName, type, token, NULL, &cb, fmi2False, loggingOn ? fmi2True : fmi2False);
-    if (c == NULL) free(host);
+    host.env = instanceEnvironment;
+    host.logger = (void (*)(void))logMessage;
+    host.log = host_log3;
+    host.allocate = calloc;
+    host.release = free;
+    c = instance_new(instanceName, type, &host, &API3, loggingOn ? 1 : 0);
+    if (c != NULL) c->early_return = earlyReturnAllowed ? 1 : 0;
     return c;
 }
 
@@ -144,7 +78,7 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                                           fmi3InstanceEnvironment instanceEnvironment, fmi3LogMessageCallback logMessage) {
     (void)resourcePath;
     (void)visible;
-    return instantiate(instanceName, fmi2ModelExchange, instantiationToken, loggingOn, instanceEnvironment, logMessage,
+    return instantiate(instanceName, ModelExchange, instantiationToken, loggingOn, instanceEnvironment, logMessage,
                        fmi3False);
 }
 
@@ -165,7 +99,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
         if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError", why);
         return NULL;
     }
-    return instantiate(instanceName, fmi2CoSimulation, instantiationToken, loggingOn, instanceEnvironment, logMessage,
+    return instantiate(instanceName, CoSimulation, instantiationToken, loggingOn, instanceEnvironment, logMessage,
                        earlyReturnAllowed);
 }
 
@@ -182,29 +116,44 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
 }
 
 void fmi3FreeInstance(fmi3Instance instance) {
-    Instance *c = (Instance *)instance;
-    void *host;
-    if (c == NULL) return;
-    host = c->cb.componentEnvironment;
-    fmi2FreeInstance(c);
-    free(host);
+    if (instance != NULL) instance_free((Instance *)instance);
 }
 
 fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories, const fmi3String categories[]) {
-    return status3(fmi2SetDebugLogging(instance, loggingOn ? fmi2True : fmi2False, nCategories, categories));
+    Instance *c = (Instance *)instance;
+    if (!allowed(c, "fmi3SetDebugLogging", ANY_ALIVE)) return fmi3Error;
+    if (nCategories > 0 && nullarg(c, "fmi3SetDebugLogging", categories, "categories")) return fmi3Error;
+    return (fmi3Status)set_debug_logging(c, "fmi3SetDebugLogging", loggingOn ? 1 : 0, nCategories, categories);
 }
 
+/* the experiment (FMI 2.0 sets it in a call of its own), then Initialization Mode */
 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined, fmi3Float64 tolerance,
                                        fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
-    const fmi2Status s = fmi2SetupExperiment(instance, toleranceDefined ? fmi2True : fmi2False, tolerance, startTime,
-                                             stopTimeDefined ? fmi2True : fmi2False, stopTime);
-    if (s != fmi2OK) return status3(s);
-    return status3(fmi2EnterInitializationMode(instance));
+    Instance *c = (Instance *)instance;
+    Status s;
+    if (!allowed(c, "fmi3EnterInitializationMode", Instantiated)) return fmi3Error;
+    s = setup_experiment(c, "fmi3EnterInitializationMode", toleranceDefined ? 1 : 0, tolerance, startTime,
+                         stopTimeDefined ? 1 : 0, stopTime);
+    return (fmi3Status)(s != OK ? s : enter_initialization_mode(c));
 }
 
-fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) { return status3(fmi2ExitInitializationMode(instance)); }
-fmi3Status fmi3Terminate(fmi3Instance instance) { return status3(fmi2Terminate(instance)); }
-fmi3Status fmi3Reset(fmi3Instance instance) { return status3(fmi2Reset(instance)); }
+fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
+    Instance *c = (Instance *)instance;
+    if (!allowed(c, "fmi3ExitInitializationMode", InitializationMode)) return fmi3Error;
+    return (fmi3Status)exit_initialization_mode(c, "fmi3ExitInitializationMode");
+}
+
+fmi3Status fmi3Terminate(fmi3Instance instance) {
+    Instance *c = (Instance *)instance;
+    if (!allowed(c, "fmi3Terminate", EventMode | ContinuousTimeMode | StepComplete | ErrorPhase)) return fmi3Error;
+    return (fmi3Status)terminate(c);
+}
+
+fmi3Status fmi3Reset(fmi3Instance instance) {
+    Instance *c = (Instance *)instance;
+    if (!allowed(c, "fmi3Reset", ANY_ALIVE)) return fmi3Error;
+    return (fmi3Status)reset(c);
+}
 
 #define NO_CS_EVENT_MODE "this FMU has no Event Mode in Co-Simulation (hasEventMode=false, eventModeUsed is false)"
 
@@ -213,12 +162,12 @@ fmi3Status fmi3Reset(fmi3Instance instance) { return status3(fmi2Reset(instance)
 fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
     Instance *c = (Instance *)instance;
     if (!allowed(c, "fmi3EnterEventMode", ANY_ALIVE)) return fmi3Error;
-    if (c->type == fmi2CoSimulation) {
-        logmsg(c, fmi2Error, "fmi3EnterEventMode: %s", NO_CS_EVENT_MODE);
+    if (c->type == CoSimulation) {
+        logmsg(c, Error, "fmi3EnterEventMode: %s", NO_CS_EVENT_MODE);
         return fmi3Error;
     }
     if (!allowed(c, "fmi3EnterEventMode", ContinuousTimeMode)) return fmi3Error;
-    return status3(fmi2EnterEventMode(instance));
+    return (fmi3Status)enter_event_mode(c);
 }
 
 /* ---- get and set ------------------------------------------------------------- */
@@ -232,28 +181,29 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
     if (nullargs(c, "fmi3GetFloat64", vr, "valueReferences", values, "values")) return fmi3Error;
     for (i = 0; i < nvr; i++) {
         if (vr[i] == VR3_TIME) values[i] = c->s.t;
-        else if (vr[i] == VR3_PROJECT || fmi2GetReal(c, vr + i, 1, values + i) != fmi2OK) {
-            if (vr[i] == VR3_PROJECT) logmsg(c, fmi2Error, "fmi3GetFloat64: value reference %u is a Boolean", vr[i]);
+        else if (vr[i] == VR3_PROJECT || get_float64(c, "fmi3GetFloat64", vr + i, 1, values + i) != OK) {
+            if (vr[i] == VR3_PROJECT) logmsg(c, Error, "fmi3GetFloat64: value reference %u is a Boolean", vr[i]);
             return fmi3Error;
         }
     }
     return fmi3OK;
 }
 
-/* Every setter is the core's: its checks of the state, the variable and the value, and its effects element by
- * element (a refused element leaves the ones before it set, as in FMI 2.0). This layer only translates the
- * FMI 3.0 value references: time and project_initial, which the core's Real setter does not know. */
+/* Every setter is the core's: its checks of the variable and the value, and its effects element by element (a
+ * refused element leaves the ones before it set). This layer only refuses the FMI 3.0 value references the core
+ * does not know: time and project_initial. */
 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, const fmi3Float64 values[],
                           size_t nValues) {
     Instance *c = (Instance *)instance;
     size_t k;
-    fmi2Status s;
+    Status s;
     if (!allowed(c, "fmi3SetFloat64", ANY_ALIVE) || !scalar_sizes(c, "fmi3SetFloat64", nvr, nValues)) return fmi3Error;
     if (nvr > 0 && nullargs(c, "fmi3SetFloat64", vr, "valueReferences", values, "values")) return fmi3Error;
+    if (!allowed(c, "fmi3SetFloat64", SETTABLE)) return fmi3Error;
     for (k = 0; k < nvr && vr[k] != VR3_TIME && vr[k] != VR3_PROJECT; k++) {}
-    s = fmi2SetReal(c, vr, k, values); /* k = 0: the state check alone */
-    if (k == nvr || s > fmi2Warning) return status3(s);
-    logmsg(c, fmi2Error, "fmi3SetFloat64: value reference %u is %s", vr[k], vr[k] == VR3_TIME
+    s = set_float64(c, "fmi3SetFloat64", vr, k, values);
+    if (k == nvr || s > Warning) return (fmi3Status)s;
+    logmsg(c, Error, "fmi3SetFloat64: value reference %u is %s", vr[k], vr[k] == VR3_TIME
            ? "time, the independent variable (fmi3SetTime or fmi3DoStep advance it)" : "a Boolean");
     return fmi3Error;
 }
@@ -261,21 +211,18 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
 fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, fmi3Boolean values[],
                           size_t nValues) {
     Instance *c = (Instance *)instance;
-    const fmi2ValueReference project = VRB_PROJECT;
+    const ValueReference project = VRB_PROJECT;
     size_t i;
     if (!allowed(c, "fmi3GetBoolean", ANY_ALIVE) || !scalar_sizes(c, "fmi3GetBoolean", nvr, nValues)) return fmi3Error;
     if (nvr > 0 && nullargs(c, "fmi3GetBoolean", vr, "valueReferences", values, "values")) return fmi3Error;
-    if (nvr == 0) return status3(fmi2GetBoolean(c, NULL, 0, NULL));
     for (i = 0; i < nvr; i++) {
-        fmi2Boolean v = fmi2False;
-        fmi2Status s;
+        int v = 0;
         if (vr[i] != VR3_PROJECT) {
-            logmsg(c, fmi2Error, "fmi3GetBoolean: unknown value reference %u", vr[i]);
+            logmsg(c, Error, "fmi3GetBoolean: unknown value reference %u", vr[i]);
             return fmi3Error;
         }
-        s = fmi2GetBoolean(c, &project, 1, &v);
-        if (s > fmi2Warning) return status3(s);
-        values[i] = v != fmi2False;
+        if (get_boolean(c, "fmi3GetBoolean", &project, 1, &v) != OK) return fmi3Error;
+        values[i] = v != 0;
     }
     return fmi3OK;
 }
@@ -283,20 +230,19 @@ fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], 
 fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, const fmi3Boolean values[],
                           size_t nValues) {
     Instance *c = (Instance *)instance;
-    const fmi2ValueReference project = VRB_PROJECT;
+    const ValueReference project = VRB_PROJECT;
     size_t i;
     if (!allowed(c, "fmi3SetBoolean", ANY_ALIVE) || !scalar_sizes(c, "fmi3SetBoolean", nvr, nValues)) return fmi3Error;
     if (nvr > 0 && nullargs(c, "fmi3SetBoolean", vr, "valueReferences", values, "values")) return fmi3Error;
-    if (nvr == 0) return status3(fmi2SetBoolean(c, NULL, 0, NULL));
+    if (nvr == 0) return allowed(c, "fmi3SetBoolean", Instantiated | InitializationMode) ? fmi3OK : fmi3Error;
     for (i = 0; i < nvr; i++) {
-        const fmi2Boolean v = values[i] ? fmi2True : fmi2False;
-        fmi2Status s;
+        const int v = values[i] ? 1 : 0;
         if (vr[i] != VR3_PROJECT) {
-            logmsg(c, fmi2Error, "fmi3SetBoolean: unknown value reference %u", vr[i]);
+            logmsg(c, Error, "fmi3SetBoolean: unknown value reference %u", vr[i]);
             return fmi3Error;
         }
-        s = fmi2SetBoolean(c, &project, 1, &v);
-        if (s > fmi2Warning) return status3(s);
+        if (!allowed(c, "fmi3SetBoolean", Instantiated | InitializationMode)) return fmi3Error;
+        if (set_boolean(c, "fmi3SetBoolean", &project, 1, &v) != OK) return fmi3Error;
     }
     return fmi3OK;
 }
@@ -309,7 +255,7 @@ fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], 
         (void)nValues;                                                                                                 \
         if (!allowed(c, #fname, ANY_ALIVE)) return fmi3Error;                                                         \
         if (nvr == 0) return fmi3OK;                                                                                   \
-        logmsg(c, fmi2Error, "%s: unknown value reference %u (this FMU has no %s variables)", #fname,                \
+        logmsg(c, Error, "%s: unknown value reference %u (this FMU has no %s variables)", #fname,                \
                vr ? vr[0] : 0u, tname);                                                                                \
         return fmi3Error;                                                                                              \
     }
@@ -339,7 +285,7 @@ NO_VARIABLES(fmi3SetString, const fmi3String, "String")
 static fmi3Status unsupported(fmi3Instance instance, const char *f, const char *why) {
     Instance *c = (Instance *)instance;
     if (!allowed(c, f, ANY_ALIVE)) return fmi3Error;
-    logmsg(c, fmi2Error, "%s: not supported by this FMU: %s", f, why);
+    logmsg(c, Error, "%s: not supported by this FMU: %s", f, why);
     return fmi3Error;
 }
 
@@ -386,26 +332,48 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference
                        "the dependencies are those of the ModelStructure in modelDescription.xml");
 }
 
-/* ---- FMU state (the core's, with its checks) -------------------------------------- */
+/* ---- FMU state ------------------------------------------------------------------ */
 
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-    return status3(fmi2GetFMUstate(instance, FMUState));
+    Instance *c = (Instance *)instance;
+    if (!allowed(c, "fmi3GetFMUState", ANY_ALIVE)) return fmi3Error;
+    if (nullarg(c, "fmi3GetFMUState", FMUState, "FMUstate")) return fmi3Error;
+    return (fmi3Status)get_fmu_state(c, "fmi3GetFMUState", FMUState);
 }
+
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) {
-    return status3(fmi2SetFMUstate(instance, FMUState));
+    Instance *c = (Instance *)instance;
+    if (!allowed(c, "fmi3SetFMUState", ANY_ALIVE)) return fmi3Error;
+    return (fmi3Status)set_fmu_state(c, "fmi3SetFMUState", FMUState);
 }
+
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-    return status3(fmi2FreeFMUstate(instance, FMUState));
+    Instance *c = (Instance *)instance;
+    if (!allowed(c, "fmi3FreeFMUState", ANY_ALIVE)) return fmi3Error;
+    if (FMUState == NULL || *FMUState == NULL) return fmi3OK;
+    return (fmi3Status)free_fmu_state(c, "fmi3FreeFMUState", FMUState);
 }
+
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size) {
-    return status3(fmi2SerializedFMUstateSize(instance, FMUState, size));
+    Instance *c = (Instance *)instance;
+    if (!allowed(c, "fmi3SerializedFMUStateSize", ANY_ALIVE)) return fmi3Error;
+    if (nullarg(c, "fmi3SerializedFMUStateSize", size, "size")) return fmi3Error;
+    return (fmi3Status)serialized_fmu_state_size(c, "fmi3SerializedFMUStateSize", FMUState, size);
 }
+
 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, fmi3Byte serializedState[], size_t size) {
-    return status3(fmi2SerializeFMUstate(instance, FMUState, (fmi2Byte *)serializedState, size));
+    Instance *c = (Instance *)instance;
+    if (!allowed(c, "fmi3SerializeFMUState", ANY_ALIVE)) return fmi3Error;
+    return (fmi3Status)serialize_fmu_state(c, "fmi3SerializeFMUState", FMUState, serializedState, size);
 }
+
 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size,
                                    fmi3FMUState *FMUState) {
-    return status3(fmi2DeSerializeFMUstate(instance, (const fmi2Byte *)serializedState, size, FMUState));
+    Instance *c = (Instance *)instance;
+    if (!allowed(c, "fmi3DeserializeFMUState", ANY_ALIVE)) return fmi3Error;
+    if (nullarg(c, "fmi3DeserializeFMUState", serializedState, "serializedState")
+        || nullarg(c, "fmi3DeserializeFMUState", FMUState, "FMUstate")) return fmi3Error;
+    return (fmi3Status)deserialize_fmu_state(c, "fmi3DeserializeFMUState", serializedState, size, FMUState);
 }
 
 /* ---- derivatives, configuration, clocks: not offered ------------------------------ */
@@ -486,67 +454,103 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
                                     fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
                                     fmi3Float64 *nextEventTime) {
     Instance *c = (Instance *)instance;
-    fmi2EventInfo info;
-    fmi2Status s;
+    EventInfo info;
     const char *f = "fmi3UpdateDiscreteStates";
     if (!allowed(c, f, ANY_ALIVE)) return fmi3Error;
-    if (c->type == fmi2CoSimulation) {
-        logmsg(c, fmi2Error, "%s: %s", f, NO_CS_EVENT_MODE);
+    if (c->type == CoSimulation) {
+        logmsg(c, Error, "%s: %s", f, NO_CS_EVENT_MODE);
         return fmi3Error;
     }
     if (nullargs(c, f, discreteStatesNeedUpdate, "discreteStatesNeedUpdate", terminateSimulation, "terminateSimulation")
         || nullargs(c, f, nominalsOfContinuousStatesChanged, "nominalsOfContinuousStatesChanged",
                     valuesOfContinuousStatesChanged, "valuesOfContinuousStatesChanged")
         || nullargs(c, f, nextEventTimeDefined, "nextEventTimeDefined", nextEventTime, "nextEventTime")) return fmi3Error;
-    s = fmi2NewDiscreteStates(c, &info);
-    if (s != fmi2OK) return status3(s);
-    *discreteStatesNeedUpdate = info.newDiscreteStatesNeeded != fmi2False;
-    *terminateSimulation = info.terminateSimulation != fmi2False;
-    *nominalsOfContinuousStatesChanged = info.nominalsOfContinuousStatesChanged != fmi2False;
-    *valuesOfContinuousStatesChanged = info.valuesOfContinuousStatesChanged != fmi2False;
-    *nextEventTimeDefined = info.nextEventTimeDefined != fmi2False;
+    if (!allowed(c, f, EventMode)) return fmi3Error;
+    update_discrete_states(c, &info);
+    *discreteStatesNeedUpdate = info.newDiscreteStatesNeeded != 0;
+    *terminateSimulation = info.terminateSimulation != 0;
+    *nominalsOfContinuousStatesChanged = info.nominalsOfContinuousStatesChanged != 0;
+    *valuesOfContinuousStatesChanged = info.valuesOfContinuousStatesChanged != 0;
+    *nextEventTimeDefined = info.nextEventTimeDefined != 0;
     *nextEventTime = info.nextEventTime;
     return fmi3OK;
 }
 
-fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) { return status3(fmi2EnterContinuousTimeMode(instance)); }
+fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
+    Instance *c = (Instance *)instance;
+    if (!allowed(c, "fmi3EnterContinuousTimeMode", EventMode) || wrong_type(c, "fmi3EnterContinuousTimeMode", ModelExchange))
+        return fmi3Error;
+    return (fmi3Status)enter_continuous_time_mode(c);
+}
 
+/* Warning: at the end of the horizon of time-varying tables, terminateSimulation true with the reason */
 fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation) {
-    fmi2Boolean event = fmi2False, stop = fmi2False;
-    fmi2Status s;
-    if (!allowed((Instance *)instance, "fmi3CompletedIntegratorStep", ANY_ALIVE)
-        || nullargs((Instance *)instance, "fmi3CompletedIntegratorStep", enterEventMode, "enterEventMode",
-                    terminateSimulation, "terminateSimulation")) return fmi3Error;
-    s = fmi2CompletedIntegratorStep(instance, noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False, &event, &stop);
-    if (s != fmi2OK && s != fmi2Warning) return status3(s);
-    /* fmi2Warning: at the end of the horizon of time-varying tables, terminateSimulation true with the reason */
-    *enterEventMode = event != fmi2False;
-    *terminateSimulation = stop != fmi2False;
-    return status3(s);
+    Instance *c = (Instance *)instance;
+    const char *f = "fmi3CompletedIntegratorStep";
+    int event = 0, stop = 0;
+    Status s;
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!allowed(c, f, ANY_ALIVE) || nullargs(c, f, enterEventMode, "enterEventMode", terminateSimulation,
+                                              "terminateSimulation")) return fmi3Error;
+    if (!allowed(c, f, ContinuousTimeMode) || wrong_type(c, f, ModelExchange)) return fmi3Error;
+    s = completed_integrator_step(c, f, &event, &stop);
+    *enterEventMode = event != 0;
+    *terminateSimulation = stop != 0;
+    return (fmi3Status)s;
 }
 
-fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) { return status3(fmi2SetTime(instance, time)); }
+fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) {
+    Instance *c = (Instance *)instance;
+    if (!allowed(c, "fmi3SetTime", EventMode | ContinuousTimeMode) || wrong_type(c, "fmi3SetTime", ModelExchange))
+        return fmi3Error;
+    return (fmi3Status)set_time(c, "fmi3SetTime", time);
+}
 
 fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 continuousStates[], size_t nContinuousStates) {
-    return status3(fmi2SetContinuousStates(instance, continuousStates, nContinuousStates));
+    Instance *c = (Instance *)instance;
+    const char *f = "fmi3SetContinuousStates";
+    if (!allowed(c, f, ContinuousTimeMode) || wrong_type(c, f, ModelExchange)) return fmi3Error;
+    if (nullarg(c, f, continuousStates, "x")) return fmi3Error;
+    return (fmi3Status)set_continuous_states(c, f, continuousStates, nContinuousStates);
 }
+
 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[], size_t nContinuousStates) {
-    return status3(fmi2GetDerivatives(instance, derivatives, nContinuousStates));
+    Instance *c = (Instance *)instance;
+    const char *f = "fmi3GetContinuousStateDerivatives";
+    if (!allowed(c, f, InitializationMode | EventMode | ContinuousTimeMode | Terminated | ErrorPhase)
+        || wrong_type(c, f, ModelExchange)) return fmi3Error;
+    if (nullarg(c, f, derivatives, "derivatives")) return fmi3Error;
+    return (fmi3Status)get_derivatives(c, f, derivatives, nContinuousStates);
 }
+
 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[], size_t nEventIndicators) {
-    return status3(fmi2GetEventIndicators(instance, eventIndicators, nEventIndicators));
+    Instance *c = (Instance *)instance;
+    (void)eventIndicators;
+    if (!allowed(c, "fmi3GetEventIndicators", ANY_ALIVE) || wrong_type(c, "fmi3GetEventIndicators", ModelExchange))
+        return fmi3Error;
+    return (fmi3Status)get_event_indicators(c, "fmi3GetEventIndicators", nEventIndicators);
 }
+
 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[], size_t nContinuousStates) {
-    return status3(fmi2GetContinuousStates(instance, continuousStates, nContinuousStates));
+    Instance *c = (Instance *)instance;
+    const char *f = "fmi3GetContinuousStates";
+    if (!allowed(c, f, ANY_ALIVE) || wrong_type(c, f, ModelExchange)) return fmi3Error;
+    if (nullarg(c, f, continuousStates, "x")) return fmi3Error;
+    return (fmi3Status)get_continuous_states(c, f, continuousStates, nContinuousStates);
 }
+
 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[], size_t nContinuousStates) {
-    return status3(fmi2GetNominalsOfContinuousStates(instance, nominals, nContinuousStates));
+    Instance *c = (Instance *)instance;
+    const char *f = "fmi3GetNominalsOfContinuousStates";
+    if (!allowed(c, f, ANY_ALIVE) || wrong_type(c, f, ModelExchange)) return fmi3Error;
+    if (nullarg(c, f, nominals, "x_nominal")) return fmi3Error;
+    return (fmi3Status)get_nominals_of_continuous_states(c, f, nominals, nContinuousStates);
 }
 
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators) {
     Instance *c = (Instance *)instance;
-    if (!allowed(c, "fmi3GetNumberOfEventIndicators", ANY_ALIVE) || wrong_type(c, "fmi3GetNumberOfEventIndicators", fmi2ModelExchange)
+    if (!allowed(c, "fmi3GetNumberOfEventIndicators", ANY_ALIVE) || wrong_type(c, "fmi3GetNumberOfEventIndicators", ModelExchange)
         || nullarg(c, "fmi3GetNumberOfEventIndicators", nEventIndicators, "nEventIndicators")) return fmi3Error;
     *nEventIndicators = 0;
     return fmi3OK;
@@ -554,13 +558,57 @@ fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventI
 
 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates) {
     Instance *c = (Instance *)instance;
-    if (!allowed(c, "fmi3GetNumberOfContinuousStates", ANY_ALIVE) || wrong_type(c, "fmi3GetNumberOfContinuousStates", fmi2ModelExchange)
+    if (!allowed(c, "fmi3GetNumberOfContinuousStates", ANY_ALIVE) || wrong_type(c, "fmi3GetNumberOfContinuousStates", ModelExchange)
         || nullarg(c, "fmi3GetNumberOfContinuousStates", nContinuousStates, "nContinuousStates")) return fmi3Error;
     *nContinuousStates = NX;
     return fmi3OK;
 }
 
 /* ---- Co-Simulation ---------------------------------------------------------------- */
+
+/* What FMI 3.0's step reports besides its status */
+typedef struct {
+    int terminate;               /* terminateSimulation: no step can follow as things are */
+    int early_return;            /* the step returned before t + h */
+    double last_successful_time;
+} StepReport;
+
+/* The core's step in FMI 3.0's terms: after a discard the FMU is as before the call, its time included; a step
+ * that ends past the end of the model's horizon, from a point before its end, is taken to that end where the
+ * importer allows early return (Warning with the reason; the FMI 3.0 way to say "this far and no further"), and
+ * a step that lands on that end asks the importer to stop (terminateSimulation, Warning). A step that also ends
+ * after the stop time is left to the core, which refuses it as an error. */
+static Status step3(Instance *c, const char *f, double t, double h, StepReport *r) {
+    const double t_before = c->s.t, ud_t_before = c->s.ud_t;
+    double t0, t1;
+    const int bounded = model_horizon(&t0, &t1);
+    Status s;
+    const int early = c->early_return && bounded && isfinite(t) && isfinite(h)
+                      && leaves_horizon(t, h) && !at_horizon_end(t) && !(c->s.stop_defined && t + h > c->s.t_stop);
+    r->early_return = 0;
+    s = do_step(c, f, t, early ? t1 - t : h);
+    if (s == Discard) { c->s.t = t_before; c->s.ud_t = ud_t_before; }
+    r->last_successful_time = c->s.t;
+    if (early) {
+        if (s == OK)
+            logmsg(c, Warning, "%s: the step from %.17g to %.17g leaves the horizon [%.17g, %.17g] the time-varying "
+                   "coefficients were tabulated on at build time: returned early at its end, terminateSimulation is "
+                   "true (build with a longer experiment stop)", f, t, t + h, t0, t1);
+        r->early_return = s == OK;
+        r->terminate = s == OK || c->s.terminal != 0;
+        return s == OK ? Warning : s; /* the status of its logged reason */
+    }
+    r->terminate = c->s.terminal != 0;
+    if (s == OK && h > 0.0 && at_horizon_end(c->s.t)) {
+        /* at the end of the tables no step can follow: the importer is asked to stop here, not at the next step */
+        logmsg(c, Warning, "%s: reached %.17g, the end of the horizon the time-varying coefficients were tabulated on "
+               "at build time: terminateSimulation is true (build with a longer experiment stop)", f, c->s.t);
+        r->terminate = 1;
+        return Warning; /* the status of the logged reason */
+    }
+    return s;
+}
+
 
 fmi3Status fmi3EnterStepMode(fmi3Instance instance) {
     return unsupported(instance, "fmi3EnterStepMode", "it has no Event Mode in Co-Simulation (hasEventMode=false): "
@@ -570,76 +618,39 @@ fmi3Status fmi3EnterStepMode(fmi3Instance instance) {
 fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                     const fmi3Int32 orders[], fmi3Float64 values[], size_t nValues) {
     Instance *c = (Instance *)instance;
-    if (!allowed(c, "fmi3GetOutputDerivatives", ANY_ALIVE)
-        || wrong_type(c, "fmi3GetOutputDerivatives", fmi2CoSimulation)
-        || !scalar_sizes(c, "fmi3GetOutputDerivatives", nvr, nValues)) return fmi3Error;
-    return status3(fmi2GetRealOutputDerivatives(c, vr, nvr, (const fmi2Integer *)orders, values));
+    const char *f = "fmi3GetOutputDerivatives";
+    if (!allowed(c, f, ANY_ALIVE) || wrong_type(c, f, CoSimulation) || !scalar_sizes(c, f, nvr, nValues)) return fmi3Error;
+    if (!allowed(c, f, ALL_STATES)) return fmi3Error;
+    if (nvr == 0) return fmi3OK;
+    if (nullarg(c, f, vr, "vr") || nullarg(c, f, orders, "order") || nullarg(c, f, values, "value")) return fmi3Error;
+    return (fmi3Status)get_output_derivatives(c, f, vr, nvr, orders, values);
 }
 
-#ifdef LSC_TIME_VARYING
-/* A step that ends past the horizon of the time-varying tables, from a point before its end, for an importer that
- * allows early return: the FMU steps to the end of the horizon and returns early there with terminateSimulation
- * (the FMI 3.0 way to say "this far and no further"). 1 if it did (status in *s), 0 if the core takes the step as
- * asked (it refuses a step past the horizon: fmi3Discard, the FMU unchanged). A step that also ends after the
- * stop time is left to the core, which refuses it as an error. */
-static int early_return_at_horizon(Instance *c, double t, double h, fmi2Boolean noSet, fmi2Status *s) {
-    const Host3 *host = (const Host3 *)c->cb.componentEnvironment;
-    const double end = TV_T1;
-    if (!host->early_return || !(c->s.phase & StepComplete) || !isfinite(t) || !isfinite(h)
-        || !TV_LEAVES_HORIZON(t, h) || TV_AT_END(t)
-        || (c->s.stop_defined && t + h > c->s.t_stop)) return 0;
-    *s = fmi2DoStep(c, t, end - t, noSet);
-    if (*s == fmi2OK)
-        logmsg(c, fmi2Warning, "fmi3DoStep: the step from %.17g to %.17g leaves the horizon [%.17g, %.17g] the "
-               "time-varying coefficients were tabulated on at build time: returned early at its end, "
-               "terminateSimulation is true (build with a longer experiment stop)", t, t + h, TV_T0, end);
-    return 1;
-}
-#endif
-
-/* The step is the core's fmi2DoStep. It returns early only at the end of the horizon of time-varying tables (when
- * the importer allows it; fmi3Warning with the reason, as when a step lands on that end) and never needs event
- * handling; after a discard lastSuccessfulTime is the FMU time before
- * the call (the FMU is unchanged), and terminateSimulation says that no retry can succeed as things are
- * (fmi2Terminated of the FMI 2.0 API: a step past the horizon, the same step discarded twice). */
+/* The step never needs event handling; it returns early only at the end of the horizon of time-varying tables
+ * (when the importer allows it; fmi3Warning with the reason, as when a step lands on that end). After a discard
+ * lastSuccessfulTime is the FMU time before the call (the FMU is unchanged), and terminateSimulation says that
+ * no retry can succeed as things are (a step past the horizon, the same step discarded twice). */
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
                       fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *eventHandlingNeeded,
                       fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
     Instance *c = (Instance *)instance;
-    const fmi2Boolean noSet = noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False;
-    double t_before, ud_t_before;
-    fmi2Status s;
-    if (!allowed(c, "fmi3DoStep", ANY_ALIVE) || wrong_type(c, "fmi3DoStep", fmi2CoSimulation)) return fmi3Error;
+    StepReport r;
+    Status s;
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (!allowed(c, "fmi3DoStep", ANY_ALIVE) || wrong_type(c, "fmi3DoStep", CoSimulation)) return fmi3Error;
     if (nullargs(c, "fmi3DoStep", eventHandlingNeeded, "eventHandlingNeeded", terminateSimulation, "terminateSimulation")
         || nullargs(c, "fmi3DoStep", earlyReturn, "earlyReturn", lastSuccessfulTime, "lastSuccessfulTime"))
         return fmi3Error;
     *eventHandlingNeeded = fmi3False;
     *earlyReturn = fmi3False;
-    /* the core takes the master's communication point as the FMU time (a few ulps from it) before stepping; after
-     * a discard the FMU is as before the call (FMI 3.0), its time included */
-    t_before = c->s.t;
-    ud_t_before = c->s.ud_t;
-#ifdef LSC_TIME_VARYING
-    if (early_return_at_horizon(c, currentCommunicationPoint, communicationStepSize, noSet, &s)) {
-        if (s == fmi2Discard) { c->s.t = t_before; c->s.ud_t = ud_t_before; }
-        *earlyReturn = s == fmi2OK;
-        *terminateSimulation = s == fmi2OK || c->s.terminal != 0;
+    if (!allowed(c, "fmi3DoStep", StepComplete)) {
+        *terminateSimulation = c->s.terminal != 0;
         *lastSuccessfulTime = c->s.t;
-        return s == fmi2OK ? fmi3Warning : status3(s); /* the status of its logged reason */
+        return fmi3Error;
     }
-#endif
-    s = fmi2DoStep(c, currentCommunicationPoint, communicationStepSize, noSet);
-    if (s == fmi2Discard) { c->s.t = t_before; c->s.ud_t = ud_t_before; }
-    *terminateSimulation = c->s.terminal != 0;
-    *lastSuccessfulTime = c->s.t;
-#ifdef LSC_TIME_VARYING
-    if (s == fmi2OK && communicationStepSize > 0.0 && TV_AT_END(c->s.t)) {
-        /* at the end of the tables no step can follow: the importer is asked to stop here, not at the next step */
-        logmsg(c, fmi2Warning, "fmi3DoStep: reached %.17g, the end of the horizon the time-varying coefficients were "
-               "tabulated on at build time: terminateSimulation is true (build with a longer experiment stop)", c->s.t);
-        *terminateSimulation = fmi3True;
-        return fmi3Warning; /* the status of the logged reason */
-    }
-#endif
-    return status3(s);
+    s = step3(c, "fmi3DoStep", currentCommunicationPoint, communicationStepSize, &r);
+    *earlyReturn = r.early_return != 0;
+    *terminateSimulation = r.terminate != 0;
+    *lastSuccessfulTime = r.last_successful_time;
+    return (fmi3Status)s;
 }

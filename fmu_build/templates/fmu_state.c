@@ -1,7 +1,7 @@
-/* FMU states: fmi2Get/Set/FreeFMUstate and serialization. A state handed to
- * the FMU is checked (header, interface, every field, a checksum when
- * serialized) before anything else is read from it. Part of the one translation
- * unit of fmi2Functions.c. */
+/* FMU states: get, set, free and serialize. A state handed to the FMU is checked
+ * (header, interface, every field, a checksum when serialized) before anything else
+ * is read from it. Part of the one translation unit of an API layer (every function
+ * static). */
 
 /* The header of a state (magic, size, token) is read first, and nothing else
  * unless it matches: a state of another lsc FMU has the same header, with its own size
@@ -13,12 +13,12 @@ static int state_header_ok(const State *s) {
 static int is_flag(int v) { return v == 0 || v == 1; }
 
 /* every field within its domain; the reason of a refusal in *why */
-static int state_valid(const State *s, int type, const char **why) {
+static int state_valid(const Instance *c, const State *s, int type, const char **why) {
     int i, k, one_phase = 0;
-    if (s->magic == STATE_FREED) { *why = "it was freed by fmi2FreeFMUstate"; return 0; }
+    if (s->magic == STATE_FREED) { *why = c->api->freed; return 0; }
     if (!state_header_ok(s)) { *why = "magic number, size or GUID hash differ (another FMU's state?)"; return 0; }
     if (s->type != type) {
-        *why = type == fmi2ModelExchange ? "it is a Co-Simulation state, this is a Model Exchange instance"
+        *why = type == ModelExchange ? "it is a Co-Simulation state, this is a Model Exchange instance"
                                          : "it is a Model Exchange state, this is a Co-Simulation instance";
         return 0;
     }
@@ -71,132 +71,113 @@ static unsigned int state_checksum(const unsigned char *b) {
 static State *new_state(Instance *c, const char *f) {
     StateBlock *b = c->retired;
     if (b != NULL) c->retired = b->next;
-    else b = (StateBlock *)c->cb.allocateMemory(1, sizeof(StateBlock));
-    if (b == NULL) logmsg(c, fmi2Error, "%s: out of memory", f);
+    else b = (StateBlock *)c->host.allocate(1, sizeof(StateBlock));
+    if (b == NULL) logmsg(c, Error, "%s: out of memory", f);
     return (State *)b;
 }
 
 /* a state to overwrite: NULL (a new one is made) or a live state of this FMU */
 static int overwritable(Instance *c, const char *f, const State *s) {
     if (s == NULL || state_header_ok(s)) return 1;
-    logmsg(c, fmi2Error, "%s: *FMUstate is not NULL and not a live state of this FMU to overwrite%s", f,
-           s->magic == STATE_FREED ? " (it was freed by fmi2FreeFMUstate)" : "");
+    logmsg(c, Error, "%s: *FMUstate is not NULL and not a live state of this FMU to overwrite%s%s%s", f,
+           s->magic == STATE_FREED ? " (" : "", s->magic == STATE_FREED ? c->api->freed : "",
+           s->magic == STATE_FREED ? ")" : "");
     return 0;
 }
 
-fmi2Status fmi2GetFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
-    Instance *c = (Instance *)comp;
-    State *s;
-    if (!allowed(c, "fmi2GetFMUstate", ANY_ALIVE)) return fmi2Error;
-    if (nullarg(c, "fmi2GetFMUstate", FMUstate, "FMUstate")) return fmi2Error;
-    s = (State *)*FMUstate;
-    if (!overwritable(c, "fmi2GetFMUstate", s)) return fmi2Error;
-    if (s == NULL && (s = new_state(c, "fmi2GetFMUstate")) == NULL) return fmi2Error;
+static Status get_fmu_state(Instance *c, const char *f, void **FMUstate) {
+    State *s = (State *)*FMUstate;
+    if (!overwritable(c, f, s)) return Error;
+    if (s == NULL && (s = new_state(c, f)) == NULL) return Error;
     memcpy(s, &c->s, sizeof(State));
     *FMUstate = s;
-    return fmi2OK;
+    return OK;
 }
 
 /* the state behind a handle, or NULL with a logged reason */
-static const State *checked_state(Instance *c, const char *f, fmi2FMUstate FMUstate) {
+static const State *checked_state(Instance *c, const char *f, const void *FMUstate) {
     const char *why;
     if (nullarg(c, f, FMUstate, "FMUstate")) return NULL;
-    if (!state_valid((const State *)FMUstate, (int)c->type, &why)) {
-        logmsg(c, fmi2Error, "%s: not a valid state of this FMU: %s", f, why);
+    if (!state_valid(c, (const State *)FMUstate, (int)c->type, &why)) {
+        logmsg(c, Error, "%s: not a valid state of this FMU: %s", f, why);
         return NULL;
     }
     return (const State *)FMUstate;
 }
 
-fmi2Status fmi2SetFMUstate(fmi2Component comp, fmi2FMUstate FMUstate) {
-    Instance *c = (Instance *)comp;
-    const State *s;
-    if (!allowed(c, "fmi2SetFMUstate", ANY_ALIVE)) return fmi2Error;
-    s = checked_state(c, "fmi2SetFMUstate", FMUstate);
-    if (s == NULL) return fmi2Error;
+static Status set_fmu_state(Instance *c, const char *f, const void *FMUstate) {
+    const State *s = checked_state(c, f, FMUstate);
+    if (s == NULL) return Error;
     memcpy(&c->s, s, sizeof(State));
     memset(c->fit_ok, 0, sizeof c->fit_ok); /* the inputs' fits are remade from the restored bins */
-    return fmi2OK;
+    return OK;
 }
 
-fmi2Status fmi2FreeFMUstate(fmi2Component comp, fmi2FMUstate *FMUstate) {
-    Instance *c = (Instance *)comp;
-    State *s;
-    if (!allowed(c, "fmi2FreeFMUstate", ANY_ALIVE)) return fmi2Error;
-    if (FMUstate == NULL || *FMUstate == NULL) return fmi2OK;
-    s = (State *)*FMUstate;
+/* *FMUstate not NULL: given back (kept on the instance's list of retired blocks) */
+static Status free_fmu_state(Instance *c, const char *f, void **FMUstate) {
+    State *s = (State *)*FMUstate;
     if (s->magic == STATE_FREED) {
-        logmsg(c, fmi2Error, "fmi2FreeFMUstate: the state was freed already");
-        return fmi2Error;
+        logmsg(c, Error, "%s: the state was freed already", f);
+        return Error;
     }
     if (!state_header_ok(s) || s->check != 0) { /* another FMU's (its owner frees it) or serialized bytes */
-        logmsg(c, fmi2Error, "fmi2FreeFMUstate: not a state of this FMU (magic number, size or GUID hash differ, or "
-               "serialized bytes)");
-        return fmi2Error;
+        logmsg(c, Error, "%s: not a state of this FMU (magic number, size or GUID hash differ, or serialized bytes)", f);
+        return Error;
     }
     /* a block of this FMU (new_state): kept, marked freed */
     s->magic = STATE_FREED;
     ((StateBlock *)s)->next = c->retired;
     c->retired = (StateBlock *)s;
     *FMUstate = NULL;
-    return fmi2OK;
+    return OK;
 }
 
-fmi2Status fmi2SerializedFMUstateSize(fmi2Component comp, fmi2FMUstate FMUstate, size_t *size) {
-    Instance *c = (Instance *)comp;
-    if (!allowed(c, "fmi2SerializedFMUstateSize", ANY_ALIVE)) return fmi2Error;
-    if (nullarg(c, "fmi2SerializedFMUstateSize", size, "size")) return fmi2Error;
-    if (checked_state(c, "fmi2SerializedFMUstateSize", FMUstate) == NULL) return fmi2Error;
+static Status serialized_fmu_state_size(Instance *c, const char *f, const void *FMUstate, size_t *size) {
+    if (checked_state(c, f, FMUstate) == NULL) return Error;
     *size = sizeof(State);
-    return fmi2OK;
+    return OK;
 }
 
-fmi2Status fmi2SerializeFMUstate(fmi2Component comp, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size) {
-    Instance *c = (Instance *)comp;
+static Status serialize_fmu_state(Instance *c, const char *f, const void *FMUstate, unsigned char serializedState[],
+                                  size_t size) {
     State tmp;
-    const State *s;
-    if (!allowed(c, "fmi2SerializeFMUstate", ANY_ALIVE)) return fmi2Error;
-    s = checked_state(c, "fmi2SerializeFMUstate", FMUstate);
-    if (s == NULL || nullarg(c, "fmi2SerializeFMUstate", serializedState, "serializedState")) return fmi2Error;
+    const State *s = checked_state(c, f, FMUstate);
+    if (s == NULL || nullarg(c, f, serializedState, "serializedState")) return Error;
     if (size < sizeof(State)) {
-        logmsg(c, fmi2Error, "fmi2SerializeFMUstate: size %lu is smaller than %lu", (unsigned long)size,
-               (unsigned long)sizeof(State));
-        return fmi2Error;
+        logmsg(c, Error, "%s: size %lu is smaller than %lu", f, (unsigned long)size, (unsigned long)sizeof(State));
+        return Error;
     }
     memcpy(&tmp, s, sizeof(State));
     tmp.check = 0;
     tmp.check = state_checksum((const unsigned char *)&tmp);
     memcpy(serializedState, &tmp, sizeof(State));
-    return fmi2OK;
+    return OK;
 }
 
-fmi2Status fmi2DeSerializeFMUstate(fmi2Component comp, const fmi2Byte serializedState[], size_t size, fmi2FMUstate *FMUstate) {
-    Instance *c = (Instance *)comp;
+static Status deserialize_fmu_state(Instance *c, const char *f, const unsigned char serializedState[], size_t size,
+                                    void **FMUstate) {
     State tmp;
     const char *why;
     unsigned int check;
-    if (!allowed(c, "fmi2DeSerializeFMUstate", ANY_ALIVE)) return fmi2Error;
-    if (nullarg(c, "fmi2DeSerializeFMUstate", serializedState, "serializedState")
-        || nullarg(c, "fmi2DeSerializeFMUstate", FMUstate, "FMUstate")) return fmi2Error;
     if (size != sizeof(State)) {
-        logmsg(c, fmi2Error, "fmi2DeSerializeFMUstate: %lu bytes given, a state of this FMU has %lu", (unsigned long)size,
+        logmsg(c, Error, "%s: %lu bytes given, a state of this FMU has %lu", f, (unsigned long)size,
                (unsigned long)sizeof(State));
-        return fmi2Error;
+        return Error;
     }
-    if (!overwritable(c, "fmi2DeSerializeFMUstate", (const State *)*FMUstate)) return fmi2Error;
+    if (!overwritable(c, f, (const State *)*FMUstate)) return Error;
     memcpy(&tmp, serializedState, sizeof(State));
     check = tmp.check;
     if (check != state_checksum((const unsigned char *)&tmp)) {
-        logmsg(c, fmi2Error, "fmi2DeSerializeFMUstate: the bytes are not a valid state of this FMU: checksum mismatch "
-               "(changed after serialization, or serialized elsewhere)");
-        return fmi2Error;
+        logmsg(c, Error, "%s: the bytes are not a valid state of this FMU: checksum mismatch (changed after "
+               "serialization, or serialized elsewhere)", f);
+        return Error;
     }
     tmp.check = 0;
-    if (!state_valid(&tmp, (int)c->type, &why)) {
-        logmsg(c, fmi2Error, "fmi2DeSerializeFMUstate: not a valid state of this FMU: %s", why);
-        return fmi2Error;
+    if (!state_valid(c, &tmp, (int)c->type, &why)) {
+        logmsg(c, Error, "%s: not a valid state of this FMU: %s", f, why);
+        return Error;
     }
-    if (*FMUstate == NULL && (*FMUstate = new_state(c, "fmi2DeSerializeFMUstate")) == NULL) return fmi2Error;
+    if (*FMUstate == NULL && (*FMUstate = new_state(c, f)) == NULL) return Error;
     memcpy(*FMUstate, &tmp, sizeof(State));
-    return fmi2OK;
+    return OK;
 }

@@ -1,6 +1,6 @@
 """Input signals: an input and its derivatives estimated from the values a master sets.
 
-The estimator (the native FMUs run the same one, ``templates/lsc_model.c``):
+The estimator (the native FMUs run the same one, ``templates/inputs.c``):
 
 * every received value is kept twice: the newest ``degree + 1`` values as
   they are, and all values of the last ``window`` seconds as weighted sums

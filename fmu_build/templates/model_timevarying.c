@@ -1,9 +1,10 @@
-/* Time-varying coefficients: G(t) = G0(t) + lambda G1(t), g(t) = g0(t) + lambda g1(t) and the residual's
- * Gram form from piecewise Chebyshev tables over the horizon [TV_T0, TV_T1] (model.h), evaluated by Clenshaw's
- * recurrence; Co-Simulation steps by the Magnus methods of order 6 and 4 from three Gauss points on the
- * augmented system y = [x; 1] (the fourth-order step where a bound of the two steps' difference is below the
- * tolerance, the sixth-order one otherwise; sub-steps h / 2^level until the estimate is below tol (1 + |x|)).
- * Compiled only when model.h defines LSC_TIME_VARYING; part of the one translation unit of fmi2Functions.c.
+/* The model backend of time-varying coefficients: G(t) = G0(t) + lambda G1(t), g(t) = g0(t) + lambda g1(t)
+ * and the residual's Gram form from piecewise Chebyshev tables over the horizon [TV_T0, TV_T1] (model.h),
+ * evaluated by Clenshaw's recurrence; Co-Simulation steps by the Magnus methods of order 6 and 4 from three
+ * Gauss points on the augmented system y = [x; 1] (the fourth-order step where a bound of the two steps'
+ * difference is below the tolerance, the sixth-order one otherwise; sub-steps h / 2^level until the estimate is
+ * below tol (1 + |x|)). The functions of the backend contract (lsc_fmu.h) are at the end. Compiled when model.h
+ * defines LSC_TIME_VARYING (lsc_core.c); part of the one translation unit of an API layer.
  * No allocation: work arrays on the stack, sized by model.h. */
 
 #define TV_M (NX + 1) /* order of the augmented system */
@@ -11,18 +12,26 @@
 /* at most 2^14 sub-steps per communication step: the Magnus series asks for lambda H below
  * about pi, so a rate far beyond 1 / h is refused (discarded with a logged reason) instead of crawling */
 #define TV_MAX_LEVEL 14
-#define TV_TIME_SLACK(t) (TIME_ULPS * DBL_EPSILON * fmax(fabs(t), 1.0))
-/* a step from t of h ends past the tables (the FMI 2.0 and 3.0 layers ask the same question) */
-#define TV_LEAVES_HORIZON(t, h) ((t) + (h) > TV_T1 + TV_TIME_SLACK(TV_T1) + 1e-12 * (h))
-/* t is at (or past) the end of the tables: no step or derivative goes further */
-#define TV_AT_END(t) (!((t) < TV_T1 - TV_TIME_SLACK(TV_T1)))
 
-static void input_jets(Instance *c, double t); /* lsc_model.c: the inputs' jets at t into c->uj */
+struct ModelCache {
+    int tv_ready;                /* tv_coef holds the tables combined at lambda = tv_lam */
+    double tv_lam;
+    double tv_coef[TV_NCOMB];    /* Chebyshev coefficients of G0 + lambda G1 and g0 + lambda g1, per piece */
+};
+
+static void model_init(ModelCache *m) { m->tv_ready = 0; }
+
+/* 1: the model is defined on the horizon [TV_T0, TV_T1] of its tables only */
+static int model_horizon(double *t0, double *t1) {
+    *t0 = TV_T0;
+    *t1 = TV_T1;
+    return 1;
+}
 
 /* The piece of t and its local variable s in [-1, 1]; -1 outside the horizon */
 static int tv_piece(double t, double *s) {
     int lo = 0, hi = TV_NPIECE - 1;
-    if (!(t >= TV_T0 - TV_TIME_SLACK(TV_T0) && t <= TV_T1 + TV_TIME_SLACK(TV_T1))) return -1;
+    if (!(t >= TV_T0 - TIME_SLACK(TV_T0) && t <= TV_T1 + TIME_SLACK(TV_T1))) return -1;
     while (lo < hi) { /* the piece p with TV_BREAKS[p] <= t < TV_BREAKS[p + 1] (the last one closed) */
         const int mid = (lo + hi + 1) / 2;
         if (TV_BREAKS[mid] <= t) lo = mid; else hi = mid - 1;
@@ -52,11 +61,12 @@ static void tv_clenshaw(const double *coef, int stride, int deg, double s, int v
 /* the coefficients of G = G0 + lambda G1 and g = g0 + lambda g1 at the current lambda (formed once per lambda) */
 static const double *tv_combined(Instance *c) {
     int p, k, e;
-    if (c->tv_ready && c->tv_lam == c->s.lam) return c->tv_coef;
+    ModelCache *m = c->model;
+    if (m->tv_ready && m->tv_lam == c->s.lam) return m->tv_coef;
     for (p = 0; p < TV_NPIECE; p++) {
         for (k = 0; k <= TV_DEG[p]; k++) {
             const double *src = TV_COEF + TV_OFF[p] + (long)k * TV_NV;
-            double *dst = c->tv_coef + TV_COFF[p] + (long)k * TV_NG;
+            double *dst = m->tv_coef + TV_COFF[p] + (long)k * TV_NG;
             for (e = 0; e < NX * NX; e++) dst[e] = src[e] + c->s.lam * src[NX * NX + e];
             for (e = 0; e < NX; e++) dst[NX * NX + e] = src[2 * NX * NX + e] + c->s.lam * src[2 * NX * NX + NX + e];
             for (e = 0; e < NX * TV_NUJ; e++) { /* the inputs' forcing maps U = U0 + lambda U1 */
@@ -65,9 +75,9 @@ static const double *tv_combined(Instance *c) {
             }
         }
     }
-    c->tv_lam = c->s.lam;
-    c->tv_ready = 1;
-    return c->tv_coef;
+    m->tv_lam = c->s.lam;
+    m->tv_ready = 1;
+    return m->tv_coef;
 }
 
 #define TV_NODES 3 /* at most this many times per sweep (the Gauss points of a step) */
@@ -137,7 +147,7 @@ static int tv_values(Instance *c, const double *t, int nt, double *out) {
     int q, p = tv_piece(t[0], s);
     if (p < 0) return -1;
     /* the usual case: all times in the piece of the first (one search, one sweep) */
-    if (t[nt - 1] < TV_BREAKS[p + 1] || (p == TV_NPIECE - 1 && t[nt - 1] <= TV_T1 + TV_TIME_SLACK(TV_T1))) {
+    if (t[nt - 1] < TV_BREAKS[p + 1] || (p == TV_NPIECE - 1 && t[nt - 1] <= TV_T1 + TIME_SLACK(TV_T1))) {
         for (q = 1; q < nt; q++) {
             const double sq = ((t[q] - TV_BREAKS[p]) - (TV_BREAKS[p + 1] - t[q])) / (TV_BREAKS[p + 1] - TV_BREAKS[p]);
             s[q] = sq > 1.0 ? 1.0 : sq;
@@ -368,39 +378,35 @@ static int tv_magnus(Instance *c, double t0, double t, double h, const double *y
 /* The reason a step is discarded at the sub-step cap: lambda H beyond about pi at the last level (the Magnus series
  * cannot follow the rate), or, with lambda H small, the error estimate itself (a forcing or an input that varies
  * too fast for the step or overflows, a tolerance below what double precision meets) */
-static void tv_log_cap(Instance *c, double t, double H, int level, double est, double size) {
+static void tv_log_cap(Instance *c, const char *f, double t, double H, int level, double est, double size) {
     const double lh = fabs(c->s.lam) * H;
     if (lh > 1.0)
-        logmsg(c, fmi2Discard, "fmi2DoStep at t = %g discarded: estimated error %g with 2^%d sub-steps (lambda = %g, "
+        logmsg(c, Discard, "%s at t = %g discarded: estimated error %g with 2^%d sub-steps (lambda = %g, "
                "lambda times the sub-step %g; the Magnus steps need lambda times the sub-step below about pi); take "
-               "smaller communication steps or a smaller lambda", t, est, level, c->s.lam, lh);
+               "smaller communication steps or a smaller lambda", f, t, est, level, c->s.lam, lh);
     else
-        logmsg(c, fmi2Discard, "fmi2DoStep at t = %g discarded: the error estimate %g%s stays above the tolerance "
+        logmsg(c, Discard, "%s at t = %g discarded: the error estimate %g%s stays above the tolerance "
                "%g (1 + |x|) = %g with 2^%d sub-steps, although lambda times the sub-step is %g (lambda = %g): the "
                "forcing or an input varies too fast for the step, or a value overflows; take smaller communication "
-               "steps, or check the inputs and their derivatives", t, est, isfinite(est) ? "" : " (not finite)",
+               "steps, or check the inputs and their derivatives", f, t, est, isfinite(est) ? "" : " (not finite)",
                c->s.tol, c->s.tol * (1.0 + size), level, lh, c->s.lam);
 }
 
-/* Co-Simulation step from c->s.t = t to t + h: 0 done, 1 discard (the step may succeed shorter or with other
- * values), 2 discard for good (past the horizon). Deterministic in the state: a restored state steps the same.
- * Its messages carry fmi2Discard, the status fmi2DoStep returns for them. */
-static int tv_do_step(Instance *c, double t, double h) {
+/* ---- the backend contract (lsc_fmu.h) ------------------------------------------------------------------ */
+
+/* Co-Simulation step from c->s.t = t to t + h within the horizon (the core checked): 0 done, 1 discard (the step
+ * may succeed shorter or with other values), 2 discard for good (an input or the forcing not finite). Deterministic in the state: a restored state steps the same.
+ * Its messages carry Discard, the status the step returns for them. */
+static int model_step(Instance *c, const char *f, double t, double h) {
     double x[TV_M], xn[TV_M];
     int i, level = 0;
     long idx = 0;
-    if (TV_LEAVES_HORIZON(t, h) || t < TV_T0 - TV_TIME_SLACK(TV_T0)) {
-        logmsg(c, fmi2Discard, "fmi2DoStep: the step from %.17g to %.17g leaves the horizon [%.17g, %.17g] the "
-               "time-varying coefficients were tabulated on at build time (build with a longer experiment stop)",
-               t, t + h, TV_T0, TV_T1);
-        return 2;
-    }
     if (NU > 0) { /* the inputs' jets the step uses (the history already holds the step start's value) */
         input_jets(c, t);
         for (i = 0; i < NU * NFE; i++) {
             if (!isfinite(c->uj[i])) {
-                logmsg(c, fmi2Discard, "fmi2DoStep at t = %g discarded: derivative %d of input %d is not finite at "
-                       "the step start", t, i % NFE, i / NFE + 1);
+                logmsg(c, Discard, "%s at t = %g discarded: derivative %d of input %d is not finite at "
+                       "the step start", f, t, i % NFE, i / NFE + 1);
                 return 2;
             }
         }
@@ -408,8 +414,8 @@ static int tv_do_step(Instance *c, double t, double h) {
         if (tv_rhs(c, t, c->s.x, xn) == 0)
             for (i = 0; i < NX; i++)
                 if (!isfinite(xn[i])) {
-                    logmsg(c, fmi2Discard, "fmi2DoStep at t = %g discarded: x' = G x + g(t, u) of state %d is not "
-                           "finite at the step start with the inputs' values and derivatives set", t, i + 1);
+                    logmsg(c, Discard, "%s at t = %g discarded: x' = G x + g(t, u) of state %d is not "
+                           "finite at the step start with the inputs' values and derivatives set", f, t, i + 1);
                     return 2;
                 }
     }
@@ -424,7 +430,7 @@ static int tv_do_step(Instance *c, double t, double h) {
         if (tv_magnus(c, t, ts, H, x, c->s.tol * (1.0 + size), xn, &est) != 0) est = INFINITY;
         if (!(est <= c->s.tol * (1.0 + size))) {
             if (level + 1 > TV_MAX_LEVEL) {
-                tv_log_cap(c, t, H, level, est, size);
+                tv_log_cap(c, f, t, H, level, est, size);
                 return 1;
             }
             level++;
@@ -466,7 +472,7 @@ static int tv_values_jet(Instance *c, double t, double *out) {
 
 /* x and its derivatives 1..NQ+1 at the current time into c->xd, from x' = G x + g:
  * x^(d) = sum_(j < d) binomial(d - 1, j) G^(j) x^(d-1-j) + g^(d-1) (NAN outside the horizon) */
-static void tv_state_derivatives(Instance *c, const double *x) {
+static void model_state_derivatives(Instance *c, const double *x) {
     double v[(NQ + 1) * TV_NG];
     int d, i, j, l;
     memcpy(c->xd, x, sizeof(double) * NX);
@@ -490,4 +496,44 @@ static void tv_state_derivatives(Instance *c, const double *x) {
             binom = binom * (double)(d - 1 - j) / (double)(j + 1);
         }
     }
+}
+
+/* x' = G(t) x + g(t) at the current time into dx (Model Exchange); Error (logged) outside the horizon or where
+ * not finite */
+static Status model_derivatives(Instance *c, const char *f, const double *x, double *dx) {
+    int i;
+    if (tv_rhs(c, c->s.t, x, dx) != 0) {
+        logmsg(c, Error, "%s: t = %.17g is outside the horizon [%.17g, %.17g] the time-varying coefficients were "
+               "tabulated on at build time", f, c->s.t, TV_T0, TV_T1);
+        return Error;
+    }
+    for (i = 0; i < NX; i++) { /* a huge lambda or an input's extrapolated jet may overflow */
+        if (!isfinite(dx[i])) {
+            logmsg(c, Error, "%s: the derivative of state %d is not finite at t = %g (lambda = %g)", f, i + 1, c->s.t,
+                   c->s.lam);
+            return Error;
+        }
+    }
+    return OK;
+}
+
+/* |Z2^T (F x - g)| at the current time (NAN outside the horizon) */
+static double model_residual(Instance *c, const double *x) { return tv_residual(c, c->s.t, x); }
+
+/* never called: project_initial stays false (model_can_project) */
+static void model_project(Instance *c) { (void)c; }
+
+/* project_initial cannot be switched on: the tables hold the residual, not the projector */
+static int model_can_project(Instance *c, const char *f) {
+    logmsg(c, Error, "%s: project_initial is not available in an FMU with time-varying coefficients (its tables hold "
+           "the residual, not the projector): start from consistent values", f);
+    return 0;
+}
+
+/* the residual and der(x) from the tables: NAN outside the horizon, not finite for a lambda too large */
+static int model_value_ok(Instance *c, const char *f, unsigned int vr, double value) {
+    if (isfinite(value) || VR_KIND[vr] < 5) return 1;
+    logmsg(c, Error, "%s: value reference %u is not finite at t = %.17g (lambda = %g; the horizon of the tables is "
+           "[%.17g, %.17g])", f, vr, c->s.t, c->s.lam, TV_T0, TV_T1);
+    return 0;
 }

@@ -1,21 +1,11 @@
-/* The model between FMI calls: G and W at the current lambda, the inputs' jets
- * (the master's derivatives, the estimate from the values received), the forcing and its
- * derivatives, the constraint residual, the state derivatives, value references.
- * Reads and writes one instance only; no FMI function here. Part of the one
- * translation unit of fmi2Functions.c (every function static). */
-
-static void form_gw(Instance *c) {
-    int i;
-    if (c->lam_gw == c->s.lam) return;
-    for (i = 0; i < NX * NX; i++) c->G[i] = G0[i] + c->s.lam * G1[i];
-    for (i = 0; i < NX * NXJ; i++) c->W[i] = W0[i] + c->s.lam * W1[i];
-    c->lam_gw = c->s.lam;
-    memset(c->cache_valid, 0, sizeof c->cache_valid);
-}
+/* The inputs between FMI calls: the values received, their estimated derivatives, and the jets of
+ * every input at a time (the master's derivatives where it sent them, else the estimate's), which
+ * both model backends read. Reads and writes one instance only; no API function here. Part of
+ * the one translation unit of an API layer (every function static). */
 
 /* ---- the inputs' derivatives ---------------------------------------------------------------------------
  * An importer sets the inputs' values; the completion needs their derivatives. Each is the master's where it
- * sent one (Co-Simulation, fmi2SetRealInputDerivatives), otherwise estimated from the values received
+ * sent one (Co-Simulation, FMI 2.0's fmi2SetRealInputDerivatives), otherwise estimated from the values received
  * (docs/guide/inputs.md; fmu_build/targets/_runtime/_inputs.py is the same estimator). Every value received is
  * kept twice: the newest UDEG + 1 as received (hist_*), and all of the last few windows as weighted moments in
  * bins (a value weighs the time since the one before it): for each of the NLEVELS windows U_WINDOW[i] times
@@ -340,7 +330,7 @@ static void estimate_inputs(Instance *c) {
  * Co-Simulation: the input's Taylor polynomial at a base time tb, shifted to t (a sub-step's start, or the
  * step end). tb is the FMU time, with the value last set; after a step, until the master sets a new value,
  * it is the step's start (the FMU holds that step's polynomial: the residual at the step end reads it). Each
- * order is the master's where it sent that order for tb (fmi2SetRealInputDerivatives), otherwise the
+ * order is the master's where it sent that order for tb (FMI 2.0's fmi2SetRealInputDerivatives), otherwise the
  * estimate's, shifted to tb.
  * Model Exchange: the estimate's polynomial at t: one smooth right-hand side between two estimates (a new
  * estimate is a step event), also for a host that sets inputs only at its communication points and holds them
@@ -351,7 +341,7 @@ static void input_jets(Instance *c, double t) {
         double *uj = c->uj + i * NFE, coef[NFE], tb = t, dt;
         const double *est = c->s.est + i * (UDEG + 1);
         int held = 0, sent = 0;
-        if (c->type != fmi2ModelExchange) {
+        if (c->type != ModelExchange) {
             held = c->s.hist_n > 0 && c->s.hist_t[0] < c->s.t && !c->s.u_fresh[i];
             tb = held ? c->s.hist_t[0] : c->s.t;
             sent = c->s.ud_t == tb;
@@ -365,7 +355,7 @@ static void input_jets(Instance *c, double t) {
             }
             coef[d] = c->s.hist_n > 0 ? v : 0.0;
         }
-        if (c->type != fmi2ModelExchange || c->s.hist_n == 0) {
+        if (c->type != ModelExchange || c->s.hist_n == 0) {
             coef[0] = held ? c->s.hist_u[i] : c->s.u[i];
             for (d = 1; d < NFE && d < NUD; d++)
                 if (sent && c->s.ud_set[i * NUD + d]) coef[d] = c->s.ud[i * NUD + d];
@@ -383,86 +373,3 @@ static void input_jets(Instance *c, double t) {
         }
     }
 }
-
-/* f and its derivatives 0..NFE-1 at t into c->fj */
-static void eval_f(Instance *c, double t) {
-    input_jets(c, t);
-    model_f_jet(t, c->s.p, c->uj, c->fj);
-}
-
-static double residual_norm(Instance *c, const double *x) {
-    double s = 0.0;
-    int i, j;
-#ifdef LSC_TIME_VARYING
-    return tv_residual(c, c->s.t, x);
-#endif
-    eval_f(c, c->s.t);
-    for (i = 0; i < NC; i++) {
-        double r = 0.0;
-        for (j = 0; j < NX; j++) r += CC[i * NX + j] * x[j];
-        for (j = 0; j < NX * NJC; j++) r -= WC[i * NX * NJC + j] * c->fj[j];
-        s += r * r;
-    }
-    return sqrt(s);
-}
-
-/* x and its derivatives 0..NQ+1 at the current time into c->xd (from x' = G x + g) */
-static void state_derivatives(Instance *c) {
-    int d, i, j;
-#ifdef LSC_TIME_VARYING
-    tv_state_derivatives(c, before_init(c) ? c->s.x0 : c->s.x);
-    return;
-#endif
-    form_gw(c);
-    eval_f(c, c->s.t);
-    memcpy(c->xd, before_init(c) ? c->s.x0 : c->s.x, sizeof(double) * NX);
-    for (d = 1; d <= NQ + 1; d++) {
-        const double *prev = c->xd + (d - 1) * NX;
-        double *cur = c->xd + d * NX;
-        for (i = 0; i < NX; i++) {
-            double v = 0.0;
-            for (j = 0; j < NX; j++) v += c->G[i * NX + j] * prev[j];
-            for (j = 0; j < NXJ; j++) v += c->W[i * NXJ + j] * c->fj[(d - 1) * NX + j];
-            cur[i] = v;
-        }
-    }
-}
-
-/* a value the next step depends on changed: a step discarded before may succeed now */
-static void changed(Instance *c) {
-    c->s.terminal = 0;
-    c->s.discard_h = 0.0;
-}
-
-/* ---- value references ----------------------------------------------------- */
-
-/* The block of a Real value reference, -1 beyond them: 0 lambda, 1 parameter in f, 2 start value, 3 input,
- * 4 state, 5 custom output, 6 constraint residual, 7 derivative of a state, 8 constant (a parameter of A or B,
- * fixed). model.h gives each value reference's block (VR_KIND) and each block's first (VR_LAMBDA ... VR_K),
- * both written from the build's one table of the FMU's variables. */
-static int vr_kind(fmi2ValueReference vr) {
-    return vr < NR ? VR_KIND[vr] : -1;
-}
-
-static double get_one(Instance *c, fmi2ValueReference vr) {
-    int i;
-    switch (vr_kind(vr)) {
-    case 0: return c->s.lam;
-    case 1: return c->s.p[vr - VR_PAR];
-    case 2: return c->s.x0[vr - VR_X0];
-    case 3: return c->s.u[vr - VR_U];
-    case 4: return (c->s.phase & (Instantiated | InitializationMode)) ? c->s.x0[vr - VR_X] : c->s.x[vr - VR_X];
-    case 5: {
-        const double *x = (c->s.phase & (Instantiated | InitializationMode)) ? c->s.x0 : c->s.x;
-        return model_output((int)(vr - VR_Y), c->s.t, x, c->s.p, c->s.u);
-    }
-    case 6: return residual_norm(c, before_init(c) ? c->s.x0 : c->s.x);
-    case 7:
-        i = (int)(vr - VR_DX);
-        state_derivatives(c);
-        return c->xd[NX + i];
-    case 8: return K_VALUE[vr - VR_K];
-    default: return NAN;
-    }
-}
-
