@@ -5,7 +5,7 @@ import scipy.linalg
 
 from ._derivative_array import array_jets
 from ._exceptions import IndexDeterminationError
-from ._linalg import TRIAL_SHIFTS, default_rcond, numerical_rank, validate_rcond
+from ._linalg import TRIAL_SHIFTS, default_rcond, numerical_rank, rank_margin, validate_rcond
 from ._problem import balance, check_dae
 from ._validate import check_k, check_t_span, check_time
 
@@ -269,19 +269,7 @@ def _array_margin(dae, k, rank, rcond, t, at):
         return np.inf
     if not np.all(np.isfinite(J)):
         return np.inf
-    return _margin(scipy.linalg.svdvals(J), rank, default_rcond(J.shape) if rcond is None else rcond)
-
-
-def _margin(s, rank, rcond):
-    tol = rcond * (s[0] if s.size else 0.0)
-    if tol == 0.0:
-        return np.inf
-    margin = np.inf
-    if rank > 0:
-        margin = min(margin, s[rank - 1] / tol)
-    if rank < s.size and s[rank] > 0.0:
-        margin = min(margin, tol / s[rank])
-    return float(margin)
+    return rank_margin(scipy.linalg.svdvals(J), rank, default_rcond(J.shape) if rcond is None else rcond)
 
 
 def _rank_drop(dae, k, times, ranks, rcond):
@@ -297,7 +285,7 @@ def _rank_drop(dae, k, times, ranks, rcond):
     rank = ranks[0].rank_J
     shape = ((k + 1) * dae.n, (k + 1) * dae.n)
     rc = default_rcond(shape) if rcond is None else rcond
-    margins = [np.inf if r._s is None else _margin(r._s, rank, rc) for r in ranks]
+    margins = [np.inf if r._s is None else rank_margin(r._s, rank, rc) for r in ranks]
     margins = [_array_margin(dae, k, rank, rcond, float(t), float(t)) if m == np.inf else m
                for t, m in zip(times, margins)]
     last = len(times) - 1

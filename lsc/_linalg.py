@@ -12,6 +12,7 @@ evaluation at many times. The trial shifts of a pencil (`TRIAL_SHIFTS`) and
 the 1-fullness bound (`ONE_FULL_TOL`) live here for the same reason.
 """
 
+import math
 import warnings
 
 import numpy as np
@@ -46,6 +47,23 @@ def norm2_if_above(X, tol):
     """``||X||_2`` when it may exceed `tol`; the cheaper Frobenius norm (an upper bound) otherwise."""
     frobenius = np.sqrt(np.einsum("ij,ij->", X, X))
     return frobenius if frobenius <= tol else np.linalg.norm(X, 2)
+
+
+def rank_margin(s, rank, rcond):
+    """``min(s_r / tol, tol / s_(r+1))`` for singular values `s`, the rank `rank` and ``tol = rcond s_1``.
+
+    Below 1 the numerical rank is not `rank`; below `RANK_MARGIN` the decision is a close call. Infinite
+    for a zero matrix (no rank decision).
+    """
+    tol = rcond * (s[0] if s.size else 0.0)
+    if tol == 0.0:
+        return math.inf
+    margin = math.inf
+    if rank > 0:
+        margin = min(margin, s[rank - 1] / tol)
+    if rank < s.size and s[rank] > 0.0:
+        margin = min(margin, tol / s[rank])
+    return float(margin)
 
 
 def default_rcond(shape):

@@ -22,7 +22,7 @@ import scipy.linalg
 
 from ._derivative_array import array_jets
 from ._exceptions import RankDecisionWarning
-from ._linalg import RANK_MARGIN, default_rcond
+from ._linalg import RANK_MARGIN, default_rcond, rank_margin as linalg_rank_margin
 
 __all__ = []
 
@@ -73,16 +73,7 @@ def rank_margin(completion, t):
     if not np.all(np.isfinite(J)):
         return math.inf
     s = scipy.linalg.svdvals(J)
-    r = completion._rank
-    tol = (completion.rcond or default_rcond(J.shape)) * s[0]
-    if tol == 0.0:
-        return math.inf
-    margin = math.inf
-    if r > 0:
-        margin = min(margin, s[r - 1] / tol)
-    if r < s.size and s[r] > 0.0:
-        margin = min(margin, tol / s[r])
-    return float(margin)
+    return linalg_rank_margin(s, completion._rank, completion.rcond or default_rcond(J.shape))
 
 
 def _resolution(a, b):
