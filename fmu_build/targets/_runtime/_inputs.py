@@ -101,7 +101,65 @@ def _chebyshev_local(alpha, beta, size):
     return np.einsum("...j,pja->...ap", powers, G) * scale[..., None, :]
 
 
-class _InputSignal:
+class _SignalState:
+    """The FMU state of an input's estimate (`_InputSignal`): saved as JSON-able data, checked, restored."""
+
+    def state(self):
+        """Everything the estimate depends on, as JSON-able lists and numbers."""
+        return {"value": self.value, "history": [list(h) for h in self.history], "origin": self._origin,
+                "first": self._first, "k": self._k.tolist(), "n": self._n.tolist(), "lo": self._lo.tolist(),
+                "m": self._m.tolist(), "r": self._r.tolist()}
+
+    def check(self, saved):
+        """Why `saved` (from `state`) cannot be restored, or None."""
+        def finite(v):
+            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+        malformed = "its input history is malformed"
+        if not (isinstance(saved, dict) and finite(saved.get("value")) and isinstance(saved.get("history"), list)):
+            return malformed
+        history = saved["history"]
+        if not (len(history) <= self.degree + 1
+                and all(isinstance(h, list) and len(h) == 3 and all(finite(v) for v in h) for h in history)
+                and all(a[0] < b[0] for a, b in zip(history, history[1:]))):
+            return malformed
+        if not history or self.order < 0:  # an input whose derivatives are not used keeps its last value only
+            return None
+        if not (finite(saved.get("origin")) and finite(saved.get("first"))):
+            return malformed
+        shapes = {"k": self._k.shape, "n": self._n.shape, "lo": self._lo.shape, "m": self._m.shape, "r": self._r.shape}
+        for key, shape in shapes.items():
+            try:
+                array = np.array(saved.get(key), dtype=float)
+            except (TypeError, ValueError):
+                return malformed
+            if array.shape != shape or not np.all(np.isfinite(array)):
+                return malformed
+        n = np.array(saved["n"], dtype=float)
+        if np.any(n < 0) or np.any(n != np.round(n)):
+            return malformed
+        return None
+
+    def restore(self, saved):
+        """Restore a state `check` accepted (the estimate is recomputed from it, bit for bit)."""
+        self.reset()
+        self.value = saved["value"]
+        self.history = [tuple(h) for h in saved["history"]]
+        if not self.history:
+            return
+        if self.order < 0:
+            self._t0, self._derivs = self.history[-1][0], np.array([self.history[-1][1]])
+            return
+        self._origin, self._first = saved["origin"], saved["first"]
+        self._k = np.array(saved["k"], dtype=float)
+        self._n = np.array(saved["n"], dtype=int)
+        self._lo = np.array(saved["lo"], dtype=float)
+        self._m = np.array(saved["m"], dtype=float)
+        self._r = np.array(saved["r"], dtype=float)
+        self._estimate()
+
+
+class _InputSignal(_SignalState):
     """Estimates of an input and its derivatives from the values received.
 
     pythonfmu cannot receive input derivatives, so they are estimated (module
@@ -384,58 +442,3 @@ class _InputSignal:
     def taylor(self, t, top):
         """Every derivative 0..top of the extrapolation polynomial at t (zero beyond its degree)."""
         return self._at(t, top)
-
-    # -- FMU states --------------------------------------------------------
-    def state(self):
-        """Everything the estimate depends on, as JSON-able lists and numbers."""
-        return {"value": self.value, "history": [list(h) for h in self.history], "origin": self._origin,
-                "first": self._first, "k": self._k.tolist(), "n": self._n.tolist(), "lo": self._lo.tolist(),
-                "m": self._m.tolist(), "r": self._r.tolist()}
-
-    def check(self, saved):
-        """Why `saved` (from `state`) cannot be restored, or None."""
-        def finite(v):
-            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-        malformed = "its input history is malformed"
-        if not (isinstance(saved, dict) and finite(saved.get("value")) and isinstance(saved.get("history"), list)):
-            return malformed
-        history = saved["history"]
-        if not (len(history) <= self.degree + 1
-                and all(isinstance(h, list) and len(h) == 3 and all(finite(v) for v in h) for h in history)
-                and all(a[0] < b[0] for a, b in zip(history, history[1:]))):
-            return malformed
-        if not history or self.order < 0:  # an input whose derivatives are not used keeps its last value only
-            return None
-        if not (finite(saved.get("origin")) and finite(saved.get("first"))):
-            return malformed
-        shapes = {"k": self._k.shape, "n": self._n.shape, "lo": self._lo.shape, "m": self._m.shape, "r": self._r.shape}
-        for key, shape in shapes.items():
-            try:
-                array = np.array(saved.get(key), dtype=float)
-            except (TypeError, ValueError):
-                return malformed
-            if array.shape != shape or not np.all(np.isfinite(array)):
-                return malformed
-        n = np.array(saved["n"], dtype=float)
-        if np.any(n < 0) or np.any(n != np.round(n)):
-            return malformed
-        return None
-
-    def restore(self, saved):
-        """Restore a state `check` accepted (the estimate is recomputed from it, bit for bit)."""
-        self.reset()
-        self.value = saved["value"]
-        self.history = [tuple(h) for h in saved["history"]]
-        if not self.history:
-            return
-        if self.order < 0:
-            self._t0, self._derivs = self.history[-1][0], np.array([self.history[-1][1]])
-            return
-        self._origin, self._first = saved["origin"], saved["first"]
-        self._k = np.array(saved["k"], dtype=float)
-        self._n = np.array(saved["n"], dtype=int)
-        self._lo = np.array(saved["lo"], dtype=float)
-        self._m = np.array(saved["m"], dtype=float)
-        self._r = np.array(saved["r"], dtype=float)
-        self._estimate()
