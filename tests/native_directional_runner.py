@@ -1,6 +1,7 @@
 """Partial derivatives of a native FMU (FMI 2.0 or 3.0, ME or CS) in this fresh process with fmpy; JSON out.
 
-Reads {"fmu", "version", "interface" ('me'|'cs'), "p" (the input's value), "lam" (or null), "phase"
+Reads {"fmu", "version", "interface" ('me'|'cs'), "p" (the input's value), "lam" (or null), "start" (optional:
+other values set before initialization), "phase"
 ('init': in Initialization Mode, knowns the states' start values; 'run': after `steps` steps of `dt`),
 "unknowns", "knowns" (names), "x" (ME 'run': the states set), "bad" (optional: calls that must be refused)}
 from stdin and prints {"J": rows of the unknowns by unit seeds, "JT": the same by adjoint products (FMI 3.0),
@@ -62,6 +63,8 @@ def main():
     if sc.get("lam") is not None:
         _setreal(fmu, [vr["lambda"]], [sc["lam"]])
     _setreal(fmu, [vr["p"]], [sc["p"]])
+    for name, value in sc.get("start", {}).items():
+        _setreal(fmu, [vr[name]], [value])
     fmu.enterInitializationMode(**({"startTime": 0.0} if v3 else {}))
     states = ["y", "v", "u"]
     if sc["phase"] == "run":

@@ -11,6 +11,7 @@ relative. The capability is declared in the model descriptions; fmuCheck and fmu
 import csv
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -129,6 +130,17 @@ def test_bad_calls_are_refused_with_a_reason(built):
         assert out["after"] == out["x"]  # a refused call changes nothing
 
 
+def test_residual_on_the_manifold_is_refused(built):
+    """|r| has no derivative where r = 0 (its one-sided derivative is |C v|, not linear in the seed): refused with
+    the reason, never a number. With a = p = 0 and a zero start r is exactly 0."""
+    for version in (2, 3):
+        out = run({"fmu": str(built[version]), "version": version, "interface": "me", "p": 0.0, "lam": LAM,
+                   "start": {"a": 0.0, "y_0": 0.0}, "phase": "init", "unknowns": ["der(y)"], "knowns": ["y_0"],
+                   "bad": [{"unknowns": ["constraint_residual"], "knowns": ["y_0", "p"]}]})
+        assert out["errors"][0]["refused"], out["errors"]
+        assert "is not differentiable here" in " ".join(out["errors"][0]["logs"])
+
+
 def test_declared_in_both_descriptions(built):
     for version, flags in ((2, ['providesDirectionalDerivative="true"']),
                            (3, ['providesDirectionalDerivatives="true"', 'providesAdjointDerivatives="true"'])):
@@ -137,3 +149,102 @@ def test_declared_in_both_descriptions(built):
         for flag in flags:
             assert xml.count(flag) == 2, flag  # Model Exchange and Co-Simulation
         assert "dependencies=" in xml
+
+
+def test_time_varying_fmu_neither_declares_nor_gives_them(tmp_path):
+    from _support import lag_spec
+
+    spec = lag_spec(equations={"A": [["2 + sin(t)"]], "B": [[1]], "f": ["sin(t)"]},
+                    experiment={"start": 0.0, "stop": 1.0, "step": 0.1})
+    for version in (2, 3):
+        fmu = build_fmu(spec, tmp_path / f"v{version}", target="native", fmi_version=version)
+        with zipfile.ZipFile(fmu) as zf:
+            xml = zf.read("modelDescription.xml").decode()
+        assert "DirectionalDerivative" in xml and 'irectionalDerivative="true"' not in xml
+        assert 'irectionalDerivatives="true"' not in xml and 'AdjointDerivatives="true"' not in xml
+        code = f"""
+import sys
+sys.path.insert(0, {str(HERE)!r})
+from native_directional_runner import _open
+logs = []
+fmu, vr = _open({{"fmu": {str(fmu)!r}, "version": {version}, "interface": "cs"}}, logs)
+{"fmu.setupExperiment(startTime=0.0)" if version == 2 else ""}
+fmu.enterInitializationMode({"startTime=0.0" if version == 3 else ""})
+fmu.exitInitializationMode()
+try:
+    fmu.getDirectionalDerivative([vr["der(x)"]], [vr["x"]], [1.0])
+    print("NOT REFUSED")
+except Exception:
+    print("REFUSED", logs[-1])
+fmu.doStep(0.0, 0.1)
+fmu.terminate()
+fmu.freeInstance()
+"""
+        proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        assert "REFUSED" in proc.stdout and "NOT REFUSED" not in proc.stdout
+        assert "not provided by an FMU of time-varying coefficients" in proc.stdout
+
+
+def _tool(name, what):
+    given = os.environ.get(name)
+    if not given:
+        pytest.skip(f"{what} not found: set {name}")
+    return given
+
+
+@pytest.mark.parametrize("version", (2, 3))
+def test_fmusim_runs_them_clean(built, version, tmp_path):
+    """fmusim (Model Exchange with CVODE, Co-Simulation) with the capability declared: exit 0, no warning or
+    error logged, the same states (fmusim 0.0.39 does not call the partials: its CVODE makes its own Jacobian)."""
+    fmusim = _tool("LSC_FMUSIM", "fmusim (the Reference FMUs' simulator)")
+    final = {}
+    for interface, solver in (("me", "cvode"), ("cs", "euler")):
+        out = tmp_path / f"{interface}.csv"
+        cmd = [fmusim, "--interface-type", interface, "--solver", solver, "--tolerance", "1e-10",
+               "--output-interval", "0.01", "--stop-time", "2", "--start-value", "p", "0.3", "--output-file", str(out), str(built[version])]
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+        assert "rror" not in proc.stdout + proc.stderr and "arning" not in proc.stdout + proc.stderr
+        with open(out, newline="") as fh:
+            rows = list(csv.reader(fh))
+        final[interface] = np.array([float(rows[-1][rows[0].index(s)]) for s in STATES])
+    assert np.allclose(final["me"], final["cs"], rtol=1e-5, atol=1e-6), final
+
+
+def test_fmucheck_is_clean(built, tmp_path):
+    """The FMU Compliance Checker reads the FMI 2.0 description with the capability and runs both interfaces."""
+    fmucheck = _tool("LSC_FMUCHECK", "fmuCheck (modelica-tools/FMUComplianceChecker)")
+    for kind in ("cs", "me"):
+        unpack = Path(tempfile.mkdtemp(prefix="fc", dir="/tmp" if os.path.isdir("/tmp") else None))
+        log = tmp_path / f"{kind}.log"
+        cmd = [fmucheck, "-h", "0.01", "-s", "2", "-l", "3", "-k", kind, "-t", str(unpack), "-o",
+               str(tmp_path / f"{kind}.csv"), "-e", str(log), str(built[2])]
+        try:
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+        finally:
+            shutil.rmtree(unpack, ignore_errors=True)
+        text = log.read_text()
+        assert proc.returncode == 0, text[-2000:]
+        summary = re.search(r"FMU reported:\s*(\d+) warning\(s\) and error\(s\)\s*Checker reported:\s*(\d+) "
+                            r"Warning\(s\)\s*(\d+) Error\(s\)", text)
+        assert summary is not None and summary.groups() == ("0", "0", "0"), text[-2000:]
+
+
+def test_fmpy_cvode_on_model_exchange_agrees_with_the_exact_steps(built):
+    """fmpy's CVode integrates the ME FMU (it does not call the partials: this checks that declaring them left
+    Model Exchange as it was) and ends where the Co-Simulation FMU's exact steps do."""
+    code = f"""
+import json
+from fmpy import simulate_fmu
+out = {{}}
+for kind in ("ModelExchange", "CoSimulation"):
+    r = simulate_fmu({str(built[2])!r}, fmi_type=kind, stop_time=2.0, output_interval=0.01, relative_tolerance=1e-10,
+                     start_values={{"p": 0.3}}, output=["y", "v", "u"])
+    out[kind] = [float(r[s][-1]) for s in ("y", "v", "u")]
+print(json.dumps(out))
+"""
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = json.loads(proc.stdout)
+    assert np.allclose(out["ModelExchange"], out["CoSimulation"], rtol=1e-7, atol=1e-8), out

@@ -110,7 +110,7 @@ static Status partial_derivatives(Instance *c, const char *f, const ValueReferen
         logmsg(c, Error, "%s: %lu knowns, more than the %d this FMU has", f, (unsigned long)nKnown, NCOL);
         return Error;
     }
-    if (!known_columns(c, f, known, nKnown, cols) || !model_partials(c, f, before_init(c) ? c->s.x0 : c->s.x))
+    if (!model_partials(c, f, before_init(c) ? c->s.x0 : c->s.x) || !known_columns(c, f, known, nKnown, cols))
         return Error;
     if (adjoint) for (k = 0; k < nKnown; k++) dvKnown[k] = 0.0;
     for (i = 0; i < nUnknown; i++) {
