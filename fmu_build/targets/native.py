@@ -48,7 +48,7 @@ _TEMPLATES = Path(__file__).parent.parent / "templates"  # fmu_build/templates
 # knows neither FMI version, one model backend of the two, and the API layer of the FMI version built with its
 # vendored headers. The layer is the one file compiled: it includes the core, which includes the rest.
 _CORE_SOURCES = ("lsc_core.c", "lsc_fmu.h", "lsc_linalg.h", "inputs.c", "instance.c", "cosimulation.c",
-                 "model_exchange.c", "fmu_state.c")
+                 "model_exchange.c", "fmu_state.c", "directional.c")
 _BACKEND_SOURCES = {False: "model_constant.c", True: "model_timevarying.c"}  # by time-varying coefficients
 _API_SOURCES = {
     2: ("fmi2Functions.c", "fmi2/headers/fmi2Functions.h", "fmi2/headers/fmi2FunctionTypes.h",
@@ -255,6 +255,26 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, maps, lam_tunable, fpars
         if exprs:
             lines += _ccode_block(exprs, targets, names)
         lines.append("}")
+        # the partial derivatives of f's jet with respect to each input's value, its derivatives held (rows of
+        # the jet the forcing maps W and W_c read)
+        rows = max(nj, njc)
+        pexprs, ptargets, nfu = [], [], max(nu + npar, 1)
+        wrt = [sympy.Symbol(_mangled("u", uname, 0), real=True) for uname in spec.input_symbols]
+        wrt += [spec.symbols[name] for name in fpars]
+        for k, sym in enumerate(wrt):
+            for d, D in enumerate(derivs[:rows]):
+                for i in range(n):
+                    e = sympy.diff(D[i], sym)
+                    if e != 0:
+                        pexprs.append(e)
+                        ptargets.append(f"dfdu[{(d * n + i) * nfu + k}]")
+        lines += ["", "/* dfdu[(d * NX + i) * A1(NFU) + k] = d f_i^(d) / d u_k (its derivatives held), then d / d p_(k-NU);",
+                  " * d < max(NJ, NJC) */",
+                  "static void model_f_partials(double t, const double *p, const double *u, double *dfdu) {",
+                  "    int i;", "    (void)t; (void)p; (void)u;", f"    for (i = 0; i < {nfe * n * nfu}; i++) dfdu[i] = 0.0;"]
+        if pexprs:
+            lines += _ccode_block(pexprs, ptargets, names)
+        lines.append("}")
     # custom outputs
     state_syms = {s["name"]: f"x[{i}]" for i, s in enumerate(spec.states)}
     out_names = dict(names)
@@ -271,7 +291,26 @@ def _model_header(spec, *, ident, guid, G0, G1, W0, W1, maps, lam_tunable, fpars
                 syms[s] = state_syms[str(s)]
         body = _ccode_block([expr], ["r"], syms)
         lines += [f"    case {j}: {{ /* {out['name']} */", "    double r;", *["    " + b for b in body], "    return r; }"]
-    lines += ["    default: return NAN;", "    }", "}", "", "#endif", ""]
+    lines += ["    default: return NAN;", "    }", "}"]
+    # their partial derivatives: d y_j/d x into dy[0 .. NX-1], d y_j/d u into dy[NX ..]
+    lines += ["", "/* d y_j/d x, d y_j/d u, d y_j/d p into dy[0 ..], dy[COL_U ..], dy[COL_PAR ..] (lsc_fmu.h; dy zero on entry) */",
+              "static void model_output_partials(int j, double t, const double *x, const double *p, const double *u, "
+              "double *dy) {", "    (void)t; (void)x; (void)p; (void)u; (void)dy;", "    switch (j) {"]
+    for j, out in enumerate(spec.outputs):
+        expr = out["expr"].subs(values)
+        syms = dict(out_names)
+        by_name = {str(s): s for s in expr.free_symbols}
+        for name in state_syms:
+            if name in by_name:
+                syms[by_name[name]] = state_syms[name]
+        wrt = [(by_name.get(s["name"]), f"dy[{i}]") for i, s in enumerate(spec.states)]
+        wrt += [(usym, f"dy[{n + i}]") for i, usym in enumerate(spec.input_symbols.values())]
+        wrt += [(by_name.get(name), f"dy[{n + nu + 1 + i}]") for i, name in enumerate(fpars)]
+        pairs = [(sympy.diff(expr, sym), tgt) for sym, tgt in wrt if sym is not None and sym in expr.free_symbols]
+        pairs = [(e, tgt) for e, tgt in pairs if e != 0]
+        body = _ccode_block([e for e, _ in pairs], [tgt for _, tgt in pairs], syms) if pairs else []
+        lines += [f"    case {j}: {{ /* {out['name']} */", *["    " + b for b in body], "    return; }"]
+    lines += ["    default: return;", "    }", "}", "", "#endif", ""]
     return "\n".join(lines), dict(interface=interface, nf=nf, nc=nc)
 
 
@@ -334,7 +373,9 @@ def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=Fal
     guid = "{" + str(uuid.UUID(digest.hexdigest()[:32])) + "}"
     header = header.replace(placeholder, guid)
     flags_common = dict(needsExecutionTool=False, canBeInstantiatedOnlyOncePerProcess=False, canNotUseMemoryManagementFunctions=False,
-                        canGetAndSetFMUstate=True, canSerializeFMUstate=True, providesDirectionalDerivative=False)
+                        canGetAndSetFMUstate=True, canSerializeFMUstate=True,
+                        # exact partial derivatives from G, W and the outputs' formulas: constant coefficients only
+                        providesDirectionalDerivative=tv is None)
     # FMI 3.0: a time-varying FMU returns early at the end of its tables' horizon where the importer allows it
     describe = partial(_describe3, might_return_early=tv is not None) if fmi_version == 3 else model_description
     # time-varying with inputs: x' only (higher orders would need the input jet beyond the order it is sent)
@@ -393,8 +434,10 @@ def _describe3(*, model_name, guid, description, model_identifier, variables, so
                co_simulation, experiment, log_categories, might_return_early=False):
     """`model_description3` with the FMI 3.0 names of the interfaces' capability flags."""
     del source_files  # FMI 3.0 lists them in sources/buildDescription.xml
+    partials = model_exchange["providesDirectionalDerivative"]
     common = dict(canGetAndSetFMUState=True, canSerializeFMUState=True, needsExecutionTool=False,
-                  canBeInstantiatedOnlyOncePerProcess=False, providesDirectionalDerivatives=False)
+                  canBeInstantiatedOnlyOncePerProcess=False, providesDirectionalDerivatives=partials,
+                  providesAdjointDerivatives=partials)
     return model_description3(
         model_name=model_name, token=guid, description=description, model_identifier=model_identifier,
         variables=variables, experiment=experiment, log_categories=log_categories,

@@ -216,10 +216,13 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component comp, const fmi2ValueRefer
                                         const fmi2ValueReference vKnown_ref[], size_t nKnown, const fmi2Real dvKnown[],
                                         fmi2Real dvUnknown[]) {
     Instance *c = (Instance *)comp;
-    (void)vUnknown_ref; (void)nUnknown; (void)vKnown_ref; (void)nKnown; (void)dvKnown; (void)dvUnknown;
-    if (!allowed(c, "fmi2GetDirectionalDerivative", ANY_ALIVE)) return fmi2Error;
-    logmsg(c, Error, "fmi2GetDirectionalDerivative: not provided (providesDirectionalDerivative=false)");
-    return fmi2Error;
+    const char *f = "fmi2GetDirectionalDerivative";
+    if (!allowed(c, f, ANY_ALIVE & ~Instantiated)) return fmi2Error;
+    if ((nUnknown > 0 && (nullarg(c, f, vUnknown_ref, "vUnknown_ref") || nullarg(c, f, dvUnknown, "dvUnknown")))
+        || (nKnown > 0 && (nullarg(c, f, vKnown_ref, "vKnown_ref") || nullarg(c, f, dvKnown, "dvKnown"))))
+        return fmi2Error;
+    return (fmi2Status)partial_derivatives(c, f, vUnknown_ref, nUnknown, vKnown_ref, nKnown, (double *)dvKnown,
+                                           dvUnknown, 0);
 }
 
 /* ---- Model Exchange ---------------------------------------------------------- */

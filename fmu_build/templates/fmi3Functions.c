@@ -376,22 +376,43 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte seriali
     return (fmi3Status)deserialize_fmu_state(c, "fmi3DeserializeFMUState", serializedState, size, FMUState);
 }
 
-/* ---- derivatives, configuration, clocks: not offered ------------------------------ */
+/* ---- partial derivatives; configuration and clocks: not offered ---------------------- */
+
+/* the directional (adjoint 0) or adjoint (1) product: seed and sensitivity sized as the knowns and unknowns
+ * (unknowns and knowns swapped for the adjoint), every variable a scalar */
+static fmi3Status partials3(fmi3Instance instance, const char *f, const fmi3ValueReference unknowns[], size_t nUnknowns,
+                            const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[], size_t nSeed,
+                            fmi3Float64 sensitivity[], size_t nSensitivity, int adjoint) {
+    Instance *c = (Instance *)instance;
+    const size_t nIn = adjoint ? nUnknowns : nKnowns, nOut = adjoint ? nKnowns : nUnknowns;
+    if (!allowed(c, f, ANY_ALIVE & ~Instantiated)) return fmi3Error;
+    if (nSeed != nIn || nSensitivity != nOut) {
+        logmsg(c, Error, "%s: nSeed = %lu, nSensitivity = %lu; expected %lu and %lu (every variable of this FMU is "
+               "a scalar)", f, (unsigned long)nSeed, (unsigned long)nSensitivity, (unsigned long)nIn,
+               (unsigned long)nOut);
+        return fmi3Error;
+    }
+    if ((nUnknowns > 0 && nullarg(c, f, unknowns, "unknowns")) || (nKnowns > 0 && nullarg(c, f, knowns, "knowns"))
+        || (nIn > 0 && nullarg(c, f, seed, "seed")) || (nOut > 0 && nullarg(c, f, sensitivity, "sensitivity")))
+        return fmi3Error;
+    return adjoint ? (fmi3Status)partial_derivatives(c, f, unknowns, nUnknowns, knowns, nKnowns, sensitivity,
+                                                     (double *)seed, 1)
+                   : (fmi3Status)partial_derivatives(c, f, unknowns, nUnknowns, knowns, nKnowns, (double *)seed,
+                                                     sensitivity, 0);
+}
 
 fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns,
                                         const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
                                         size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity) {
-    (void)unknowns; (void)nUnknowns; (void)knowns; (void)nKnowns; (void)seed; (void)nSeed; (void)sensitivity;
-    (void)nSensitivity;
-    return unsupported(instance, "fmi3GetDirectionalDerivative", "providesDirectionalDerivatives=false");
+    return partials3(instance, "fmi3GetDirectionalDerivative", unknowns, nUnknowns, knowns, nKnowns, seed, nSeed,
+                     sensitivity, nSensitivity, 0);
 }
 
 fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns,
                                     const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
                                     size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity) {
-    (void)unknowns; (void)nUnknowns; (void)knowns; (void)nKnowns; (void)seed; (void)nSeed; (void)sensitivity;
-    (void)nSensitivity;
-    return unsupported(instance, "fmi3GetAdjointDerivative", "providesAdjointDerivatives=false");
+    return partials3(instance, "fmi3GetAdjointDerivative", unknowns, nUnknowns, knowns, nKnowns, seed, nSeed,
+                     sensitivity, nSensitivity, 1);
 }
 
 fmi3Status fmi3EnterConfigurationMode(fmi3Instance instance) {

@@ -9,6 +9,7 @@
  *   cosimulation.c       the communication step, discards, input and output derivatives;
  *   model_exchange.c     the states and their derivatives for the host's integrator;
  *   fmu_state.c          FMU states and their serialization;
+ *   directional.c        partial derivatives: directional and adjoint products;
  *   lsc_linalg.h         products, LU, the matrix exponential.
  * Everything that belongs to one model (sizes, value references, the matrices or tables,
  * the C of the forcing and the custom outputs) is in the generated "model.h"; the build
@@ -29,3 +30,4 @@
 #include "cosimulation.c"
 #include "model_exchange.c"
 #include "fmu_state.c"
+#include "directional.c"

@@ -23,6 +23,11 @@
 
 #define NXJ (NX * NJ)            /* columns of W */
 #define MB (NX * (NQ + 4))       /* order of the block matrix: phi_0 .. phi_(NQ+3) */
+#define NFU (NU + NPAR)          /* f's arguments with partial derivatives: the inputs, then the parameters */
+#define COL_U (NX)               /* the columns of a row of partial derivatives: the states, the inputs, */
+#define COL_LAM (NX + NU)        /* lambda, */
+#define COL_PAR (NX + NU + 1)    /* the parameters in f */
+#define NCOL (NX + NU + 1 + NPAR)
 #define NUD (NF)                 /* length of an input jet: u, u', ..., u^(NF-1) */
 #define HN (UDEG + 1)            /* the newest input values, kept as received */
 #define NBINS 8                  /* complete bins per least-squares window of an input (lsc_model.c, the estimator) */
@@ -163,6 +168,9 @@ typedef struct {
     double uj[A1(NU) * NFE];
     double xd[(NQ + 2) * NX];
     double tmp[NX], tmp2[NX];
+    double dfdu[NFE * NX * A1(NFU)];  /* d[f; f'; ...]/d (u, p): row d * NX + i, column the input or parameter */
+    double dgdx[NX * NX], dgdu[NX * NCOL]; /* d x'/d x; d x'/d (u, lambda, p) in columns COL_U .. NCOL-1 */
+    double row[NCOL];                 /* one unknown's partial derivatives by column (COL_U, COL_LAM, COL_PAR) */
     /* each input's least-squares fits, per window: a function of the complete bins, made once per bin
      * (fit_key: the bin index and degree it was made for; fit_ok 1: fit_d holds it, -1: too few values) */
     double fit_key[A1(NU)][NLEVELS][2];
@@ -189,6 +197,10 @@ static void model_state_derivatives(Instance *c, const double *x);
 static double model_residual(Instance *c, const double *x);
 /* c->s.x moved to the nearest consistent point (project_initial) */
 static void model_project(Instance *c);
+/* d x'/d x into c->dgdx, d x'/d (u, lambda, p) into c->dgdu (columns COL_U ..), d[f; f'; ...]/d (u, p) into
+ * c->dfdu at the current time (the forcing's jet into c->fj); `x` the states: 1, or 0 with a logged reason
+ * where the backend does not provide them */
+static int model_partials(Instance *c, const char *f, const double *x);
 /* 1 if project_initial may be switched on, else 0 with a logged reason */
 static int model_can_project(Instance *c, const char *f);
 /* 1 if a value read is one to hand to the host, else 0 with a logged reason */

@@ -12,6 +12,7 @@
  *   model_horizon       the times the model is defined on (here all)
  *   model_step          one Co-Simulation step
  *   model_derivatives   x' for Model Exchange
+ *   model_partials      d x'/d x and d x'/d u (directional derivatives)
  *   model_state_derivatives, model_residual, model_project, model_can_project, model_value_ok
  * Part of the one translation unit of an API layer (every function static). */
 
@@ -189,6 +190,30 @@ static Status model_derivatives(Instance *c, const char *f, const double *x, dou
         dx[i] = v;
     }
     return OK;
+}
+
+/* d x'/d x = G, d x'/d u = W d[f; f'; ...]/d u (the inputs' derivatives held), d x'/d lambda = G1 x + W1 [f; ...],
+ * d x'/d p = W d[f; f'; ...]/d p at the current time: exact */
+static int model_partials(Instance *c, const char *f, const double *x) {
+    const ModelCache *m = c->model;
+    int i, j, k;
+    (void)f;
+    form_gw(c);
+    eval_f(c, c->s.t);
+    model_f_partials(c->s.t, c->s.p, c->uj, c->dfdu);
+    memcpy(c->dgdx, m->G, sizeof c->dgdx);
+    for (i = 0; i < NX; i++) {
+        double v = 0.0;
+        for (k = 0; k < NFU; k++) {
+            double w = 0.0;
+            for (j = 0; j < NXJ; j++) w += m->W[i * NXJ + j] * c->dfdu[j * A1(NFU) + k];
+            c->dgdu[i * NCOL + (k < NU ? COL_U + k : COL_PAR + k - NU)] = w;
+        }
+        for (j = 0; j < NX; j++) v += G1[i * NX + j] * x[j];
+        for (j = 0; j < NXJ; j++) v += W1[i * NXJ + j] * c->fj[j];
+        c->dgdu[i * NCOL + COL_LAM] = v;
+    }
+    return 1;
 }
 
 /* x and its derivatives 0..NQ+1 at the current time into c->xd (from x' = G x + g) */

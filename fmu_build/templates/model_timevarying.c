@@ -537,3 +537,12 @@ static int model_value_ok(Instance *c, const char *f, unsigned int vr, double va
            "[%.17g, %.17g])", f, vr, c->s.t, c->s.lam, TV_T0, TV_T1);
     return 0;
 }
+
+/* not provided (the model description does not declare them): G(t) and the forcing are Chebyshev tables */
+static int model_partials(Instance *c, const char *f, const double *x) {
+    (void)x;
+    logmsg(c, Error, "%s: partial derivatives are not provided by an FMU of time-varying coefficients (its model "
+           "description does not declare them: G(t) and the forcing are Chebyshev tables, exact to their accuracy "
+           "only)", f);
+    return 0;
+}
