@@ -1,0 +1,117 @@
+"""A hostile pass on the inputs' surface: tables fitted smoothly (`fit_inputs`, `lsc-fmu simulate --input`),
+`simulate_with_inputs`, and the FMUs' derivative estimates under hosts that misbehave.
+
+Each test is a class of input a demanding user gives; the answer is either right (against an exact
+solution) or a refusal naming the reason, never a success with a wrong answer.
+"""
+import csv
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from test_cli_inputs import STATES, exact
+
+ROOT = Path(__file__).resolve().parents[1]
+SPECS = ROOT / "examples" / "specs"
+RLC_TABLE = ROOT / "examples" / "inputs" / "rlc_source.csv"
+
+pytest.importorskip("fmpy")
+
+
+def _lsc_fmu(*args, cwd):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.run([sys.executable, "-m", "fmu_build", *map(str, args)], capture_output=True, text=True,
+                          timeout=600, cwd=cwd, env=env)
+
+
+def _columns(path):
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(fh))
+    names = [n.strip().strip('"') for n in rows[0]]
+    data = np.array([[float(v) for v in row] for row in rows[1:] if row])
+    return {name: data[:, j] for j, name in enumerate(names)}
+
+
+def _write(path, header, rows):
+    path.write_text(header + "\n" + "\n".join(",".join(repr(float(v)) for v in row) for row in rows) + "\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory):
+    from fmu_build import build_fmu
+
+    out = tmp_path_factory.mktemp("attacks")
+    return {
+        "path2": build_fmu(SPECS / "path_input.toml", out / "path2", target="native"),
+        "rlc3": build_fmu(SPECS / "rlc_source.toml", out / "rlc3", target="native", fmi_version=3),
+    }
+
+
+# -- tables whose smooth fit would be a wrong signal -------------------------------------------------------
+
+def _step_table():
+    t = np.r_[np.arange(0.0, 5.0, 0.01), np.arange(5.0 + 1e-6, 10.0 + 1e-9, 0.01)]
+    return t, (t > 5.0).astype(float)
+
+
+def test_a_step_in_the_table_is_not_fitted_into_overshoots():
+    # the quintic spline through a jump over 1e-6 s rings with an amplitude of the jump's order (and
+    # derivatives of 1e6 and more): a signal nobody gave; the fit refuses it, naming the place and the way out
+    from fmu_build import fit_inputs
+
+    t, p = _step_table()
+    with pytest.raises(ValueError, match=r"column `p`.*near t = 5(\.0)?\b.*--linear-input"):
+        fit_inputs({"time": t, "p": p})
+    with pytest.raises(ValueError, match="column `p`"):
+        fit_inputs({"time": [0.0, 5.0, 5.000001, 10.0], "p": [0.0, 0.0, 1.0, 1.0]})
+
+
+def test_simulate_with_a_step_table_refuses_in_one_line_and_linear_input_runs(fmus, tmp_path):
+    t, p = _step_table()
+    table = _write(tmp_path / "step.csv", "time,p", zip(t, p))
+    proc = _lsc_fmu("simulate", fmus["path2"], "--input", table, "-o", tmp_path / "run.csv", cwd=tmp_path)
+    assert proc.returncode != 0 and not (tmp_path / "run.csv").exists(), proc.stdout
+    assert proc.stderr.count("\n") == 1 and "--linear-input" in proc.stderr and "Traceback" not in proc.stderr
+    proc = _lsc_fmu("simulate", fmus["path2"], "--input", table, "--linear-input", "-o", tmp_path / "run.csv",
+                    cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    run = _columns(tmp_path / "run.csv")
+    assert np.abs(run["y"] - (run["time"] > 5.0)).max() <= 1.0 + 1e-9  # y = p: within the table's values
+    late = run["time"] >= 7.0
+    assert np.abs(run["y"][late] - 1.0).max() < 1e-6
+
+
+def test_smooth_coarse_tables_still_fit():
+    from fmu_build import fit_inputs
+
+    for spacing in (0.5, 0.1, 1e-3):
+        t = np.arange(0.0, 10.0 + 1e-9, spacing)
+        fit = fit_inputs({"time": t, "p": np.sin(t)})
+        s = np.linspace(0.0, 10.0, 777)
+        assert np.abs(fit.sample(s)["p"] - np.sin(s)).max() < 2e-3 * spacing ** 2 + 1e-12
+
+
+# -- FMI 3.0 ------------------------------------------------------------------------------------------------
+
+def test_fmi3_cosimulation_takes_a_table_fitted_smoothly(fmus, tmp_path):
+    # FMI 3.0 has no input derivatives: the FMU gets the fit's values and estimates them; the run says so
+    proc = _lsc_fmu("simulate", fmus["rlc3"], "--input", RLC_TABLE, "-o", tmp_path / "run.csv", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "FMI 3.0" in proc.stderr
+    run = _columns(tmp_path / "run.csv")
+    t = run["time"]
+    X = np.array([run[n] for n in STATES])
+    assert abs(t[-1] - 6.0) < 1e-9
+    assert np.abs(X - exact(t))[:, t >= 2.0].max() < 1e-3  # the guessed start decaying like exp(-t): 4.4e-4
+
+
+def test_simulate_with_inputs_on_an_fmi3_fmu_names_the_version(fmus):
+    from fmu_build import fit_inputs, simulate_with_inputs
+
+    with pytest.raises(ValueError, match=r"FMI 3\.0.*InputFit\.sample"):
+        simulate_with_inputs(fmus["rlc3"], fit_inputs(RLC_TABLE), stop_time=1.0)
