@@ -229,11 +229,14 @@ def _simulate_fitted(args, md, signals, run, start_values, outputs):
 
     start, stop_time, step = run
     fit = fit_inputs(signals)
-    if md.coSimulation is None:  # no derivatives can be sent; fmpy runs it with the fit's values
+    fmi3 = not str(md.fmiVersion).startswith("2.")
+    if md.coSimulation is None or fmi3:  # no derivatives can be sent; fmpy runs it with the fit's values
         grid = np.append(np.arange(start, stop_time, step if step is not None else (stop_time - start) / 500),
                          stop_time)
-        print("lsc-fmu: note: a Model Exchange FMU cannot receive input derivatives: the fit's values at every "
-              "output point; the FMU estimates the derivatives", file=sys.stderr)
+        what = ("an FMI 3.0 FMU cannot receive input derivatives (FMI 3.0 has no fmi3SetRealInputDerivatives)"
+                if fmi3 else "a Model Exchange FMU cannot receive input derivatives")
+        print(f"lsc-fmu: note: {what}: the fit's values at every output point; the FMU estimates the derivatives, "
+              "guessing them at the start", file=sys.stderr)
         return None, fit.sample(grid)
     notes = []
     result = simulate_with_inputs(args.fmu, fit, start_time=start, stop_time=stop_time, step=step,

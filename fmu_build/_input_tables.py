@@ -46,6 +46,8 @@ class InputFit:
         self.t_span = (float(t[0]), float(t[-1]))
         self.degree = min(DEGREE, len(t) - 1)
         self._splines = {name: make_interp_spline(t, values, k=self.degree) for name, values in columns.items()}
+        for name, values in columns.items():
+            _check_resolved(t, values, name, self._splines[name])
 
     def _times(self, t):
         t = np.asarray(t, dtype=float)
@@ -96,6 +98,37 @@ class InputFit:
         for name, spline in self._splines.items():
             out[name] = spline(t)
         return out
+
+
+def _check_resolved(t, values, name, spline):
+    """Refuse a column whose rows resolve no smooth signal (a jump, a staircase of rounded values).
+
+    Between two rows the spline of a smooth signal leaves the two values' range only near an extremum,
+    by a fraction of the rows' second difference there (1/8 for a parabola); through a jump it rings
+    on either side, where the second differences vanish, with an amplitude of the jump's order: a
+    signal nobody gave, and derivatives of 1/spacing^j. The excursion beyond the two values is allowed
+    the largest second difference of the neighbouring rows, plus 1e-6 of the column's range.
+    """
+    if values.size < 3:
+        return
+    s = t[:-1, None] + np.diff(t)[:, None] * np.linspace(0.0, 1.0, 9)[1:-1]
+    fitted = spline(s.ravel()).reshape(s.shape)
+    lo, hi = np.minimum(values[:-1], values[1:]), np.maximum(values[:-1], values[1:])
+    excursion = np.maximum(np.maximum(fitted.max(axis=1) - hi, lo - fitted.min(axis=1)), 0.0)
+    second = np.abs(np.diff(values, 2))
+    at_rows = np.r_[second[:1], second, second[-1:]]  # each row's (the end rows': their neighbour's)
+    near = np.maximum(at_rows[:-1], at_rows[1:])  # each interval's two rows and one more on either side
+    near = np.maximum.reduce([near, np.r_[near[:1], near[:-1]], np.r_[near[1:], near[-1:]]])
+    slack = 1e-6 * float(np.ptp(values)) + 1e-12 * float(np.abs(values).max())
+    beyond = excursion - near - slack
+    worst = int(np.argmax(beyond))
+    if beyond[worst] > 0:
+        raise ValueError(f"`table` column `{name}` is not resolved by its rows between t = {float(t[worst])!r} and "
+                         f"{float(t[worst + 1])!r}: the fit leaves their values by {float(excursion[worst]):.3g}, "
+                         f"more than the neighbouring rows' second differences ({float(near[worst]):.3g}) allow, as "
+                         "it rings near a jump or a staircase, a signal the table does not give; give rows of a "
+                         "smooth signal, or interpolate linearly, values only (lsc-fmu simulate --linear-input; "
+                         "fmpy.simulate_fmu with the table itself).")
 
 
 def _columns(table):
@@ -254,6 +287,10 @@ def _plan(fmu, md, fit, start_time, stop_time, step, output):
     if md.coSimulation is None:
         raise ValueError(f"`fmu` {os.fspath(fmu)!r} has no Co-Simulation interface; run a Model Exchange FMU with "
                          "fmpy.simulate_fmu and `InputFit.sample` as its input.")
+    if not str(md.fmiVersion).startswith("2."):
+        raise ValueError(f"`fmu` {os.fspath(fmu)!r} is an FMI {md.fmiVersion} FMU, which cannot receive input "
+                         "derivatives (FMI 3.0 has no fmi3SetRealInputDerivatives); run it with fmpy.simulate_fmu "
+                         "and `InputFit.sample` as its input.")
     variables = {v.name: v for v in md.modelVariables}
     for name in fit.names:
         v = variables.get(name)
