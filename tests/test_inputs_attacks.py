@@ -117,3 +117,68 @@ def test_simulate_with_inputs_on_an_fmi3_fmu_names_the_version(fmus):
 
     with pytest.raises(ValueError, match=r"FMI 3\.0.*InputFit\.sample"):
         simulate_with_inputs(fmus["rlc3"], fit_inputs(RLC_TABLE), stop_time=1.0)
+
+
+# -- Model Exchange hosts whose steps are far below the estimate's renewal spacing -------------------------
+
+_ME_EULER = r"""
+import json, sys
+from ctypes import c_double
+import numpy as np
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Model
+
+path, h = sys.argv[1], float(sys.argv[2])
+md = read_model_description(path)
+vr = {v.name: v.valueReference for v in md.modelVariables}
+m = FMU2Model(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.modelExchange.modelIdentifier)
+m.instantiate()
+nx = md.numberOfContinuousStates
+p = lambda t: np.sin(t) ** 4  # p, p', p'', p''' vanish at 0: the start y = v = u = 0 is consistent
+m.setupExperiment(startTime=0.0)
+m.enterInitializationMode()
+m.setReal([vr["p"]], [0.0])
+m.exitInitializationMode()
+
+def leave_event_mode():
+    while m.newDiscreteStates()[0]:
+        pass
+    m.enterContinuousTimeMode()
+
+m.enterEventMode()
+leave_event_mode()
+x, dx = (c_double * nx)(), (c_double * nx)()
+m.getContinuousStates(x, nx)
+worst = 0.0
+for i in range(int(round(2.0 / h))):
+    m.setTime(i * h)
+    m.getDerivatives(dx, nx)
+    for k in range(nx):
+        x[k] += h * dx[k]
+    t = (i + 1) * h
+    m.setTime(t)
+    m.setReal([vr["p"]], [p(t)])
+    m.setContinuousStates(x, nx)
+    if m.completedIntegratorStep()[0]:
+        m.enterEventMode()
+        leave_event_mode()
+        m.getContinuousStates(x, nx)
+    worst = max(worst, abs(m.getReal([vr["y"]])[0] - p(t)))
+m.terminate()
+m.freeInstance()
+print(json.dumps(worst))
+"""
+
+
+def test_model_exchange_steps_far_below_the_renewal_spacing_do_not_spoil_the_estimate(fmus):
+    # Euler with exact samples of a smooth input: the error in y = p must not grow as the host's step shrinks
+    # below the estimate's renewal spacing (0.01): the estimate's polynomial is stepped up to 0.01 past its time,
+    # and the interpolant of the newest values 1e-5 apart differentiated to order 7 was rounding (kicks of the
+    # residual to 1e4; 3.4e-4, 1.3e-4, 0.16 at h = 1e-3, 1e-4, 3e-5 measured over [0, 2])
+    errors = []
+    for h in (1e-3, 1e-4, 3e-5):
+        proc = subprocess.run([sys.executable, "-c", _ME_EULER, str(fmus["path2"]), repr(h)], capture_output=True,
+                              text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        errors.append(float(proc.stdout.strip().splitlines()[-1]))
+    assert errors[0] < 1e-3 and all(b <= a * 1.05 for a, b in zip(errors, errors[1:])), errors
