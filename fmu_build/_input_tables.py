@@ -183,6 +183,14 @@ def fit_inputs(table):
     -------
     InputFit
 
+    Raises
+    ------
+    ValueError
+        For times not strictly increasing, values not finite, and a column whose rows resolve no
+        smooth signal: where the fit rings between two rows (a jump, a staircase of rounded values),
+        leaving their values by more than the neighbouring rows' second differences allow; such a
+        table is for linear interpolation, values only (``lsc-fmu simulate --linear-input``).
+
     Examples
     --------
     >>> import numpy as np
