@@ -182,3 +182,23 @@ def test_model_exchange_steps_far_below_the_renewal_spacing_do_not_spoil_the_est
         assert proc.returncode == 0, proc.stderr[-2000:]
         errors.append(float(proc.stdout.strip().splitlines()[-1]))
     assert errors[0] < 1e-3 and all(b <= a * 1.05 for a, b in zip(errors, errors[1:])), errors
+
+
+# -- columns that are not real numbers --------------------------------------------------------------------
+
+@pytest.mark.parametrize("column, found", [
+    (["1 m", "2 m", "3 m"], "text"),  # a unit in every cell: not converted, refused
+    ([True, False, True], "bool"),
+    ([1j, 2.0, 3.0], "complex"),
+])
+@pytest.mark.parametrize("where", ["p", "time"])
+def test_columns_that_are_not_real_numbers_are_refused_naming_them(column, found, where):
+    from fmu_build import fit_inputs
+
+    table = {"time": [0.0, 1.0, 2.0], "p": [0.0, 1.0, 4.0]}
+    table[where] = column
+    with pytest.raises(TypeError, match=rf"`table` column `{where}` holds {found}.*real numbers"):
+        fit_inputs(table)
+    structured = np.array(list(zip(*table.values())), dtype=[(name, np.asarray(v).dtype) for name, v in table.items()])
+    with pytest.raises(TypeError, match=rf"`table` column `{where}` holds {found}"):
+        fit_inputs(structured)
