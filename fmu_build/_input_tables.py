@@ -131,6 +131,23 @@ def _check_resolved(t, values, name, spline):
                          "fmpy.simulate_fmu with the table itself).")
 
 
+_KINDS = {"U": "text", "S": "text", "O": "objects", "b": "bool", "c": "complex numbers", "M": "dates",
+          "m": "time deltas", "V": "records"}
+
+
+def _real(column, name):
+    """The column as a flat float array; text (a unit in the cells), booleans, complex numbers refused."""
+    array = np.asarray(column)
+    kind = array.dtype.kind
+    if kind == "O":  # a list mixing numbers with something else
+        kind = next((np.asarray(v).dtype.kind for v in array.reshape(-1) if np.asarray(v).dtype.kind not in "iuf"),
+                    "f")
+    if kind not in "iuf":
+        raise TypeError(f"`table` column `{name}` holds {_KINDS.get(kind, kind)}, expected real numbers (a unit is "
+                        "not read or converted: give the values as numbers in the variable's unit).")
+    return array.astype(float).reshape(-1)
+
+
 def _columns(table):
     """(times, {name: values}) of a table given as a CSV path, a structured array or a mapping."""
     if isinstance(table, (str, os.PathLike)):
@@ -153,7 +170,7 @@ def _columns(table):
                         f"{type(table).__name__}.")
     if "time" not in table:
         raise ValueError(f"`table` has no `time` column; found {sorted(table)}.")
-    t = np.asarray(table["time"], dtype=float).reshape(-1)
+    t = _real(table["time"], "time")
     names = [name for name in table if name != "time"]
     if not names:
         raise ValueError("`table` has no input column besides `time`.")
@@ -161,7 +178,7 @@ def _columns(table):
         raise ValueError("`table`'s `time` must hold at least 2 finite, strictly increasing values.")
     columns = {}
     for name in names:
-        values = np.asarray(table[name], dtype=float).reshape(-1)
+        values = _real(table[name], name)
         if values.shape != t.shape or not np.all(np.isfinite(values)):
             raise ValueError(f"`table` column `{name}` must hold {t.size} finite numbers, one per time.")
         columns[str(name)] = values
