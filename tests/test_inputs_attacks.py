@@ -202,3 +202,16 @@ def test_columns_that_are_not_real_numbers_are_refused_naming_them(column, found
     structured = np.array(list(zip(*table.values())), dtype=[(name, np.asarray(v).dtype) for name, v in table.items()])
     with pytest.raises(TypeError, match=rf"`table` column `{where}` holds {found}"):
         fit_inputs(structured)
+
+
+def test_a_csv_with_quoted_names_as_fmpy_writes_it_is_read_by_fit_inputs(tmp_path):
+    # fmpy.util.write_csv quotes the names; `lsc-fmu simulate --input` reads such a file, so does fit_inputs
+    from fmpy.util import write_csv
+
+    from fmu_build import fit_inputs
+
+    t = np.linspace(0.0, 1.0, 101)
+    write_csv(tmp_path / "table.csv", np.array(list(zip(t, np.sin(t))), dtype=[("time", float), ("p", float)]))
+    assert '"p"' in (tmp_path / "table.csv").read_text().splitlines()[0]
+    fit = fit_inputs(tmp_path / "table.csv")
+    assert fit.names == ("p",) and abs(fit.jet(0.5, 1)["p"][1] - np.cos(0.5)) < 1e-8
