@@ -8,6 +8,7 @@ better: `fit_inputs` fits each column with the quintic interpolating spline thro
 ``fmpy.simulate_fmu``, `InputFit.sample` gives the fit's values at the communication points.
 """
 
+import csv
 import math
 import os
 import shutil
@@ -154,8 +155,8 @@ def _columns(table):
         path = os.fspath(table)
         if not os.path.isfile(path):
             raise ValueError(f"`table` {path!r} is not a file.")
-        with open(path, encoding="utf-8-sig") as fh:
-            header = [c.strip() for c in fh.readline().split(",")]
+        with open(path, newline="", encoding="utf-8-sig") as fh:  # quoted names, as fmpy writes them
+            header = [c.strip() for c in next(csv.reader(fh), [])]
         try:
             data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, encoding="utf-8-sig")
         except ValueError as exc:
