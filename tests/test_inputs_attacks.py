@@ -215,3 +215,13 @@ def test_a_csv_with_quoted_names_as_fmpy_writes_it_is_read_by_fit_inputs(tmp_pat
     assert '"p"' in (tmp_path / "table.csv").read_text().splitlines()[0]
     fit = fit_inputs(tmp_path / "table.csv")
     assert fit.names == ("p",) and abs(fit.jet(0.5, 1)["p"][1] - np.cos(0.5)) < 1e-8
+
+
+@pytest.mark.parametrize("linear", [False, True])
+def test_an_input_given_by_the_table_and_by_set_is_refused(fmus, tmp_path, linear):
+    # which one wins would be a guess (the table did, silently): refused in one line, nothing written
+    table = _write(tmp_path / "p.csv", "time,p", [(0.0, 0.0), (10.0, 1.0)])
+    proc = _lsc_fmu("simulate", fmus["path2"], "--input", table, "--set", "p=3", *(["--linear-input"] * linear),
+                    "-o", tmp_path / "run.csv", cwd=tmp_path)
+    assert proc.returncode == 2 and not (tmp_path / "run.csv").exists(), proc.stderr
+    assert proc.stderr.count("\n") == 1 and "`p`" in proc.stderr and "--set" in proc.stderr, proc.stderr
