@@ -293,6 +293,9 @@ def simulate_with_inputs(fmu, inputs, *, start_time=None, stop_time=None, step=N
     from fmpy import read_model_description
 
     fit = inputs if isinstance(inputs, InputFit) else fit_inputs(inputs)
+    for name in start_values or {}:
+        if name in fit.names:
+            raise ValueError(f"`start_values` gives `{name}`, an input of the table: give it one way only.")
     md = read_model_description(os.fspath(fmu))
     plan = _plan(fmu, md, fit, start_time, stop_time, step, output)
     rows, orders, report = _Run(fmu, md, fit, plan).run(start_values or {})

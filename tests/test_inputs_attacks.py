@@ -225,3 +225,10 @@ def test_an_input_given_by_the_table_and_by_set_is_refused(fmus, tmp_path, linea
                     "-o", tmp_path / "run.csv", cwd=tmp_path)
     assert proc.returncode == 2 and not (tmp_path / "run.csv").exists(), proc.stderr
     assert proc.stderr.count("\n") == 1 and "`p`" in proc.stderr and "--set" in proc.stderr, proc.stderr
+
+
+def test_simulate_with_inputs_refuses_a_start_value_for_an_input_of_the_table(fmus):
+    from fmu_build import simulate_with_inputs
+
+    with pytest.raises(ValueError, match=r"`start_values` gives `p`, an input of the table"):
+        simulate_with_inputs(fmus["path2"], {"time": [0.0, 10.0], "p": [0.0, 1.0]}, start_values={"p": 3.0})
