@@ -88,13 +88,14 @@ def _add_simulate(sub):
                     "output to a CSV file. An input CSV has a header row 'time,<input>,...' and one row per "
                     "time. It is checked before the run: times finite and strictly increasing, every value a "
                     "finite number, every column an input of the FMU, every input a column or given a start "
-                    "value. Each column is fitted by the interpolating spline of degree 5 through its rows "
+                    "value (not both: a column and --set). Each column is fitted by the interpolating spline of degree 5 through its rows "
                     "(scipy's make_interp_spline, not-a-knot ends; degree rows - 1 below 6 rows): its j-th "
                     "derivative errs by O(spacing^(6 - j)) for a smooth signal. Every communication point, the "
                     "start included, receives the fit's value and, where the FMU takes them (native FMUs: "
-                    "fmi2SetRealInputDerivatives), its derivatives; an FMU that takes none (pythonfmu) "
-                    "estimates them, guessing them at the start (a note says so). --linear-input interpolates "
-                    "linearly and sends values only, as fmpy does (for a table with corners or jumps).",
+                    "fmi2SetRealInputDerivatives), its derivatives; an FMU that takes none (pythonfmu, FMI 3.0) "
+                    "estimates them, guessing them at the start (a note says so). A table whose fit rings "
+                    "between its rows (a jump, a staircase of rounded values) is refused. --linear-input "
+                    "interpolates linearly and sends values only, as fmpy does (for a table with corners or jumps).",
         epilog="example: lsc-fmu simulate out/PathInput.fmu --input examples/inputs/path.csv --step 0.01 --plot -o out/run.csv",
     )
     p.add_argument("fmu", help="path of the .fmu file")
@@ -229,11 +230,14 @@ def _simulate_fitted(args, md, signals, run, start_values, outputs):
 
     start, stop_time, step = run
     fit = fit_inputs(signals)
-    if md.coSimulation is None:  # no derivatives can be sent; fmpy runs it with the fit's values
+    fmi3 = not str(md.fmiVersion).startswith("2.")
+    if md.coSimulation is None or fmi3:  # no derivatives can be sent; fmpy runs it with the fit's values
         grid = np.append(np.arange(start, stop_time, step if step is not None else (stop_time - start) / 500),
                          stop_time)
-        print("lsc-fmu: note: a Model Exchange FMU cannot receive input derivatives: the fit's values at every "
-              "output point; the FMU estimates the derivatives", file=sys.stderr)
+        what = ("an FMI 3.0 FMU cannot receive input derivatives (FMI 3.0 has no fmi3SetRealInputDerivatives)"
+                if fmi3 else "a Model Exchange FMU cannot receive input derivatives")
+        print(f"lsc-fmu: note: {what}: the fit's values at every output point; the FMU estimates the derivatives, "
+              "guessing them at the start", file=sys.stderr)
         return None, fit.sample(grid)
     notes = []
     result = simulate_with_inputs(args.fmu, fit, start_time=start, stop_time=stop_time, step=step,

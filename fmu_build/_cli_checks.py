@@ -247,6 +247,10 @@ def check_input_csv(path, inputs, set_names, span=None):
         if name not in inputs:
             raise ValueError(f"`--input` {path}: column `{name}` is not an input of the FMU; its inputs are "
                              f"{sorted(inputs)}.")
+    for name in header[1:]:
+        if name in set_names:
+            raise ValueError(f"`--input` {path}: input `{name}` has a column there and a value by --set {name}=...; "
+                             "give it one way only.")
     for name, start in inputs.items():
         if name not in header and start is None and name not in set_names:
             raise ValueError(f"input `{name}` has no column in {path} and no start value; add a column or "

@@ -8,6 +8,7 @@ better: `fit_inputs` fits each column with the quintic interpolating spline thro
 ``fmpy.simulate_fmu``, `InputFit.sample` gives the fit's values at the communication points.
 """
 
+import csv
 import math
 import os
 import shutil
@@ -46,6 +47,8 @@ class InputFit:
         self.t_span = (float(t[0]), float(t[-1]))
         self.degree = min(DEGREE, len(t) - 1)
         self._splines = {name: make_interp_spline(t, values, k=self.degree) for name, values in columns.items()}
+        for name, values in columns.items():
+            _check_resolved(t, values, name, self._splines[name])
 
     def _times(self, t):
         t = np.asarray(t, dtype=float)
@@ -98,14 +101,62 @@ class InputFit:
         return out
 
 
+def _check_resolved(t, values, name, spline):
+    """Refuse a column whose rows resolve no smooth signal (a jump, a staircase of rounded values).
+
+    Between two rows the spline of a smooth signal leaves the two values' range only near an extremum,
+    by a fraction of the rows' second difference there (1/8 for a parabola); through a jump it rings
+    on either side, where the second differences vanish, with an amplitude of the jump's order: a
+    signal nobody gave, and derivatives of 1/spacing^j. The excursion beyond the two values is allowed
+    the largest second difference of the neighbouring rows, plus 1e-6 of the column's range.
+    """
+    if values.size < 3:
+        return
+    s = t[:-1, None] + np.diff(t)[:, None] * np.linspace(0.0, 1.0, 9)[1:-1]
+    fitted = spline(s.ravel()).reshape(s.shape)
+    lo, hi = np.minimum(values[:-1], values[1:]), np.maximum(values[:-1], values[1:])
+    excursion = np.maximum(np.maximum(fitted.max(axis=1) - hi, lo - fitted.min(axis=1)), 0.0)
+    second = np.abs(np.diff(values, 2))
+    at_rows = np.r_[second[:1], second, second[-1:]]  # each row's (the end rows': their neighbour's)
+    near = np.maximum(at_rows[:-1], at_rows[1:])  # each interval's two rows and one more on either side
+    near = np.maximum.reduce([near, np.r_[near[:1], near[:-1]], np.r_[near[1:], near[-1:]]])
+    slack = 1e-6 * float(np.ptp(values)) + 1e-12 * float(np.abs(values).max())
+    beyond = excursion - near - slack
+    worst = int(np.argmax(beyond))
+    if beyond[worst] > 0:
+        raise ValueError(f"`table` column `{name}` is not resolved by its rows between t = {float(t[worst])!r} and "
+                         f"{float(t[worst + 1])!r}: the fit leaves their values by {float(excursion[worst]):.3g}, "
+                         f"more than the neighbouring rows' second differences ({float(near[worst]):.3g}) allow, as "
+                         "it rings near a jump or a staircase, a signal the table does not give; give rows of a "
+                         "smooth signal, or interpolate linearly, values only (lsc-fmu simulate --linear-input; "
+                         "fmpy.simulate_fmu with the table itself).")
+
+
+_KINDS = {"U": "text", "S": "text", "O": "objects", "b": "bool", "c": "complex numbers", "M": "dates",
+          "m": "time deltas", "V": "records"}
+
+
+def _real(column, name):
+    """The column as a flat float array; text (a unit in the cells), booleans, complex numbers refused."""
+    array = np.asarray(column)
+    kind = array.dtype.kind
+    if kind == "O":  # a list mixing numbers with something else
+        kind = next((np.asarray(v).dtype.kind for v in array.reshape(-1) if np.asarray(v).dtype.kind not in "iuf"),
+                    "f")
+    if kind not in "iuf":
+        raise TypeError(f"`table` column `{name}` holds {_KINDS.get(kind, kind)}, expected real numbers (a unit is "
+                        "not read or converted: give the values as numbers in the variable's unit).")
+    return array.astype(float).reshape(-1)
+
+
 def _columns(table):
     """(times, {name: values}) of a table given as a CSV path, a structured array or a mapping."""
     if isinstance(table, (str, os.PathLike)):
         path = os.fspath(table)
         if not os.path.isfile(path):
             raise ValueError(f"`table` {path!r} is not a file.")
-        with open(path, encoding="utf-8-sig") as fh:
-            header = [c.strip() for c in fh.readline().split(",")]
+        with open(path, newline="", encoding="utf-8-sig") as fh:  # quoted names, as fmpy writes them
+            header = [c.strip() for c in next(csv.reader(fh), [])]
         try:
             data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, encoding="utf-8-sig")
         except ValueError as exc:
@@ -120,7 +171,7 @@ def _columns(table):
                         f"{type(table).__name__}.")
     if "time" not in table:
         raise ValueError(f"`table` has no `time` column; found {sorted(table)}.")
-    t = np.asarray(table["time"], dtype=float).reshape(-1)
+    t = _real(table["time"], "time")
     names = [name for name in table if name != "time"]
     if not names:
         raise ValueError("`table` has no input column besides `time`.")
@@ -128,7 +179,7 @@ def _columns(table):
         raise ValueError("`table`'s `time` must hold at least 2 finite, strictly increasing values.")
     columns = {}
     for name in names:
-        values = np.asarray(table[name], dtype=float).reshape(-1)
+        values = _real(table[name], name)
         if values.shape != t.shape or not np.all(np.isfinite(values)):
             raise ValueError(f"`table` column `{name}` must hold {t.size} finite numbers, one per time.")
         columns[str(name)] = values
@@ -149,6 +200,14 @@ def fit_inputs(table):
     Returns
     -------
     InputFit
+
+    Raises
+    ------
+    ValueError
+        For times not strictly increasing, values not finite, and a column whose rows resolve no
+        smooth signal: where the fit rings between two rows (a jump, a staircase of rounded values),
+        leaving their values by more than the neighbouring rows' second differences allow; such a
+        table is for linear interpolation, values only (``lsc-fmu simulate --linear-input``).
 
     Examples
     --------
@@ -234,6 +293,9 @@ def simulate_with_inputs(fmu, inputs, *, start_time=None, stop_time=None, step=N
     from fmpy import read_model_description
 
     fit = inputs if isinstance(inputs, InputFit) else fit_inputs(inputs)
+    for name in start_values or {}:
+        if name in fit.names:
+            raise ValueError(f"`start_values` gives `{name}`, an input of the table: give it one way only.")
     md = read_model_description(os.fspath(fmu))
     plan = _plan(fmu, md, fit, start_time, stop_time, step, output)
     rows, orders, report = _Run(fmu, md, fit, plan).run(start_values or {})
@@ -254,6 +316,10 @@ def _plan(fmu, md, fit, start_time, stop_time, step, output):
     if md.coSimulation is None:
         raise ValueError(f"`fmu` {os.fspath(fmu)!r} has no Co-Simulation interface; run a Model Exchange FMU with "
                          "fmpy.simulate_fmu and `InputFit.sample` as its input.")
+    if not str(md.fmiVersion).startswith("2."):
+        raise ValueError(f"`fmu` {os.fspath(fmu)!r} is an FMI {md.fmiVersion} FMU, which cannot receive input "
+                         "derivatives (FMI 3.0 has no fmi3SetRealInputDerivatives); run it with fmpy.simulate_fmu "
+                         "and `InputFit.sample` as its input.")
     variables = {v.name: v for v in md.modelVariables}
     for name in fit.names:
         v = variables.get(name)

@@ -321,6 +321,12 @@ static void estimate_inputs(Instance *c) {
                 if (agree <= top)
                     for (j = agree; j <= e; j++) est[j] = j <= es ? ds[j] : 0.0;
             }
+            /* Model Exchange steps this polynomial up to ME_INPUT_SPACING past est_t. E_I's orders above those used
+             * are derivatives of the newest values only: where these span less than that, their rounding
+             * (eps / span^j) would dominate the extrapolation (kicks of the forcing): E_S's there, or none */
+            if (c->type == ModelExchange
+                && c->s.hist_t[0] - c->s.hist_t[(c->s.hist_n < e + 1 ? c->s.hist_n : e + 1) - 1] < ME_INPUT_SPACING)
+                for (j = top + 1; j <= e; j++) est[j] = found && j <= es ? ds[j] : 0.0;
         }
         est[0] = c->s.hist_u[i];
     }
