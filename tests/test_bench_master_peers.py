@@ -145,9 +145,6 @@ print(json.dumps({"success": bool(r.success), "message": str(r.message), "error"
 '''
 
 
-@pytest.mark.xfail(strict=True, reason="the step control keeps the loop's first step (step_size = 0.01) at 120 "
-                                        "times the tolerance and, over [0, 2], reports success (error 2.9e-5 at "
-                                        "rtol = 1e-7); over [0, 0.1] it reports the failure")
 def test_step_control_controls_the_first_step_of_a_loop_through_a_differentiated_input():
     """The loop of docs/cosimulation.md (exact solution ``w = exp(-t / (1 + g))``, ``x2 = w / (1 + g)``) under step
     control at rtol = 1e-7 from a first step of 0.01 over [0, 2]: a run that reports success is within 10 times the

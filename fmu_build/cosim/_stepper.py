@@ -105,6 +105,7 @@ class Controller:
         self.prev = None  # the widest rejected attempt (t, H, measure) while later attempts lie inside it
         self.floor = None  # (t, the jump of the checked values right at t): the error of the step to t
         self.H_last = None  # the last step taken
+        self.ahead = None  # (t, H, error) of the last step from t repeated for the error found at its end
         self.attempts, self.budget, self.warned = 0, 0.0, False
         self.recent, self.last_worst = collections.deque(maxlen=PACE), None
 
@@ -185,9 +186,15 @@ class Controller:
                     self.prev = (t, H, m)
                 self.after_reject, H = True, H_next
                 continue
+            t_new = t_end if H == t_end - t else t + H
+            if verdict == "accept" and snap is not None and self._late_error(t, H, t_new, m):
+                run.restore(snap, t)
+                run.release(snap)
+                run.rejected += 1
+                self.after_reject, H = True, self.control.shrink(H, self.ahead[2], max(1, m.order - 1))
+                continue
             if snap is not None:
                 run.release(snap)
-            t_new = t_end if H == t_end - t else t + H
             run.accept(t_new, H, m)
             self.budget += m.err * H
             self.H_last = H
@@ -198,6 +205,28 @@ class Controller:
             # a crossing step's estimate is the jump; its share err H of the budget is one ordinary step's
             self._kept(t, t_new, 0.0 if verdict == "cross" else m.err, m.names[m.worst])
             return H, H_next
+
+    def _late_error(self, t, H, t_new, m):
+        """Whether a step from ``t`` that passed its own check left more than the tolerance in an output that
+        follows its input's derivative, seen only at ``t_new`` (``Run.look_ahead``): checked while the
+        history is shorter than the extrapolation's degree (the start, after a jump), where the orders the
+        master lacks reach the FMUs as 0 and such an output's band, made of the FMU's own derivatives, agrees
+        with what the step produced. The step is repeated smaller while that error shrinks with it (at least
+        like ``H^(1/2)``); one that does not (an FMU relaxing at the rate of the step) is left to the check
+        at the next step's start (``_probe``)."""
+        run = self.run
+        if run.history.degree >= run.p or not any(run.layout.inputs_of[n] for n in run.layout.names):
+            return False
+        change = run.look_ahead(t_new, max(1e-6 * H, self.control.min_step))
+        if change is None:
+            return False
+        late = float(np.max(np.abs(change) / m.scale, initial=0.0))
+        if late <= 1.0 or H <= self.control.min_step * (1 + 1e-12):
+            return False
+        if self.ahead is not None and self.ahead[0] == t and late > self.ahead[2] * (H / self.ahead[1]) ** 0.5:
+            return False
+        self.ahead = (t, H, late)
+        return True
 
     def _judge(self, t, H, m, can_roll, H_ref):
         """``("accept" | "cross" | "reject" | "probe", next H)`` for an attempt from ``t`` with ``H``."""
