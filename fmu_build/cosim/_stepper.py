@@ -111,10 +111,12 @@ class Controller:
 
     def advance(self, t0, stop_time, H, progress):
         control = self.control
-        self.span, t = stop_time - t0, t0
+        self.span, self.stop, t = stop_time - t0, stop_time, t0
         progress.total, progress.unit = stop_time - t0, "of the time span"
         while t < stop_time:
             H = min(H, stop_time - t)
+            if H == stop_time - t and self._looks_ahead():  # its end must be checked before the stop time
+                H = 0.5 * H
             if stop_time - (t + H) < control.min_step:  # no sliver of a step at the end
                 H = stop_time - t
             t_end = stop_time if H == stop_time - t else t + H
@@ -206,6 +208,13 @@ class Controller:
             self._kept(t, t_new, 0.0 if verdict == "cross" else m.err, m.names[m.worst])
             return H, H_next
 
+    def _looks_ahead(self):
+        """Whether the next step's end is checked by a look-ahead (``_late_error``): while the history is
+        shorter than the extrapolation's degree, with rollback and FMUs that have inputs."""
+        run = self.run
+        return (run.history.degree < run.p and run.rollback.available
+                and any(run.layout.inputs_of[n] for n in run.layout.names))
+
     def _late_error(self, t, H, t_new, m):
         """Whether a step from ``t`` that passed its own check left more than the tolerance in an output that
         follows its input's derivative, seen only at ``t_new`` (``Run.look_ahead``): checked while the
@@ -215,7 +224,7 @@ class Controller:
         like ``H^(1/2)``); one that does not (an FMU relaxing at the rate of the step) is left to the check
         at the next step's start (``_probe``)."""
         run = self.run
-        if run.history.degree >= run.p or not any(run.layout.inputs_of[n] for n in run.layout.names):
+        if not (self._looks_ahead() and t_new < self.stop):  # no step beyond fmi2SetupExperiment's stopTime
             return False
         change = run.look_ahead(t_new, max(1e-6 * H, self.control.min_step))
         if change is None:
