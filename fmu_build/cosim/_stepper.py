@@ -25,6 +25,12 @@ no more to the sum of ``err H`` than one ordinary step; the history before it is
 extrapolation restarts at degree 0). FMUs that cannot roll back keep every step: the estimate is then
 an indicator (a warning says so) and the run ends when the steps kept add up to ``sum err H`` beyond
 ``BUDGET`` times the time span.
+
+While the history is shorter than the extrapolation's degree (the start, after a jump) the orders the
+master lacks reach the FMUs as 0: an output that follows its input's derivative (``x2 = -u'``) is then off
+by the derivative of the input error, and its band, made of the FMU's derivatives computed from the same
+input, agrees with it. Such a step is checked by a look-ahead before it is accepted (``_late_error``): a
+step a million times smaller from its end shows that error as the jump of the checked values there.
 """
 
 import collections
