@@ -18,7 +18,7 @@ from ._exchange import convert
 from ._extrapolate import Band, History
 from ._layout import MAX_INPUT_ORDER, LSC_TOOL, Layout, built_by_lsc, lambda_targets  # noqa: F401 (re-exported)
 from ._loops import LoopSolver
-from ._result import AlgebraicLoopWarning, _Stop
+from ._result import AlgebraicLoopWarning, _Discarded, _Stop
 from ._rollback import Rollback
 from ._stepper import Controller
 from ._system import _split
@@ -192,6 +192,31 @@ class Run:
         m = Measure(defects, scaled, orders, self.checked_names, dropped, recorded)
         m.change, m.scale = change, np.concatenate([scale, scale_x])
         return m
+
+    def look_ahead(self, t, h):
+        """The jump of the checked values right at ``t`` (the end of a step not yet accepted) when the FMUs
+        receive the inputs of the next step: a step of ``h`` (tiny) from ``t`` with the history extended to
+        ``t``, then everything rolled back. An FMU whose output follows the derivative of its input (the
+        Follower: ``x2 = -u'``) shows there the error the step left in that output, which the step's own
+        defect does not: the output's band is built from the FMU's derivatives, computed from the same
+        input polynomial. None if an FMU discarded the step."""
+        history, coupling, real = self.history, self.coupling, self.layout.real
+        kept = [list(a) for a in (history.t, history.v, history.d, history.x)]
+        history.push(t, coupling.value, self.read_derivatives(t), coupling.extras)
+        old, extras_old = coupling.value.copy(), coupling.extras.copy()
+        snap = self.save(t)
+        try:
+            self.set_lambda(h, t)
+            self.step_all(t, h)
+            coupling.read_recorded(t + h)
+            change = np.concatenate([np.where(real, coupling.value - old, 0.0), coupling.extras - extras_old])
+        except _Discarded:
+            change = None
+        finally:
+            self.restore(snap, t)
+            self.release(snap)
+            history.t, history.v, history.d, history.x = kept
+        return change
 
     def accept(self, t_new, H, m):
         """The step to ``t_new`` is taken: the divergence check, the history, the result row."""

@@ -25,6 +25,12 @@ no more to the sum of ``err H`` than one ordinary step; the history before it is
 extrapolation restarts at degree 0). FMUs that cannot roll back keep every step: the estimate is then
 an indicator (a warning says so) and the run ends when the steps kept add up to ``sum err H`` beyond
 ``BUDGET`` times the time span.
+
+While the history is shorter than the extrapolation's degree (the start, after a jump) the orders the
+master lacks reach the FMUs as 0: an output that follows its input's derivative (``x2 = -u'``) is then off
+by the derivative of the input error, and its band, made of the FMU's derivatives computed from the same
+input, agrees with it. Such a step is checked by a look-ahead before it is accepted (``_late_error``): a
+step a million times smaller from its end shows that error as the jump of the checked values there.
 """
 
 import collections
@@ -105,15 +111,18 @@ class Controller:
         self.prev = None  # the widest rejected attempt (t, H, measure) while later attempts lie inside it
         self.floor = None  # (t, the jump of the checked values right at t): the error of the step to t
         self.H_last = None  # the last step taken
+        self.ahead = None  # (t, H, error) of the last step from t repeated for the error found at its end
         self.attempts, self.budget, self.warned = 0, 0.0, False
         self.recent, self.last_worst = collections.deque(maxlen=PACE), None
 
     def advance(self, t0, stop_time, H, progress):
         control = self.control
-        self.span, t = stop_time - t0, t0
+        self.span, self.stop, t = stop_time - t0, stop_time, t0
         progress.total, progress.unit = stop_time - t0, "of the time span"
         while t < stop_time:
             H = min(H, stop_time - t)
+            if H == stop_time - t and self._looks_ahead():  # its end must be checked before the stop time
+                H = 0.5 * H
             if stop_time - (t + H) < control.min_step:  # no sliver of a step at the end
                 H = stop_time - t
             t_end = stop_time if H == stop_time - t else t + H
@@ -185,9 +194,15 @@ class Controller:
                     self.prev = (t, H, m)
                 self.after_reject, H = True, H_next
                 continue
+            t_new = t_end if H == t_end - t else t + H
+            if verdict == "accept" and snap is not None and self._late_error(t, H, t_new, m):
+                run.restore(snap, t)
+                run.release(snap)
+                run.rejected += 1
+                self.after_reject, H = True, self.control.shrink(H, self.ahead[2], max(1, m.order - 1))
+                continue
             if snap is not None:
                 run.release(snap)
-            t_new = t_end if H == t_end - t else t + H
             run.accept(t_new, H, m)
             self.budget += m.err * H
             self.H_last = H
@@ -198,6 +213,35 @@ class Controller:
             # a crossing step's estimate is the jump; its share err H of the budget is one ordinary step's
             self._kept(t, t_new, 0.0 if verdict == "cross" else m.err, m.names[m.worst])
             return H, H_next
+
+    def _looks_ahead(self):
+        """Whether the next step's end is checked by a look-ahead (``_late_error``): while the history is
+        shorter than the extrapolation's degree, with rollback and FMUs that have inputs."""
+        run = self.run
+        return (run.history.degree < run.p and run.rollback.available
+                and any(run.layout.inputs_of[n] for n in run.layout.names))
+
+    def _late_error(self, t, H, t_new, m):
+        """Whether a step from ``t`` that passed its own check left more than the tolerance in an output that
+        follows its input's derivative, seen only at ``t_new`` (``Run.look_ahead``): checked while the
+        history is shorter than the extrapolation's degree (the start, after a jump), where the orders the
+        master lacks reach the FMUs as 0 and such an output's band, made of the FMU's own derivatives, agrees
+        with what the step produced. The step is repeated smaller while that error shrinks with it (at least
+        like ``H^(1/2)``); one that does not (an FMU relaxing at the rate of the step) is left to the check
+        at the next step's start (``_probe``)."""
+        run = self.run
+        if not (self._looks_ahead() and t_new < self.stop):  # no step beyond fmi2SetupExperiment's stopTime
+            return False
+        change = run.look_ahead(t_new, max(1e-6 * H, self.control.min_step))
+        if change is None:
+            return False
+        late = float(np.max(np.abs(change) / m.scale, initial=0.0))
+        if late <= 1.0 or H <= self.control.min_step * (1 + 1e-12):
+            return False
+        if self.ahead is not None and self.ahead[0] == t and late > self.ahead[2] * (H / self.ahead[1]) ** 0.5:
+            return False
+        self.ahead = (t, H, late)
+        return True
 
     def _judge(self, t, H, m, can_roll, H_ref):
         """``("accept" | "cross" | "reject" | "probe", next H)`` for an attempt from ``t`` with ``H``."""
