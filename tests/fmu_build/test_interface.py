@@ -8,7 +8,6 @@ pythonfmu FMUs built from a changed table run with it (each in a subprocess).
 import dataclasses
 import re
 import zipfile
-from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -19,9 +18,9 @@ from fmu_build._description3 import model_description3
 from fmu_build._interface import C_BLOCKS, Interface, Variable, native_interface, pythonfmu_interface
 from fmu_build._model import _resolve
 from fmu_build.targets._runtime._variables import register_variables
-from test_native import run
+from tests.fmu_build.targets.test_native import run
 
-ROOT = Path(__file__).parent.parent
+from tests.support import ROOT
 SPEC = ROOT / "examples" / "specs" / "path_input.toml"  # a tunable parameter in f, an input, fixed ones in A, B
 
 

@@ -6,7 +6,7 @@ from hypothesis import strategies as st
 
 from lsc import complete, eigenanalysis, gallery
 
-from conftest import assert_same_spectrum
+from tests.support.problems import assert_same_spectrum
 
 
 def decidable(p, method, lam):

@@ -5,7 +5,7 @@ import pytest
 
 from lsc import COMPLETIONS, IndexDeterminationError, LinearDAE, complete, gallery
 
-from conftest import METHOD_LAMS
+from tests.support.problems import METHOD_LAMS
 
 
 def test_registry_keys_match_class_names():
@@ -57,7 +57,7 @@ def test_project_returns_nearest_consistent_point(problem):
 
 @pytest.mark.parametrize("name", ["chain3", "pencil-3-2", "mechanical"])
 def test_theorem5_extra_differentiations_leave_standard_unchanged(name):
-    from conftest import CONSTANT_PROBLEMS
+    from tests.support.problems import CONSTANT_PROBLEMS
 
     p = CONSTANT_PROBLEMS[name]()
     base = complete(p.dae, "standard")

@@ -379,7 +379,7 @@ def test_abs_in_a_spec_equation_is_refused_up_front(expr, entry, key):
     import tomllib
 
     from fmu_build import SpecError, parse_spec
-    from test_spec_errors import BASE
+    from tests.fmu_build.spec.test_spec_errors import BASE
 
     fragment = {"f": 'f = [0, "p + sin(t)"]', "B": 'B = [[0, -1], [0, 0]]'}[key]
     new = {"f": f'f = [0, "{expr}"]', "B": f'B = [[0, "{expr}"], [0, 0]]'}[key]
@@ -393,7 +393,7 @@ def test_abs_in_a_spec_output_is_accepted():
     import tomllib
 
     from fmu_build import parse_spec
-    from test_spec_errors import BASE
+    from tests.fmu_build.spec.test_spec_errors import BASE
 
     spec = parse_spec(tomllib.loads(BASE + '\n[outputs]\nspeed = "abs(v)"\n'))
     assert str(spec.outputs[0]["expr"]) == "Abs(v)"

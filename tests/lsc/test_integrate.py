@@ -5,14 +5,14 @@ import scipy.linalg
 
 from lsc import LinearDAE, complete, eigenanalysis, gallery, solve_completion, solve_dae
 
-from conftest import METHOD_LAMS
+from tests.support.problems import METHOD_LAMS
 
 
 @pytest.mark.parametrize("name", ["chain4-mixed", "pencil-3-2", "mechanical", "prescribed_path"])
 @pytest.mark.parametrize("method, lam", METHOD_LAMS)
 @pytest.mark.parametrize("solver", ["RK45", "Radau"])
 def test_accuracy_from_consistent_start(name, method, lam, solver):
-    from conftest import CONSTANT_PROBLEMS
+    from tests.support.problems import CONSTANT_PROBLEMS
 
     p = CONSTANT_PROBLEMS[name]()
     c = complete(p.dae, method, lam=lam)

@@ -1,6 +1,6 @@
 """Large sparse models and the dense comparison at n ~ 300 (marked slow: minutes).
 
-Run:  python -m pytest -m slow tests/test_sparse_slow.py
+Run:  python -m pytest -m slow tests/lsc/test_sparse_slow.py
 """
 import numpy as np
 import pytest
@@ -23,9 +23,9 @@ NEAR_300 = {
 @pytest.mark.parametrize("name", sorted(NEAR_300))
 def test_equals_the_dense_svd_completion_near_n_300(name):
     """Against setup='dense' (SVDs of the derivative arrays) on the time-rescaled twin (A scaled by a power of two
-    to ||B||; the same completion, see tests/test_sparse.py), G on random vectors to <= 1e-10. Without the
+    to ||B||; the same completion, see tests/lsc/test_sparse.py), G on random vectors to <= 1e-10. Without the
     rescaling the dense path itself loses digits on Stokes (||B|| / ||A|| ~ 1 / h^2: 5e-9 at n = 95)."""
-    from test_sparse import _balanced_dense
+    from tests.lsc.test_sparse import _balanced_dense
 
     p = NEAR_300[name]()
     c = lsc.complete(p.dae, "alternative", lam=2.0)

@@ -10,7 +10,7 @@ from lsc._derivative_array import array_jets
 from lsc._factors import Decline
 from lsc._structured import structured_array, structured_index
 
-from conftest import CONSTANT_PROBLEMS, METHOD_LAMS
+from tests.support.problems import CONSTANT_PROBLEMS, METHOD_LAMS
 
 # Stated tolerance: the structured and dense set-ups agree to this, relative to the largest entry.
 TOL = 1e-10

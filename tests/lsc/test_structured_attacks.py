@@ -12,7 +12,7 @@ from lsc import IndexDeterminationError, LinearDAE, RankDecisionWarning, complet
 from lsc import JetCallable
 from lsc.gallery._canonical import _Sinusoids, _conditioned, _real_block, _shift_blocks
 
-from conftest import METHOD_LAMS
+from tests.support.problems import METHOD_LAMS
 
 
 def manufactured(A, B, seed=0):

@@ -7,7 +7,7 @@ from lsc import (
     IndexDeterminationError, LinearDAE, check_solvability, complete, gallery, solve_completion,
 )
 
-from conftest import METHOD_LAMS
+from tests.support.problems import METHOD_LAMS
 
 t = sympy.Symbol("t")
 

@@ -22,7 +22,7 @@ from scipy.integrate import solve_ivp
 pytest.importorskip("libcosimpy", reason="libcosimpy is not installed (pip install -e '.[cosim]')")
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="the chain FMUs are compiled with gcc")
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.support import ROOT  # noqa: E402
 SCRIPT = ROOT / "examples" / "bench_master_peers.py"
 
 

@@ -10,14 +10,13 @@ constraint, and no decay without it.
 """
 import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from lsc import gallery
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.support import ROOT
 
 
 @pytest.fixture(scope="module")

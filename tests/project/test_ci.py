@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-import conftest
+from tests import conftest
+from tests.support import ROOT
 
-HERE = Path(__file__).resolve().parent
 
 CASES = '''
 import pytest
@@ -42,7 +42,7 @@ MODULE_SKIP = "import pytest\npytest.importorskip('fmpy.absent_module')\n\ndef t
 
 
 def run_cases(tmp_path, ci):
-    shutil.copy(HERE / "conftest.py", tmp_path / "conftest.py")
+    shutil.copy(ROOT / "tests" / "conftest.py", tmp_path / "conftest.py")
     (tmp_path / "test_cases.py").write_text(CASES)
     (tmp_path / "test_module_skip.py").write_text(MODULE_SKIP)
     env = {k: v for k, v in os.environ.items() if k != "CI"}
@@ -81,7 +81,6 @@ def test_in_ci_a_missing_host_fails(tmp_path):
 
 
 # -- .ci/run -----------------------------------------------------------------------------------------------
-ROOT = HERE.parent
 
 
 def ci_commands():
@@ -90,7 +89,7 @@ def ci_commands():
 
 
 def test_ci_runs_the_readme_test_command_as_written():
-    from test_readme_shell import bash_blocks
+    from tests.project.test_readme_shell import bash_blocks
 
     parts = ci_commands()
     assert f"{parts['INSTALL']} && {parts['SUITE']}" == bash_blocks()[0][1]
@@ -147,7 +146,8 @@ def test_ci_run_on_a_stub_project(tmp_path):
         shutil.copy(ROOT / ".ci" / name, proj / ".ci" / name)
     (proj / "pyproject.toml").write_text(STUB_PYPROJECT)
     (proj / "tests" / "test_stub.py").write_text(STUB_SUITE)
-    (proj / "tests" / "test_readme_shell.py").write_text(STUB_README_SHELL)
+    (proj / "tests" / "project").mkdir()
+    (proj / "tests" / "project" / "test_readme_shell.py").write_text(STUB_README_SHELL)
     (fake / "ldconfig").write_text("#!/bin/sh\necho 'libtbb.so.12 (libc6,x86-64) => /lib/libtbb.so.12'\n")
     (fake / "apt-get").write_text("#!/bin/sh\necho 'apt-get called' >&2\nexit 3\n")
     for exe in fake.iterdir():

@@ -1,11 +1,11 @@
 """The documentation builds with warnings as errors (sphinx-build -W)."""
+import re
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.support import ROOT
 
 pytest.importorskip("sphinx", reason="the docs build needs the `test` or `docs` extra (sphinx)")
 pytest.importorskip("numpydoc")
@@ -30,3 +30,15 @@ def test_readme_has_no_project_history():
     text = (ROOT / "README.md").read_text().lower()
     for word in ("session", "earlier version", "this issue", "issue #", "previously", "used to ", "re-run", "before the fix"):
         assert word not in text, word
+
+
+def test_every_test_path_the_project_names_exists():
+    """A test file, runner or C master named in the README, the docs, .ci/run or an example exists (the tests are
+    laid out by package: a file moved without its mentions fails here)."""
+    texts = [ROOT / "README.md", ROOT / ".ci" / "run", *(ROOT / "docs").rglob("*.md"), *(ROOT / "examples").rglob("*.py"),
+             *(ROOT / "fmu_build").rglob("*.py")]
+    named = {(path.relative_to(ROOT), ref) for path in texts
+             for ref in re.findall(r"(?<![\w/])tests/[\w/]*\w\.(?:py|c)\b", path.read_text(encoding="utf-8"))}
+    assert len(named) > 40
+    missing = sorted(f"{path}: {ref}" for path, ref in named if not (ROOT / ref).is_file())
+    assert not missing, missing

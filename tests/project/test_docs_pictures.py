@@ -12,14 +12,13 @@ import math
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
 pytest.importorskip("fmpy")
 pytest.importorskip("matplotlib")
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.support import ROOT  # noqa: E402
 GENERATED = ROOT / "docs" / "_generated"
 # Below this the values are the integrator's rounding noise: they must stay below it, not agree.
 FLOOR = 1e-9

@@ -13,11 +13,10 @@ import re
 import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.support import ROOT
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 PAGES = [p for p in PAGES if "_build" not in p.parts and "_generated" not in p.parts]
 BLOCK = re.compile(r"^```python\n(.*?)^```\n(?:\s*prints\s*\n+```text\n(.*?)^```)?", re.S | re.M)

@@ -5,7 +5,7 @@ starts empty (pip's download cache is reused). The lines of every ```bash block
 run in one bash process, in the README's order, so ``eval "$(lsc-fmu env)"``
 reaches the next line as it does for a reader; every ```python block runs where
 it stands on the page, as ``python block.py`` from the clone's root
-(tests/test_readme.py checks what they print). Each line's and block's time is
+(tests/project/test_readme.py checks what they print). Each line's and block's time is
 printed. Afterwards ``git status
 --porcelain`` must be empty: nothing a line writes may land outside ``out/``
 (ignored by git).
@@ -23,7 +23,7 @@ Two stated exceptions:
 
 Slow (it installs every extra), so it is marked ``install`` and left out of the
 default run; ``.ci/run`` runs it (``python -m pytest -m install -s
-tests/test_readme_shell.py``).
+tests/project/test_readme_shell.py``).
 """
 import os
 import re
@@ -36,7 +36,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.support import ROOT
 SUITE = "python -m pytest"
 NATIVE_HOST = re.compile(r"\becos\b|lsc-fmu env")
 

@@ -1,9 +1,8 @@
 """docs/reliability.md names, for every class of bad input, the test that proves it: each named
 test must exist, so the table cannot point at a test that was renamed or removed."""
 import re
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.support import ROOT
 
 
 def named_tests(text):

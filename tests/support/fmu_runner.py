@@ -11,7 +11,7 @@ process that already imported its modules silently runs the host's copy.
 import json
 import sys
 
-from _support import ImportBlocker
+from helpers import ImportBlocker
 
 
 def main():

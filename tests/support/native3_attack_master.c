@@ -1,4 +1,4 @@
-/* A hostile FMI 3.0 master for native lsc FMUs (tests/test_native_fmi3_attacks.py).
+/* A hostile FMI 3.0 master for native lsc FMUs (tests/fmu_build/targets/test_native_fmi3_attacks.py).
  *
  *   native3_attack_master LIB.so TOKEN SCENARIO [LIB2.so TOKEN2]
  *

@@ -17,7 +17,7 @@ import json
 import sys
 from ctypes import byref, c_bool, c_double, c_int32, c_uint32
 
-from _support import ImportBlocker
+from helpers import ImportBlocker
 
 
 def _slave(path, logs, early_return_allowed=False):

@@ -1,4 +1,4 @@
-/* A hostile FMI 2.0 master for native lsc FMUs (tests/test_native_attacks.py).
+/* A hostile FMI 2.0 master for native lsc FMUs (tests/fmu_build/targets/test_native_attacks.py).
  *
  *   native_attack_master LIB.so GUID SCENARIO [LIB2.so GUID2 | INPUT_VR]   (env XVR: first state value reference, default 4)
  *

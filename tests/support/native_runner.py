@@ -10,7 +10,7 @@ and prints {"time", "values", "status", "logs", ...}.
 import json
 import sys
 
-from _support import ImportBlocker
+from helpers import ImportBlocker
 
 
 def main():

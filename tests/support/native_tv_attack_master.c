@@ -1,4 +1,4 @@
-/* A hostile FMI 2.0 master for time-varying native lsc FMUs (tests/test_native_timevarying_attacks.py).
+/* A hostile FMI 2.0 master for time-varying native lsc FMUs (tests/fmu_build/targets/test_native_timevarying_attacks.py).
  *
  *   native_tv_attack_master LIB.so GUID NX T1 SCENARIO [LIB2.so GUID2]
  *

@@ -1,7 +1,7 @@
 /* A small FMI 2.0 master for valgrind (--track-origins=yes): the paths of a time-varying native FMU with an input
  * where a Magnus step fails early (an input that overflows it, lambda = 1e300), a step past the horizon, and Model
  * Exchange at the horizon's end. Prints "label status" per call and "LOG status message" per logger call.
- * Usage: master <fmu .so> <guid> <vr of u> <vr of lambda>  (used by tests/test_native_timevarying_statuses.py) */
+ * Usage: master <fmu .so> <guid> <vr of u> <vr of lambda>  (used by tests/fmu_build/targets/test_native_timevarying_statuses.py) */
 #include <dlfcn.h>
 #include <stdarg.h>
 #include <stdio.h>

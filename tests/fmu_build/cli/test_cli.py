@@ -15,7 +15,7 @@ pytest.importorskip("fmpy")
 from fmu_build import ecos_executable  # noqa: E402
 from fmu_build.__main__ import main  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.support import ROOT  # noqa: E402
 SPECS = ROOT / "examples" / "specs"
 
 

@@ -20,7 +20,7 @@ pytest.importorskip("pandas")
 
 from fmu_build import build_fmu  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.support import ROOT  # noqa: E402
 SPECS = ROOT / "examples" / "specs"
 GALLERY = ["gallery:prescribed_path", "--t-span", "0", "0.2", "--scheduler", "serial", "--no-progress"]
 PNG = b"\x89PNG\r\n\x1a\n"

@@ -1,7 +1,6 @@
 """lsc-fmu documents itself: every subcommand's --help has a description and an example, and
 docs/cli.md is exactly what the argument parser generates (so it cannot miss a command)."""
 import argparse
-import pathlib
 import subprocess
 import sys
 
@@ -10,7 +9,7 @@ import pytest
 from fmu_build.__main__ import COMMANDS, main, parser
 from fmu_build._cli_docs import markdown
 
-ROOT = pathlib.Path(__file__).resolve().parent.parent
+from tests.support import ROOT
 
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))

@@ -19,9 +19,9 @@ from fmu_build import build_fmu  # noqa: E402
 from fmu_build.__main__ import main  # noqa: E402
 from fmu_build._cli_checks import check_input_csv  # noqa: E402
 
-from _support import deadline  # noqa: E402
+from tests.support.helpers import deadline  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.support import ROOT  # noqa: E402
 SPECS = ROOT / "examples" / "specs"
 
 

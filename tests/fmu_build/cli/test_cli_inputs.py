@@ -10,13 +10,12 @@ import csv
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.linalg
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.support import ROOT
 SPEC = ROOT / "examples" / "specs" / "rlc_source.toml"
 TABLE = ROOT / "examples" / "inputs" / "rlc_source.csv"
 R, L, C1, C2 = 1.0, 0.5, 0.2, 0.25

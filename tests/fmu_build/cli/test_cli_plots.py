@@ -5,7 +5,6 @@ FMUs run in subprocesses; the plot helpers are checked on figures drawn from syn
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,7 +16,7 @@ from fmpy import read_model_description  # noqa: E402
 
 from fmu_build import build_fmu  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.support import ROOT  # noqa: E402
 SPECS = ROOT / "examples" / "specs"
 
 

@@ -1,6 +1,6 @@
 """fmu_build.cosim: the co-simulation master.
 
-FMUs are loaded in subprocesses (see tests/fmu_runner.py for why); the plant FMUs are compiled
+FMUs are loaded in subprocesses (see tests/support/fmu_runner.py for why); the plant FMUs are compiled
 here from examples/plants/linear_plant.c with gcc. References: the monolithic lsc solution of
 scenario 1, the exact solution of the differentiated-input loop, libcosimpy and ecos.
 """
@@ -9,14 +9,13 @@ import re
 import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from fmu_build import cosim
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.support import ROOT
 PLANTS = ROOT / "examples" / "plants"
 sys.path.insert(0, str(PLANTS))
 

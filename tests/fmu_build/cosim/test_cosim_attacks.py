@@ -13,11 +13,10 @@ import subprocess
 import sys
 import textwrap
 import zipfile
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.support import ROOT
 PLANTS = ROOT / "examples" / "plants"
 sys.path.insert(0, str(PLANTS))
 

@@ -11,8 +11,8 @@ import sys
 import numpy as np
 import pytest
 
-from test_cosim import PLANTS
-from test_cosim_attacks import attempt
+from tests.fmu_build.cosim.test_cosim import PLANTS
+from tests.fmu_build.cosim.test_cosim_attacks import attempt
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="the test FMUs are compiled with gcc")
 sys.path.insert(0, str(PLANTS))

@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from test_cosim import PLANTS, ROOT, run
+from tests.fmu_build.cosim.test_cosim import PLANTS, ROOT, run
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="the plant FMUs are compiled with gcc")
 sys.path.insert(0, str(PLANTS))

@@ -16,8 +16,8 @@ import zipfile
 import numpy as np
 import pytest
 
-import _support
-from test_cosim import PLANTS, ROOT, run
+from tests.support import helpers
+from tests.fmu_build.cosim.test_cosim import PLANTS, ROOT, run
 
 sys.path.insert(0, str(PLANTS))
 
@@ -29,7 +29,7 @@ TYPES = ["Float32_continuous", "Float32_discrete", "Float64_continuous", "Float6
 def ref():
     folders = {}
     for version in ("2.0", "3.0"):
-        folder, reason = _support.reference_fmus(version)
+        folder, reason = helpers.reference_fmus(version)
         if folder is None:
             pytest.skip(reason)
         folders[version] = folder

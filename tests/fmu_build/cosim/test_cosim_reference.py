@@ -9,15 +9,15 @@ import sys
 import numpy as np
 import pytest
 
-import _support
-from test_cosim import PLANTS, ROOT, run
+from tests.support import helpers
+from tests.fmu_build.cosim.test_cosim import PLANTS, ROOT, run
 
 sys.path.insert(0, str(PLANTS))
 
 
 @pytest.fixture(scope="session")
 def reference_fmus():
-    folder, reason = _support.reference_fmus("2.0")
+    folder, reason = helpers.reference_fmus("2.0")
     if folder is None:
         pytest.skip(reason)
     return folder

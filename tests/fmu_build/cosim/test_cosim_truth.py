@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from test_cosim import PLANTS, run
+from tests.fmu_build.cosim.test_cosim import PLANTS, run
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="the test FMUs are compiled with gcc")
 sys.path.insert(0, str(PLANTS))

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from fmu_build.cosim import _units
-from test_cosim import PLANTS, run
+from tests.fmu_build.cosim.test_cosim import PLANTS, run
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="the plant FMUs are compiled with gcc")
 sys.path.insert(0, str(PLANTS))

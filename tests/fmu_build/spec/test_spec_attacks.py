@@ -13,11 +13,11 @@ from pathlib import Path
 
 import pytest
 
-from _support import lag_spec as _spec
-from _support import spec_problems as _problems
+from tests.support.helpers import lag_spec as _spec
+from tests.support.helpers import spec_problems as _problems
 from fmu_build import SpecError, build_fmu, load_spec
 
-ROOT = Path(__file__).resolve().parent.parent
+from tests.support import ROOT
 
 
 def _run(code, timeout):

@@ -9,7 +9,7 @@ import tomllib
 
 import pytest
 
-from _support import deadline
+from tests.support.helpers import deadline
 from fmu_build import SpecError, build_fmu, parse_spec
 
 BASE = """

@@ -13,7 +13,7 @@ TOML type, texts with control characters) must all end in a parsed spec or a `Sp
   hangs, far above the time a case takes, which is well under a second).
 
 The default run draws 100 examples per test. For a longer search set the environment variable
-``LSC_FUZZ_EXAMPLES``, e.g. ``LSC_FUZZ_EXAMPLES=20000 python -m pytest tests/test_spec_fuzz.py``.
+``LSC_FUZZ_EXAMPLES``, e.g. ``LSC_FUZZ_EXAMPLES=20000 python -m pytest tests/fmu_build/spec/test_spec_fuzz.py``.
 """
 import builtins
 import math
@@ -24,7 +24,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from _support import deadline
+from tests.support.helpers import deadline
 from fmu_build import SpecError, parse_spec
 from fmu_build.spec._expressions import FUNCTIONS
 

@@ -1,8 +1,8 @@
 """Limits of the spec layer: messages name the field and the limit (docs/spec_reference.md)."""
 import pytest
 
-from _support import lag_spec as _spec
-from _support import spec_problems as _problems
+from tests.support.helpers import lag_spec as _spec
+from tests.support.helpers import spec_problems as _problems
 from fmu_build import SpecError, build_fmu, load_spec, parse_spec
 from fmu_build.spec._limits import MAX_DERIVATIVE_SIZE, MAX_LAM, derivative_problems
 

@@ -22,7 +22,9 @@ from fmu_build import build_fmu, recommend, sweep  # noqa: E402
 from fmu_build import study  # noqa: E402
 from fmu_build.study import _grid, _runs, _sweep  # noqa: E402
 
-SPECS = os.path.join(os.path.dirname(__file__), os.pardir, "examples", "specs")
+from tests.support import ROOT  # noqa: E402
+
+SPECS = os.path.join(ROOT, "examples", "specs")
 T_SPAN = (0.0, 2.0)
 GRID = {"lam": [0.5, 1.0, 2.0, 5.0, 10.0], "step": [0.05, 0.1], "offset": [0.0, 0.1]}
 
@@ -306,7 +308,7 @@ def test_ssp_target_maps_the_point_onto_cosimulate(tmp_path, monkeypatch):
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc (the plant and the native FMU are compiled)")
 def test_ssp_study_against_cosimulate_runs(tmp_path):
     """A study of the differentiated-input loop (C plant -> native DAE FMU) equals direct cosimulate runs."""
-    plants = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples", "plants")
+    plants = os.path.join(ROOT, "examples", "plants")
     code = textwrap.dedent(f"""
         import json, sys
         import numpy as np
@@ -365,7 +367,7 @@ def _readme_sweep_line():
     import re
     import shlex
 
-    with open(os.path.join(os.path.dirname(__file__), os.pardir, "README.md"), encoding="utf-8") as fh:
+    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as fh:
         line, = [l for l in fh.read().splitlines() if re.search(r"\blsc-fmu sweep\b", l)]
     return shlex.split(line.split("&&")[-1])[1:]
 

@@ -28,7 +28,7 @@ from lsc import gallery  # noqa: E402
 from fmu_build import sweep  # noqa: E402
 from fmu_build.study import _runs, _sweep  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from tests.support import ROOT  # noqa: E402
 SPECS = os.path.join(ROOT, "examples", "specs")
 FEEDTHROUGH_INPUTS = {"Float64_continuous_input": [0.5], "Float64_discrete_input": [1.5], "Int32_input": [3],
                       "Boolean_input": [True], "Enumeration_input": [1], "String_input": ["a"],
@@ -40,7 +40,7 @@ def _serial(target, grid, **kwargs):
 
 
 def _reference_fmu(name, version="2.0"):
-    from _support import reference_fmus
+    from tests.support.helpers import reference_fmus
 
     folder, reason = reference_fmus(version)
     if folder is None:

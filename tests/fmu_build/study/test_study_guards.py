@@ -18,7 +18,7 @@ from lsc import gallery  # noqa: E402
 from fmu_build import sweep  # noqa: E402
 from fmu_build.study import _runs, _sweep  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from tests.support import ROOT, SUPPORT  # noqa: E402
 SPECS = os.path.join(ROOT, "examples", "specs")
 T_SPAN = (0.0, 1.0)
 
@@ -240,8 +240,8 @@ def test_cli_sweep_output_is_checked_before_running(tmp_path, capsys, output, ne
 def _cli_without(blocked, *args, cwd):
     code = textwrap.dedent(f"""
         import sys
-        sys.path.insert(0, {os.path.join(ROOT, 'tests')!r})
-        from _support import ImportBlocker
+        sys.path.insert(0, {str(SUPPORT)!r})
+        from helpers import ImportBlocker
         sys.meta_path.insert(0, ImportBlocker({blocked!r}))
         from fmu_build.__main__ import main
         sys.exit(main({list(args)!r}))
@@ -286,7 +286,7 @@ def test_cli_sweep_refuses_a_boolean_lam(tmp_path, capsys):
     ({"n_workers": 0, "scheduler": None}, "`n_workers` must be a positive integer; found 0"),
 ])
 def test_horizon_and_workers_are_checked_up_front(kwargs, needle):
-    from _support import deadline
+    from tests.support.helpers import deadline
 
     kwargs = {"scheduler": "serial", **kwargs}
     with deadline(30, "a refusal that should be immediate"), pytest.raises(ValueError, match=needle):
@@ -397,7 +397,7 @@ def test_string_values_are_texts():
 
 
 def _feedthrough():
-    from _support import reference_fmus
+    from tests.support.helpers import reference_fmus
 
     folder, reason = reference_fmus("2.0")
     if folder is None:

@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.support import ROOT
 SPECS = ROOT / "examples" / "specs"
 STOP, DT = 2.0, 0.01
 T = sp.Symbol("t")

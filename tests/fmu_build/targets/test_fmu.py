@@ -15,14 +15,13 @@ from fmu_build import SpecError, build_fmu, load_spec, parse_spec  # noqa: E402
 from fmu_build.targets._runtime import start_name  # noqa: E402
 from lsc import gallery  # noqa: E402
 
-HERE = Path(__file__).parent
-ROOT = HERE.parent
+from tests.support import ROOT, SUPPORT  # noqa: E402
 SPEC = ROOT / "examples" / "specs" / "prescribed_path.toml"
 TOL = {"rtol": 1e-10, "atol": 1e-12}
 
 
 def run(scenario):
-    out = subprocess.run([sys.executable, str(HERE / "fmu_runner.py")], input=json.dumps(scenario), capture_output=True,
+    out = subprocess.run([sys.executable, str(SUPPORT / "fmu_runner.py")], input=json.dumps(scenario), capture_output=True,
                          text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -38,14 +37,18 @@ def chain4():
     """N x' + x = f, N a 4x4 shift (index 4); x = sum (-1)^i N^i f^(i) exactly."""
     import sympy
 
-    from lsc.gallery import Problem, _lambdified_exact
+    from lsc.gallery import Problem
 
     t = sympy.Symbol("t")
     f = sympy.Matrix([sympy.sin(t), sympy.cos(2 * t), sympy.exp(-t), 1 + t**2 / 2])
     N = sympy.Matrix(4, 4, lambda i, j: 1 if j == i + 1 else 0)
     x = sum(((-1) ** i * N**i * f.diff(t, i) for i in range(4)), sympy.zeros(4, 1))
     dae = lsc.LinearDAE(np.eye(4, k=1), np.eye(4), f)
-    return Problem("chain4", dae, (0.0, 1.0), _lambdified_exact(x, t), 4, [], (4,))
+    def exact(ts, d):
+        values = sympy.lambdify(t, list(x.diff(t, d)), modules="numpy")(ts)
+        return np.array([np.broadcast_to(np.asarray(v, dtype=float), ts.shape) for v in values])
+
+    return Problem("chain4", dae, (0.0, 1.0), exact, 4, [], (4,))
 
 
 # (how to build, the problem, state names)
@@ -287,7 +290,7 @@ def test_input_example_spec_builds_a_valid_fmu(tmp_path):
 
 
 def run_cosim(scenario):
-    out = subprocess.run([sys.executable, str(HERE / "cosim_runner.py")], input=json.dumps(scenario), capture_output=True,
+    out = subprocess.run([sys.executable, str(SUPPORT / "cosim_runner.py")], input=json.dumps(scenario), capture_output=True,
                          text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -517,7 +520,7 @@ def test_power_form_interpolant_equals_scipys(solver):
 
 def run_calls(scenario):
     """Run FMI calls in a fresh host process; the host must exit by itself with code 0 (no signal)."""
-    out = subprocess.run([sys.executable, str(HERE / "fmu_runner.py")], input=json.dumps(scenario), capture_output=True,
+    out = subprocess.run([sys.executable, str(SUPPORT / "fmu_runner.py")], input=json.dumps(scenario), capture_output=True,
                          text=True, timeout=600)
     assert out.returncode == 0, (out.returncode, out.stderr[-3000:])
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -683,7 +686,7 @@ def test_stiff_completion_switches_to_an_implicit_solver_and_says_so(path_fmu):
 
 def test_host_without_scipy_is_told_what_it_lacks(path_fmu):
     scenario = {"fmu": str(path_fmu), "dt": 0.1, "steps": 1, "outputs": ["y"], "block": ["scipy"]}
-    out = subprocess.run([sys.executable, str(HERE / "fmu_runner.py")], input=json.dumps(scenario), capture_output=True,
+    out = subprocess.run([sys.executable, str(SUPPORT / "fmu_runner.py")], input=json.dumps(scenario), capture_output=True,
                          text=True, timeout=600)
     assert out.returncode == 1, (out.returncode, out.stderr[-2000:])  # fmpy's exception, no crash
     assert "cannot import scipy.linalg" in out.stderr and "numpy and scipy" in out.stderr, out.stderr[-2000:]

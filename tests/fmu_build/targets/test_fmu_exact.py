@@ -3,7 +3,6 @@ import json
 import math
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,12 +16,12 @@ from fmu_build.targets._runtime._inputs import _InputSignal  # noqa: E402
 from fmu_build.targets._runtime._steppers import _expm_small  # noqa: E402
 from lsc import gallery  # noqa: E402
 
-HERE = Path(__file__).parent
-SPECS = HERE.parent / "examples" / "specs"
+from tests.support import ROOT, SUPPORT  # noqa: E402
+SPECS = ROOT / "examples" / "specs"
 
 
 def run(scenario):
-    out = subprocess.run([sys.executable, str(HERE / "fmu_runner.py")], input=json.dumps(scenario), capture_output=True,
+    out = subprocess.run([sys.executable, str(SUPPORT / "fmu_runner.py")], input=json.dumps(scenario), capture_output=True,
                          text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     return json.loads(out.stdout.strip().splitlines()[-1])

@@ -16,15 +16,16 @@ import csv
 import os
 import shutil
 import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from lsc import gallery
-from test_native_timevarying import PROBLEMS, _exact, _names
+from tests.fmu_build.targets.test_native_timevarying import PROBLEMS, _exact, _names
 
-SPECS = Path(__file__).resolve().parents[1] / "examples" / "specs"
+from tests.support import ROOT
+
+SPECS = ROOT / "examples" / "specs"
 STOP, DT = 2.0, 0.01
 MODELS = ("constant", "timevarying")
 VERSIONS = (2, 3)

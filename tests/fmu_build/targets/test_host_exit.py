@@ -1,6 +1,6 @@
 """A pythonfmu FMU lets a native (C) host exit cleanly, run after run.
 
-tests/host_exit_master.c dlopens the FMU's binary, steps it, terminates, frees
+tests/support/host_exit_master.c dlopens the FMU's binary, steps it, terminates, frees
 the instance and returns from main, so that every exit handler and library
 destructor runs as in any C or C++ host (ecos, the FMU Compliance Checker).
 Without the FMU's own teardown, pythonfmu 0.7.0 releases its interpreter
@@ -22,8 +22,8 @@ from xml.etree import ElementTree as ET
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-MASTER = ROOT / "tests" / "host_exit_master.c"
+from tests.support import ROOT, SUPPORT
+MASTER = SUPPORT / "host_exit_master.c"
 FMI_HEADERS = ROOT / "fmu_build" / "templates" / "fmi2" / "headers"
 STEPS, DT = 10, 0.01
 

@@ -10,7 +10,6 @@ import json
 import math
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,8 +17,8 @@ import pytest
 from fmu_build import parse_spec
 from fmu_build.targets._runtime._inputs import _InputSignal
 
-HERE = Path(__file__).parent
-SPECS = HERE.parent / "examples" / "specs"
+from tests.support import ROOT, SUPPORT
+SPECS = ROOT / "examples" / "specs"
 
 
 def _errors(h, spacing=None, window=0.3, after=1.5, stop=3.0, order=3):

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.support import ROOT
 TABLE = ROOT / "examples" / "inputs" / "path.csv"
 STOP, AFTER = 10.0, 2.0
 STEPS = [0.01, 0.004, 0.002]

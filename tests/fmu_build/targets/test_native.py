@@ -1,7 +1,7 @@
 """The native target: generated C, FMI 2.0 Co-Simulation and Model Exchange, no Python in the host.
 
-Every FMU runs in a subprocess (tests/native_runner.py with fmpy, or the C
-master tests/native_master.c); references are lsc.solve_completion with
+Every FMU runs in a subprocess (tests/support/native_runner.py with fmpy, or the C
+master tests/support/native_master.c); references are lsc.solve_completion with
 method='expm' on the same DAE and the same output points (the FMU steps the
 same way: Taylor degree 3 forcing, exact matrix exponential), and exact
 solutions where the gallery has them.
@@ -13,7 +13,6 @@ import stat
 import subprocess
 import sys
 import zipfile
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,10 +23,9 @@ from fmu_build import NativeTargetError
 from fmu_build._model import _numeric_dae
 from lsc import gallery
 
-HERE = Path(__file__).parent
-ROOT = HERE.parent
-RUNNER = HERE / "native_runner.py"
-MASTER = HERE / "native_master.c"
+from tests.support import ROOT, SUPPORT
+RUNNER = SUPPORT / "native_runner.py"
+MASTER = SUPPORT / "native_master.c"
 FMI_HEADERS = ROOT / "fmu_build" / "templates" / "fmi2" / "headers"
 
 

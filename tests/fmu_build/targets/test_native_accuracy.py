@@ -2,7 +2,7 @@
 
 Huge literals in the forcing, rates far from 1 at build time, the constraint
 residual with an input, input derivatives sent for some orders only: each FMU
-runs in a subprocess (tests/native_runner.py, fmpy) and is compared with
+runs in a subprocess (tests/support/native_runner.py, fmpy) and is compared with
 `lsc.solve_completion` or the pythonfmu FMU on the same DAE.
 """
 import json
@@ -11,16 +11,14 @@ import subprocess
 import sys
 import textwrap
 import zipfile
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from fmu_build import build_fmu, parse_spec
-from test_native import CS_RTOL, library, rel_err, run, spec_dict
+from tests.fmu_build.targets.test_native import CS_RTOL, library, rel_err, run, spec_dict
 
-HERE = Path(__file__).parent
-ROOT = HERE.parent
+from tests.support import ROOT, SUPPORT
 STRICT = ["-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", "-O2", "-shared", "-fPIC"]
 
 

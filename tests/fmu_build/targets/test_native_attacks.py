@@ -1,7 +1,7 @@
 """Hostile-master attacks on native C FMUs that the FMU does not withstand today.
 
 Each test asserts what SHOULD happen (FMI 2.0 and docs/native_fmu.md) and so fails
-until the FMU is fixed. The FMU runs in a subprocess: tests/native_attack_master.c,
+until the FMU is fixed. The FMU runs in a subprocess: tests/support/native_attack_master.c,
 compiled with -fsanitize=address,undefined, dlopens the FMU compiled from its own
 sources with the same sanitizers, runs one scenario and prints "label status" per
 call and "LOG ..." per logger call; or fmpy's FMU2Slave in a fresh Python.
@@ -12,7 +12,6 @@ import subprocess
 import sys
 import textwrap
 import zipfile
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,9 +19,8 @@ import pytest
 from fmu_build import build_fmu
 from lsc import gallery
 
-HERE = Path(__file__).parent
-ROOT = HERE.parent
-MASTER = HERE / "native_attack_master.c"
+from tests.support import ROOT, SUPPORT
+MASTER = SUPPORT / "native_attack_master.c"
 HEADERS = ROOT / "fmu_build" / "templates" / "fmi2" / "headers"
 SAN = ["-g", "-O1", "-fsanitize=address,undefined", "-fno-omit-frame-pointer"]
 

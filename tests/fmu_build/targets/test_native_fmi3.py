@@ -1,6 +1,6 @@
 """FMI 3.0 native FMUs: the FMI 3.0 layer over the FMI 2.0 core gives the same numbers, and its own refusals.
 
-Every FMU runs in a subprocess (tests/native3_runner.py with fmpy). The FMI 2.0 build of the same
+Every FMU runs in a subprocess (tests/support/native3_runner.py with fmpy). The FMI 2.0 build of the same
 spec is the reference: one core, two API layers, so Co-Simulation must agree to 1e-12 and Model
 Exchange (fmpy's CVode on the same right-hand side) to the integrator's tolerance.
 """
@@ -9,24 +9,22 @@ import shutil
 import subprocess
 import sys
 import zipfile
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-import _support
+from tests.support import helpers
 from fmu_build import build_fmu
 
-HERE = Path(__file__).parent
-ROOT = HERE.parent
+from tests.support import ROOT, SUPPORT
 SPECS = ROOT / "examples" / "specs"
-RUNNER = HERE / "native3_runner.py"
+RUNNER = SUPPORT / "native3_runner.py"
 OUTPUTS = ["y", "v", "u", "constraint_residual"]
 
 
 def run(scenario, timeout=300):
     proc = subprocess.run([sys.executable, str(RUNNER)], input=json.dumps(scenario), capture_output=True, text=True,
-                          timeout=timeout, cwd=HERE)
+                          timeout=timeout, cwd=SUPPORT)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout)
 
@@ -183,13 +181,13 @@ def test_bad_model_exchange_calls_are_refused(built):
 
 
 def test_model_exchange_state_machine(built):
-    """The FMI 3.0 Model Exchange state machine call by call (tests/native3_tv_runner.py): Event Mode after
+    """The FMI 3.0 Model Exchange state machine call by call (tests/support/native3_tv_runner.py): Event Mode after
     initialization, fmi3UpdateDiscreteStates without events or a next event time, Continuous-Time Mode and back by
     fmi3EnterEventMode from it only; every call out of order refused with the reason, and the Event Mode calls on
     a Co-Simulation instance (hasEventMode=false) too."""
-    proc = subprocess.run([sys.executable, str(HERE / "native3_tv_runner.py")], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, str(SUPPORT / "native3_tv_runner.py")], capture_output=True, text=True,
                           input=json.dumps({"kind": "me_sequence", "fmu": str(built["prescribed_path", 3]), "t": 0.5}),
-                          timeout=300, cwd=HERE)
+                          timeout=300, cwd=SUPPORT)
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     no_event = [0, False, False, False, False, False, 0.0]  # need update, terminate, nominals, values, next time
@@ -251,7 +249,7 @@ def test_command_line_builds_fmi3(tmp_path, capsys):
 
 def test_coupled_to_reference_dahlquist(built, tmp_path):
     """The plant's output x = 0.9^k (Dahlquist, explicit Euler) is our path input p: y follows it, as the FMI 2.0 build."""
-    folder, reason = _support.reference_fmus("3.0")
+    folder, reason = helpers.reference_fmus("3.0")
     if folder is None:
         pytest.skip(reason)
     out = run({"kind": "couple", "plant": str(folder / "Dahlquist.fmu"), "fmu": str(built["path_input", 3]),
@@ -281,7 +279,7 @@ def test_c_master_under_address_and_ub_sanitizers(built, tmp_path):
                  "-o", str(tmp_path / "san.so"), str(src / "fmi3Functions.c"), "-lm"],
                 # the master without -pedantic: ISO C has no cast from dlsym's pointer to a function pointer
                 ["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", *san, "-D_POSIX_C_SOURCE=200809L",
-                 "-I", str(src / "fmi3" / "headers"), "-o", str(tmp_path / "master"), str(HERE / "native3_master.c"),
+                 "-I", str(src / "fmi3" / "headers"), "-o", str(tmp_path / "master"), str(SUPPORT / "native3_master.c"),
                  "-ldl"]):
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
         assert proc.returncode == 0, proc.stderr[-3000:]

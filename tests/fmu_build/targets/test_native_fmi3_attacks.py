@@ -1,6 +1,6 @@
 """Hostile-master attacks on the FMI 3.0 API of native lsc FMUs.
 
-tests/native3_attack_master.c, compiled with -fsanitize=address,undefined, dlopens the FMU's
+tests/support/native3_attack_master.c, compiled with -fsanitize=address,undefined, dlopens the FMU's
 fmi3Functions.c compiled with the same sanitizers, runs one scenario and prints "label status"
 per call, "value label x" for numbers and "LOG status message" per logger call. A sanitizer
 report, a crash or a leak fails the scenario. fmpy's FMU3Slave runs the same FMU in a fresh Python.
@@ -13,16 +13,14 @@ import shutil
 import subprocess
 import sys
 import zipfile
-from pathlib import Path
 
 import pytest
 
 from fmu_build import build_fmu
 
-HERE = Path(__file__).parent
-ROOT = HERE.parent
+from tests.support import ROOT, SUPPORT
 SPECS = ROOT / "examples" / "specs"
-MASTER = HERE / "native3_attack_master.c"
+MASTER = SUPPORT / "native3_attack_master.c"
 HEADERS = ROOT / "fmu_build" / "templates" / "fmi3" / "headers"
 SAN = ["-g", "-O1", "-fsanitize=address,undefined", "-fno-sanitize-recover=undefined", "-fno-omit-frame-pointer"]
 OK, WARNING, DISCARD, ERROR = 0, 1, 2, 3
@@ -313,7 +311,7 @@ def test_fmpy_master_hostile_name_types_reset_and_foreign_states(fmus):
     state set into a Co-Simulation instance."""
     proc = subprocess.run([sys.executable, "-c", FMPY_PROBE,
                            json.dumps({"fmu": fmus["pp"]["fmu"], "fmu2": fmus["pp2"]["fmu"]})],
-                          capture_output=True, text=True, timeout=120, cwd=HERE)
+                          capture_output=True, text=True, timeout=120, cwd=SUPPORT)
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = json.loads(proc.stdout)
     # the two builds' states have one size (the GUID hash refuses the other's), small without inputs (424 bytes)

@@ -4,20 +4,19 @@ Every setter is called on every variable of four build kinds (constant coefficie
 inputs; time-varying coefficients, with and without inputs), in every state of a Co-Simulation and a Model
 Exchange instance, with a valid and with invalid values, on the FMI 2.0 and the FMI 3.0 build of one spec;
 each call on a fresh instance, followed by the rest of its life (initialization, a step or a derivative
-evaluation, termination) with every variable read back. The two traces (tests/native_setters_runner.py, in a
+evaluation, termination) with every variable read back. The two traces (tests/support/native_setters_runner.py, in a
 subprocess) must be equal bit for bit: one core, two API layers.
 """
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
 from fmu_build import build_fmu
 
-HERE = Path(__file__).parent
-SPECS = HERE.parent / "examples" / "specs"
+from tests.support import ROOT, SUPPORT
+SPECS = ROOT / "examples" / "specs"
 
 TV = {"model": {"name": "TvSet"}, "states": {"x1": {"start": 1.0}, "x2": {"start": 0.0}},
       "parameters": {"a": {"value": 1.5}},
@@ -42,8 +41,8 @@ def built(tmp_path_factory):
 
 def traces(built, kind, interface):
     sc = {"fmus": {str(v): str(built[kind, v]) for v in (2, 3)}, "interface": interface}
-    proc = subprocess.run([sys.executable, str(HERE / "native_setters_runner.py")], input=json.dumps(sc),
-                          capture_output=True, text=True, timeout=600, cwd=HERE)
+    proc = subprocess.run([sys.executable, str(SUPPORT / "native_setters_runner.py")], input=json.dumps(sc),
+                          capture_output=True, text=True, timeout=600, cwd=SUPPORT)
     assert proc.returncode == 0, proc.stderr[-3000:]  # the host exits cleanly after every refused call
     out = json.loads(proc.stdout)
     return out["2"], out["3"]

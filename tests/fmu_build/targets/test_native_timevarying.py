@@ -3,7 +3,7 @@
 Four problems of index 1 to 3 with exact solutions (manufactured: f = A x*' + B x*
 in sympy), among them two rotating constraints and the gallery's
 `rotating_canonical` written in sympy; each FMU runs in a subprocess
-(tests/native_runner.py, fmpy) with lsc, sympy, scipy and fmu_build blocked.
+(tests/support/native_runner.py, fmpy) with lsc, sympy, scipy and fmu_build blocked.
 """
 import os
 import subprocess
@@ -18,8 +18,8 @@ from fmu_build import build_fmu, parse_spec
 from fmu_build._model import _numeric_dae
 from fmu_build.targets import _native_tv
 from fmu_build.targets.native import NativeTargetError
-from test_native import rel_err, run
-from test_native_accuracy import _compile_strict
+from tests.fmu_build.targets.test_native import rel_err, run
+from tests.fmu_build.targets.test_native_accuracy import _compile_strict
 
 BLOCK = ["lsc", "sympy", "scipy", "fmu_build"]
 T = sp.Symbol("t")
@@ -249,7 +249,7 @@ def test_validates_clean(built):
 
 
 def test_c_master_under_address_and_ub_sanitizers(built, tmp_path):
-    from test_native import _master, _sanitized_library, _unpacked
+    from tests.fmu_build.targets.test_native import _master, _sanitized_library, _unpacked
 
     guid, vrs = _unpacked(built["Rot3"], tmp_path)
     lib = _sanitized_library(tmp_path)

@@ -1,6 +1,6 @@
 """A hostile FMI 2.0 master against time-varying native FMUs (piecewise Chebyshev tables over a horizon).
 
-The FMU runs in a subprocess: tests/native_tv_attack_master.c, compiled with -fsanitize=address,undefined,
+The FMU runs in a subprocess: tests/support/native_tv_attack_master.c, compiled with -fsanitize=address,undefined,
 dlopens the FMU compiled from its own sources with the same sanitizers, runs one scenario and prints
 "label status" per call, "label v1 v2 .." for values and "LOG ..." per logger call; or fmpy in a fresh Python.
 Each test asserts what FMI 2.0 and docs/native_fmu.md promise: bad input refused with a logged reason, no
@@ -12,18 +12,17 @@ import subprocess
 import sys
 import textwrap
 import zipfile
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from fmu_build import build_fmu
-from test_native_attacks import _chain5_spec
-from test_native_timevarying import PROBLEMS, _exact
+from tests.fmu_build.targets.test_native_attacks import _chain5_spec
+from tests.fmu_build.targets.test_native_timevarying import PROBLEMS, _exact
 
-HERE = Path(__file__).parent
-MASTER = HERE / "native_tv_attack_master.c"
-HEADERS = HERE.parent / "fmu_build" / "templates" / "fmi2" / "headers"
+from tests.support import ROOT, SUPPORT
+MASTER = SUPPORT / "native_tv_attack_master.c"
+HEADERS = ROOT / "fmu_build" / "templates" / "fmi2" / "headers"
 SAN = ["-g", "-O1", "-fsanitize=address,undefined", "-fno-omit-frame-pointer"]
 OK, WARNING, DISCARD, ERROR = 0, 1, 2, 3
 T1 = 2.2  # the horizon's end: experiment stop 2 plus the 10 % margin
@@ -217,7 +216,7 @@ def test_output_derivative_orders_and_input_derivatives_without_inputs(fmus):
     assert st["order_1"] == OK
     # orders 1 to 4 are provided (maxOutputDerivativeOrder 4 without inputs): order 2 of x1 at t = 0.2 is exact's
     import sympy as sp
-    from test_native_timevarying import PROBLEMS_SOURCES, T
+    from tests.fmu_build.targets.test_native_timevarying import PROBLEMS_SOURCES, T
     d2 = float(sp.Matrix(PROBLEMS_SOURCES["Rot2"]["xe"])[0].diff(T, 2).subs(T, 0.2))
     assert st["order_2"] == OK and abs(v["order_2_value"][0] - d2) < 1e-8 * max(1.0, abs(d2)), (v["order_2_value"], d2)
     for label in ("order_0", "order_huge", "order_negative", "order_min"):
@@ -316,7 +315,7 @@ def test_values_before_initialization(fmus):
     clean(rc, text)
     assert st["getReal_x"] == OK and np.abs(np.array(v["x"]) - exact(0.0)).max() == 0.0
     import sympy as sp
-    from test_native_timevarying import PROBLEMS_SOURCES, T
+    from tests.fmu_build.targets.test_native_timevarying import PROBLEMS_SOURCES, T
     xe = sp.Matrix(PROBLEMS_SOURCES["Rot2"]["xe"])
     dx0 = np.array(xe.diff(T).subs(T, 0).evalf(), dtype=float).ravel()
     assert st["getReal_der"] == OK and np.abs(np.array(v["der"]) - dx0).max() < 1e-8
@@ -443,7 +442,7 @@ def test_model_exchange_derivatives_at_piece_breaks_and_horizon_ends(fmus):
 
 
 def test_fixed_lambda_build_refuses_lambda(tmp_path):
-    from test_native_timevarying import PROBLEMS_SOURCES, _spec
+    from tests.fmu_build.targets.test_native_timevarying import PROBLEMS_SOURCES, _spec
 
     d, _ = _spec("Rot2Std", *[PROBLEMS_SOURCES["Rot2"][k] for k in ("A", "B", "xe")], method="standard")
     fmu = build_fmu(d, tmp_path, target="native")

@@ -3,7 +3,7 @@
 The problems and the library reference are those of test_native_timevarying.py (exact solutions,
 index 1 to 3, rotating constraints). The FMI 2.0 build of the same spec is the reference of the
 layer: one core, so fmpy's Co-Simulation and Model Exchange runs agree to 1e-12. Every FMU runs in
-a subprocess (tests/native3_tv_runner.py, tests/native3_runner.py, tests/native3_master.c).
+a subprocess (tests/support/native3_tv_runner.py, tests/support/native3_runner.py, tests/support/native3_master.c).
 """
 import json
 import os
@@ -11,7 +11,6 @@ import shutil
 import subprocess
 import sys
 import zipfile
-from pathlib import Path
 from xml.etree import ElementTree as ET
 
 import numpy as np
@@ -22,18 +21,18 @@ import lsc
 from fmu_build import build_fmu, parse_spec
 from fmu_build._model import _numeric_dae
 from fmu_build.targets import _native_tv
-from test_native import rel_err
-from test_native import run as run2
-from test_native_timevarying import BLOCK, DT, PROBLEMS, PROBLEMS_SOURCES, STOP, T, _exact, _library, _names
+from tests.fmu_build.targets.test_native import rel_err
+from tests.fmu_build.targets.test_native import run as run2
+from tests.fmu_build.targets.test_native_timevarying import BLOCK, DT, PROBLEMS, PROBLEMS_SOURCES, STOP, T, _exact, _library, _names
 
-HERE = Path(__file__).parent
+from tests.support import SUPPORT
 NAMES = ("Tv1", "Rot2", "Rot3")
 HORIZON = STOP * (1 + _native_tv.HORIZON_MARGIN)  # 2.2: the tables reach 10 % past the experiment's stop
 
 
 def run(scenario, runner="native3_tv_runner.py", timeout=300):
-    proc = subprocess.run([sys.executable, str(HERE / runner)], input=json.dumps(scenario), capture_output=True,
-                          text=True, timeout=timeout, cwd=HERE)
+    proc = subprocess.run([sys.executable, str(SUPPORT / runner)], input=json.dumps(scenario), capture_output=True,
+                          text=True, timeout=timeout, cwd=SUPPORT)
     assert proc.returncode == 0, proc.stderr[-3000:]  # the host exits cleanly, whatever the FMU refused
     return json.loads(proc.stdout.strip().splitlines()[-1])  # (fmpy's CVode prints its failures on stdout)
 
@@ -242,7 +241,7 @@ def test_c_master_under_address_and_ub_sanitizers(built, tmp_path):
     for cmd in (["cc", "-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", *san, "-shared", "-fPIC", "-I", str(src),
                  "-o", str(tmp_path / "san.so"), str(src / "fmi3Functions.c"), "-lm"],
                 ["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", *san, "-D_POSIX_C_SOURCE=200809L",
-                 "-I", str(src / "fmi3" / "headers"), "-o", str(tmp_path / "master"), str(HERE / "native3_master.c"),
+                 "-I", str(src / "fmi3" / "headers"), "-o", str(tmp_path / "master"), str(SUPPORT / "native3_master.c"),
                  "-ldl"]):
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
         assert proc.returncode == 0, proc.stderr[-3000:]

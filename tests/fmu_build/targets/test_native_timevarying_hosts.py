@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from fmu_build import build_fmu
-from test_native import rel_err
-from test_native_timevarying import PROBLEMS, STOP, _exact, _names
+from tests.fmu_build.targets.test_native import rel_err
+from tests.fmu_build.targets.test_native_timevarying import PROBLEMS, STOP, _exact, _names
 
 NAME = "Rot3"
 STEPS = 200  # of 0.01 (the spec's step) up to the experiment's stop 2.0

@@ -4,8 +4,8 @@ Problems with manufactured exact solutions whose forcing is fed partly through a
 time-dependent coefficient ``b(t)`` (``f = f_rest(t) + b(t) u``, ``u = u*(t)`` known): positions and
 velocities on a rotating line driven by a force along the line and through the constraint (index 3; also
 with a row and an unknown scaled by 1e4, so that the library equilibrates both), and the gallery's
-`rotating_canonical` (written in sympy, tests/test_native_timevarying.py) with one of its rotated forcing
-components through the input (index 2). Each FMU runs in a subprocess (tests/native_runner.py, fmpy;
+`rotating_canonical` (written in sympy, tests/fmu_build/targets/test_native_timevarying.py) with one of its rotated forcing
+components through the input (index 2). Each FMU runs in a subprocess (tests/support/native_runner.py, fmpy;
 the accuracy runs with lsc, sympy, scipy and fmu_build blocked).
 """
 import zipfile
@@ -18,8 +18,8 @@ import lsc
 from fmu_build import build_fmu, parse_spec
 from fmu_build._model import _numeric_dae
 from fmu_build.targets.native import NativeTargetError
-from test_native import rel_err, run
-from test_native_timevarying import BLOCK, T, _spec, rotating_canonical_sympy
+from tests.fmu_build.targets.test_native import rel_err, run
+from tests.fmu_build.targets.test_native_timevarying import BLOCK, T, _spec, rotating_canonical_sympy
 
 STOP, DT = 2.0, 0.01
 U = sp.Symbol("u")
@@ -238,7 +238,7 @@ def test_rollback_with_inputs_bit_for_bit(built, serialize):
 def test_compiles_warning_free_and_declares_input_derivatives(built, tmp_path):
     from fmpy import read_model_description
 
-    from test_native_accuracy import _compile_strict
+    from tests.fmu_build.targets.test_native_accuracy import _compile_strict
 
     proc = _compile_strict(built["RotForce3"], tmp_path)
     assert proc.returncode == 0 and proc.stderr == "", proc.stderr
@@ -303,7 +303,7 @@ def test_c_master_under_address_and_ub_sanitizers(built, tmp_path):
     import os
     import subprocess
 
-    from test_native import _master, _sanitized_library, _unpacked
+    from tests.fmu_build.targets.test_native import _master, _sanitized_library, _unpacked
 
     name = "RotForce3"
     guid, vrs = _unpacked(built[name], tmp_path)

@@ -12,11 +12,11 @@ import subprocess
 import sys
 import textwrap
 import zipfile
-from pathlib import Path
 
 import pytest
 
 from fmu_build import build_fmu
+from tests.support import SUPPORT
 
 OK, WARNING, DISCARD, ERROR = 0, 1, 2, 3
 STOP = 1.0
@@ -126,11 +126,11 @@ def test_failing_magnus_steps_read_no_uninitialized_value(fmu, tmp_path):
         xml = zf.read("modelDescription.xml").decode()
     guid = re.search(r'guid="([^"]+)"', xml).group(1)
     vr = {name: re.search(rf'name="{name}" valueReference="(\d+)"', xml).group(1) for name in ("u", "lambda")}
-    src, here = tmp_path / "sources", Path(__file__).parent
+    src = tmp_path / "sources"
     for cmd in (["cc", "-g", "-O1", "-std=c99", "-shared", "-fPIC", "-I", str(src), "-o", str(tmp_path / "plain.so"),
                  str(src / "fmi2Functions.c"), "-lm"],
                 ["cc", "-g", "-O1", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(src / "fmi2" / "headers"), "-o",
-                 str(tmp_path / "master"), str(here / "native_tv_valgrind_master.c"), "-ldl"]):
+                 str(tmp_path / "master"), str(SUPPORT / "native_tv_valgrind_master.c"), "-ldl"]):
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
         assert proc.returncode == 0, proc.stderr[-3000:]
     proc = subprocess.run(["valgrind", "--track-origins=yes", "--error-exitcode=9", "-q", str(tmp_path / "master"),

@@ -2,7 +2,6 @@
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,13 +14,13 @@ import lsc  # noqa: E402
 from fmu_build import NativeTargetError, SpecError, build_fmu  # noqa: E402
 from lsc import gallery  # noqa: E402
 
-HERE = Path(__file__).parent
+from tests.support import SUPPORT  # noqa: E402
 LAM = 2.0
 G_MASSES = 4999  # n = 2 g + 1 = 9,999 unknowns, index 3
 
 
 def run(scenario):
-    out = subprocess.run([sys.executable, str(HERE / "fmu_runner.py")], input=json.dumps(scenario), capture_output=True,
+    out = subprocess.run([sys.executable, str(SUPPORT / "fmu_runner.py")], input=json.dumps(scenario), capture_output=True,
                          text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     return json.loads(out.stdout.strip().splitlines()[-1])

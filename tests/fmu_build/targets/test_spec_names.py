@@ -2,7 +2,6 @@
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,7 +11,7 @@ import lsc  # noqa: F401  (the build needs it)
 from fmu_build import SpecError, build_fmu, parse_spec
 from fmu_build.targets._pythonfmu_source import _jet_source, _outputs_source
 
-HERE = Path(__file__).parent
+from tests.support import SUPPORT
 
 
 def _collision_spec(pname="p__1"):
@@ -74,7 +73,7 @@ def test_fmu_with_a_parameter_named_like_an_input_derivative(tmp_path):
     scenario = {"fmu": str(fmu), "dt": dt, "steps": steps, "outputs": ["x"],
                 "start_values": {"rtol": 1e-10, "atol": 1e-12},
                 "input_series": {"p": (0.8 * dt * np.arange(steps)).tolist()}}
-    out = subprocess.run([sys.executable, str(HERE / "fmu_runner.py")], input=json.dumps(scenario), capture_output=True,
+    out = subprocess.run([sys.executable, str(SUPPORT / "fmu_runner.py")], input=json.dumps(scenario), capture_output=True,
                          text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     result = json.loads(out.stdout.strip().splitlines()[-1])
