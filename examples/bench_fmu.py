@@ -21,7 +21,7 @@ exact stepping) is measured side by side in the same run:
   work), the floor of fmpy's own loop; and both again in fmpy's low-level
   ``FMU2Slave`` loop (doStep + getReal per step, 15 interleaved runs), where
   simulate_fmu's unzip and XML parsing do not blur the ratio;
-- in a small C master (tests/native_master.c: dlopen, doStep + getReal per
+- in a small C master (tests/support/native_master.c: dlopen, doStep + getReal per
   step), 10,000 and 1,000,000 steps;
 - against the library's exact stepping (``method='expm'``) at the same points.
 
@@ -144,7 +144,7 @@ def build_native_pair(out_dir):
 
 
 def c_master(native, steps, repeats):
-    """Best per-step time (us) of the native FMU in tests/native_master.c, and y at the end."""
+    """Best per-step time (us) of the native FMU in tests/support/native_master.c, and y at the end."""
     import zipfile
     from xml.etree import ElementTree as ET
 
@@ -156,7 +156,7 @@ def c_master(native, steps, repeats):
     exe = work / "master"
     headers = ROOT / "fmu_build" / "templates" / "fmi2" / "headers"
     subprocess.run(["cc", "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200809L", "-I", str(headers),
-                    "-o", str(exe), str(ROOT / "tests" / "native_master.c"), "-ldl"], check=True)
+                    "-o", str(exe), str(ROOT / "tests" / "support" / "native_master.c"), "-ldl"], check=True)
     lib = next((work / "binaries").rglob("*.so"))
     best, y_end = float("inf"), None
     for _ in range(repeats):

@@ -1,7 +1,7 @@
 """The command-line reference docs/cli.md, generated from lsc-fmu's argument parser.
 
 Run: ``python examples/gen_cli_docs.py`` prints the page; ``--docs`` writes docs/cli.md
-(tests/test_cli_docs.py checks that the file equals what the parser generates).
+(tests/fmu_build/cli/test_cli_docs.py checks that the file equals what the parser generates).
 """
 import pathlib
 import sys

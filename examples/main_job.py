@@ -12,7 +12,7 @@
    and the numbers it draws (each run's residual at t = 0, 1, ..., 10 and
    its errors) to out/main_job.json, whose SHA-256 the PNG carries; with
    ``--docs`` also to docs/_generated/main_job.png and .json, the README's
-   picture (tests/test_docs_pictures.py compares them with a run).
+   picture (tests/project/test_docs_pictures.py compares them with a run).
 4. The same example is also built as native C FMUs (``target="native"``: no
    Python in the host; the alternative one has ``lambda`` tunable, the
    standard one is a second build, since the method is fixed in C) and run

@@ -1,7 +1,7 @@
 """docs/cli.md, written from the argument parser itself (so no command or option can be missing).
 
 Run ``python -m fmu_build.__main__ --markdown`` to print it; ``examples/gen_cli_docs.py
---docs`` writes docs/cli.md, and tests/test_cli_docs.py checks the file equals it.
+--docs`` writes docs/cli.md, and tests/fmu_build/cli/test_cli_docs.py checks the file equals it.
 """
 import argparse
 

@@ -39,7 +39,6 @@ from ._rcl import rcl_ladder
 from ._rotating import rotating_canonical
 from ._sparse_base import Descriptor, SparseProblem
 from ._stokes import stokes_descriptor, stokes_ind2
-from ._thesis import _lambdified_exact  # noqa: F401  (private; the FMU tests use it)
 from ._thesis import stiff_index1, thesis_example1, thesis_example3, thesis_example4, thesis_example5
 
 __all__ = [

@@ -1,0 +1,1 @@
+"""Tests of the `lsc-fmu` command line."""

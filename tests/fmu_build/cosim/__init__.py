@@ -1,0 +1,1 @@
+"""Tests of `fmu_build.cosim`, the co-simulation master."""

@@ -1,0 +1,1 @@
+"""Tests of `fmu_build.spec`: reading, checking and refusing model specs."""

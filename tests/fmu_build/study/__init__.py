@@ -1,0 +1,1 @@
+"""Tests of `fmu_build.study`, the parameter studies."""

@@ -1,0 +1,1 @@
+"""Tests of the project as a whole: README, docs, CI, examples and benchmarks, imports and public names."""
