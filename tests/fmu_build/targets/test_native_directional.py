@@ -3,7 +3,7 @@ fmi3GetAdjointDerivative against lsc's own completion.
 
 A constant-coefficient completion x' = G x + W [f; f'; ...] knows its Jacobian: d x'/d x = G,
 d x'/d u = W d[f; f'; ...]/d u, and the outputs' formulas give theirs. Each FMU runs in a subprocess
-(tests/native_directional_runner.py, fmpy) in FMI 2.0 and 3.0, Model Exchange and Co-Simulation, in
+(tests/support/native_directional_runner.py, fmpy) in FMI 2.0 and 3.0, Model Exchange and Co-Simulation, in
 Initialization Mode (the knowns are the states' start values) and after steps; its products with unit seeds
 must equal G, W's input column and the output map computed here from ``lsc.complete(...).maps()`` to 1e-12
 relative. The capability is declared in the model descriptions; fmuCheck and fmusim run the FMUs clean.
@@ -25,8 +25,9 @@ import pytest
 import lsc
 from fmu_build import build_fmu
 
-HERE = Path(__file__).parent
-RUNNER = HERE / "native_directional_runner.py"
+from tests.support import SUPPORT
+
+RUNNER = SUPPORT / "native_directional_runner.py"
 P, LAM, A = 0.3, 4.0, 1.5  # the input's value, lambda set at run time (the build's is 5), a in f
 # y' = v, m v' = -k y - c v + u + a sin t, y = p + p^2/10 (index 3): f's last row is nonlinear in the input p
 SPEC = {"model": {"name": "PathOut", "description": "a path as an input, outputs linear and not"},
@@ -57,7 +58,7 @@ def completion():
 
 def run(scenario):
     proc = subprocess.run([sys.executable, str(RUNNER)], input=json.dumps(scenario), capture_output=True, text=True,
-                          timeout=300, cwd=HERE)
+                          timeout=300, cwd=SUPPORT)
     assert proc.returncode == 0, proc.stderr[-3000:]  # the host process exits cleanly, refused calls included
     return json.loads(proc.stdout)
 
@@ -152,7 +153,7 @@ def test_declared_in_both_descriptions(built):
 
 
 def test_time_varying_fmu_neither_declares_nor_gives_them(tmp_path):
-    from _support import lag_spec
+    from tests.support.helpers import lag_spec
 
     spec = lag_spec(equations={"A": [["2 + sin(t)"]], "B": [[1]], "f": ["sin(t)"]},
                     experiment={"start": 0.0, "stop": 1.0, "step": 0.1})
@@ -164,7 +165,7 @@ def test_time_varying_fmu_neither_declares_nor_gives_them(tmp_path):
         assert 'irectionalDerivatives="true"' not in xml and 'AdjointDerivatives="true"' not in xml
         code = f"""
 import sys
-sys.path.insert(0, {str(HERE)!r})
+sys.path.insert(0, {str(SUPPORT)!r})
 from native_directional_runner import _open
 logs = []
 fmu, vr = _open({{"fmu": {str(fmu)!r}, "version": {version}, "interface": "cs"}}, logs)

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from test_cli_inputs import STATES, exact
+from tests.fmu_build.cli.test_cli_inputs import STATES, exact
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.support import ROOT
 SPECS = ROOT / "examples" / "specs"
 RLC_TABLE = ROOT / "examples" / "inputs" / "rlc_source.csv"
 
