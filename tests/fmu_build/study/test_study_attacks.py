@@ -393,10 +393,12 @@ def test_cli_range_of_an_fmu_parameter_named_k():
 def test_cli_ctrl_c_stops_with_one_line_and_the_rows_kept(tmp_path):
     # Ctrl-C printed a traceback through Dask's wait; now one line, status 130, the study resumable
     output = tmp_path / "s.csv"
-    lams = ",".join(str(1.0 + i / 100) for i in range(2000))  # more runs than a loaded machine finishes before the signal
+    lams = ",".join(str(1.0 + i / 100) for i in range(2000))  # more runs than finish before the signal
     cmd = [sys.executable, "-m", "fmu_build", "sweep", "gallery:prescribed_path", "--grid", f"lam={lams}",
            "--t-span", "0", "1", "--scheduler", "serial", "--no-progress", "-o", str(output)]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    # SIGINT as a terminal gives it: a test worker (pytest-xdist) ignores SIGINT, and a child inherits that
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and (not output.exists() or len(output.read_text().splitlines()) < 3):
         time.sleep(0.2)
