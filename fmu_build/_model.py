@@ -1,6 +1,6 @@
 """A spec as the numeric model every target shares.
 
-The DAE with the parameters at their values (`_numeric_dae`), its completion
+The DAE with the parameters at their values (`ModelSpec.linear_dae`), its completion
 checked at the start time (`_complete_at_start`), which input derivatives the
 completion can use (`_needed_input_orders`), the Taylor degree of exact
 stepping (`_exact_degree`), and the names generated code gives the spec's
@@ -252,21 +252,4 @@ def _entries_failing(tf, d, t0, label, vector):
                 names.append(f"equations.{label}[{i}]" if vector else f"equations.{label}[{i}][{j}]")
     return ", ".join(names)
 
-
-def _numeric_dae(spec):
-    """The spec's DAE with parameters at their values (sympy in t)."""
-    import sympy
-
-    values = {spec.symbols[p["name"]]: p["value"] for p in spec.parameters}
-    # inputs at their start values: the build checks solvability there; in A or B an input can
-    # change the structure, which the FMU then reports at the step where it happens
-    values.update({spec.input_symbols[u["name"]]: u["start"] for u in spec.inputs})
-
-    def num(M):
-        M = M.subs(values)
-        return np.array(M.tolist(), dtype=float) if not M.free_symbols else M
-
-    f = num(spec.f)
-    f = f.reshape(-1) if isinstance(f, np.ndarray) else sympy.Matrix(f)
-    return lsc.LinearDAE(num(spec.A), num(spec.B), f)
 

@@ -128,6 +128,38 @@ class ModelSpec:
     def n(self):
         return len(self.states)
 
+    def linear_dae(self):
+        """The spec's DAE as an `lsc.LinearDAE`: parameters at their values, inputs at their start values.
+
+        Constant coefficients become arrays; coefficients in ``t`` stay sympy
+        (the targets build from this DAE, and it is the reference a test or a
+        user compares an FMU with).
+
+        Examples
+        --------
+        >>> from pathlib import Path
+        >>> import fmu_build, lsc
+        >>> spec = fmu_build.load_spec(Path(fmu_build.__file__).parent.parent / "examples/specs/prescribed_path.toml")
+        >>> dae = spec.linear_dae()
+        >>> dae.n, dae.is_constant, lsc.differentiation_index(dae)
+        (3, True, 3)
+        """
+        import lsc
+        import numpy as np
+        import sympy
+
+        values = {self.symbols[p["name"]]: p["value"] for p in self.parameters}
+        # inputs at their start values: the build checks solvability there; in A or B an input can
+        # change the structure, which the FMU then reports at the step where it happens
+        values.update({self.input_symbols[u["name"]]: u["start"] for u in self.inputs})
+
+        def num(M):
+            M = M.subs(values)
+            return np.array(M.tolist(), dtype=float) if not M.free_symbols else M
+
+        f = num(self.f)
+        return lsc.LinearDAE(num(self.A), num(self.B), f.reshape(-1) if isinstance(f, np.ndarray) else sympy.Matrix(f))
+
 
 def load_spec(path):
     """Read and validate a TOML spec file; raises `SpecError` listing every problem.

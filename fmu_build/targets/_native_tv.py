@@ -313,7 +313,7 @@ def _inputs(spec, p):
 
     values = {spec.symbols[q["name"]]: q["value"] for q in spec.parameters}
 
-    def num(M):  # as fmu_build._model._numeric_dae: arrays where constant, sympy in t otherwise
+    def num(M):  # as ModelSpec.linear_dae: arrays where constant, sympy in t otherwise
         M = sympy.Matrix(M).subs(values)
         return np.array(M.tolist(), dtype=float) if not M.free_symbols else M
 

@@ -324,14 +324,14 @@ def _compile(src_dir, out_path, compiler, extra_flags=(), main="fmi2Functions.c"
 
 def build_native(spec, dest, *, fix_parameters=False, extra_cflags=(), quiet=False, fmi_version=2):
     """Build the native FMU of a resolved `ModelSpec` (see `fmu_build.build_fmu`, ``target='native'``)."""
-    from .._model import _needed_input_orders, _numeric_dae
+    from .._model import _needed_input_orders
 
     if type(fmi_version) is not int or fmi_version not in (2, 3):
         raise ValueError(f"`fmi_version` must be 2 or 3; found {fmi_version!r}.")
     kpars = _check_expressible(spec, fix_parameters)
     compiler = find_compiler()
     _platform()  # an unknown platform is refused before any work
-    dae = _numeric_dae(spec)
+    dae = spec.linear_dae()
     # time-varying: the library's solvability check over the experiment's horizon (the tables' samples check
     # only the rank at their own times, not the consistency of [J, F] where the equations nearly degenerate)
     span = None if dae.is_constant else (float(spec.experiment["start"]), float(spec.experiment["stop"]))

@@ -20,7 +20,7 @@ import numpy as np
 import lsc
 
 from .._description import model_structure, unit_definitions
-from .._model import _complete_at_start, _numeric_dae
+from .._model import _complete_at_start
 from ._pythonfmu_source import _BUILD_PLACEHOLDER, _SLAVE, _model_source
 from ._vendor import _vendor_ivp
 
@@ -34,7 +34,7 @@ def build_pythonfmu(spec, dest):
     from pythonfmu.builder import FmuBuilder
 
     # Solvability check on the real data before anything is written.
-    dae = _numeric_dae(spec)
+    dae = spec.linear_dae()
     span = (spec.experiment["start"], spec.experiment["stop"])
     completion = _complete_at_start(dae, spec, span)
     k_used = completion.k

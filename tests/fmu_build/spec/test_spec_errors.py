@@ -187,7 +187,7 @@ f = [0, "sqrt(t)"]
 @pytest.mark.parametrize("start, refused", [(0.0, True), (0.25, False)])
 def test_build_refuses_a_completion_not_finite_at_the_start(start, refused, tmp_path):
     # y = sqrt(t), x = -y': f is finite at t = 0, its derivative (which the completion uses) is not
-    from fmu_build._model import _complete_at_start, _numeric_dae
+    from fmu_build._model import _complete_at_start
 
     data = tomllib.loads(SQRT_SPEC)
     data["experiment"] = {"start": start, "stop": start + 1.0}
@@ -197,7 +197,7 @@ def test_build_refuses_a_completion_not_finite_at_the_start(start, refused, tmp_
             build_fmu(spec, tmp_path)
         assert list(tmp_path.iterdir()) == []
     else:
-        completion = _complete_at_start(_numeric_dae(spec), spec, (start, start + 1.0))
+        completion = _complete_at_start(spec.linear_dae(), spec, (start, start + 1.0))
         # on the solution x = -1/(2 sqrt t), y = sqrt t the completion gives its exact derivative
         exact = [-0.5 * start**-0.5, start**0.5]
         derivative = [0.25 * start**-1.5, 0.5 * start**-0.5]

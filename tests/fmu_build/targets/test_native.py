@@ -20,7 +20,6 @@ import pytest
 import lsc
 from fmu_build import build_fmu, parse_spec
 from fmu_build import NativeTargetError
-from fmu_build._model import _numeric_dae
 from lsc import gallery
 
 from tests.support import ROOT, SUPPORT
@@ -105,7 +104,7 @@ CS_RTOL = 1e-9
 
 
 def library(spec, t, x0=None, lam=None):
-    dae = _numeric_dae(spec)
+    dae = spec.linear_dae()
     c = lsc.complete(dae, spec.method, lam=None if spec.method == "standard" else (lam or spec.lam))
     x0 = np.array([s["start"] for s in spec.states]) if x0 is None else x0
     # an accurate reference: the FMU's scheme (a degree-3 Taylor forcing) on steps 64 times shorter than the

@@ -171,9 +171,8 @@ def test_index5_huge_lambda_matches_library_expm(fmus):
     X = np.array(json.loads(proc.stdout.strip().splitlines()[-1]))
     import lsc
     from fmu_build import parse_spec
-    from fmu_build._model import _numeric_dae
     spec = parse_spec(_chain5_spec())
-    c = lsc.complete(_numeric_dae(spec), "alternative", lam=1e8)
+    c = lsc.complete(spec.linear_dae(), "alternative", lam=1e8)
     tt = np.arange(51) * 0.01
     ref = lsc.solve_completion(c, (0, tt[-1]), 0.1 * np.ones(6), method="expm", t_eval=tt, taylor_degree=3,
                                max_step=0.01 / 64)

@@ -15,7 +15,6 @@ import sympy as sp
 
 import lsc
 from fmu_build import build_fmu, parse_spec
-from fmu_build._model import _numeric_dae
 from fmu_build.targets import _native_tv
 from fmu_build.targets.native import NativeTargetError
 from tests.fmu_build.targets.test_native import rel_err, run
@@ -111,7 +110,7 @@ def _exact(name, times):
 
 def _library(d, times, lam=None, x0=None, t0=None):
     spec = parse_spec(d)
-    c = lsc.complete(_numeric_dae(spec), spec.method, lam=lam or spec.lam)
+    c = lsc.complete(spec.linear_dae(), spec.method, lam=lam or spec.lam)
     x0 = np.array([s["start"] for s in spec.states]) if x0 is None else x0
     times = np.asarray(times)
     res = lsc.solve_completion(c, (times[0] if t0 is None else t0, times[-1]), x0, method="DOP853", t_eval=times,
@@ -130,7 +129,7 @@ def test_rotating_canonical_problem_is_exact():
 @pytest.mark.parametrize("name", list(PROBLEMS))
 def test_cosimulation_matches_exact_solution_and_library(built, name):
     d = PROBLEMS[name][0]
-    assert lsc.complete(_numeric_dae(parse_spec(d)), "alternative", lam=2.0).k >= INDEX[name] - 1
+    assert lsc.complete(parse_spec(d).linear_dae(), "alternative", lam=2.0).k >= INDEX[name] - 1
     steps = int(round(STOP / DT))
     r = run({"fmu": str(built[name]), "dt": DT, "steps": steps, "outputs": _names(d) + ["constraint_residual"],
              "block": BLOCK})
@@ -339,7 +338,7 @@ def test_build_refuses_a_near_singular_point_as_the_library_does(tmp_path):
     (an FMU built anyway ran with 350 to 1e5 times the host's tolerance, with status OK)."""
     d, _ = _near_singular(6)
     with pytest.raises(lsc.IndexDeterminationError) as library:
-        lsc.complete(_numeric_dae(parse_spec(d)), "alternative", lam=2.0, t_span=(0.0, STOP))
+        lsc.complete(parse_spec(d).linear_dae(), "alternative", lam=2.0, t_span=(0.0, STOP))
     with pytest.raises(lsc.IndexDeterminationError) as build:
         build_fmu(d, tmp_path, target="native")
     assert "t=1:" in str(build.value) and str(build.value) == str(library.value)
@@ -358,7 +357,7 @@ def test_near_singular_point_the_library_accepts_is_as_accurate_as_the_library(t
     assert set(r["status"]) == {"ok"}
     exact = np.array(exact_at(np.array(r["time"])), dtype=float).reshape(2, -1)
     err_fmu = np.abs(np.array(r["values"]).T - exact).max()
-    c = lsc.complete(_numeric_dae(parse_spec(d)), "alternative", lam=2.0, t_span=(0.0, STOP))
+    c = lsc.complete(parse_spec(d).linear_dae(), "alternative", lam=2.0, t_span=(0.0, STOP))
     res = lsc.solve_completion(c, (0.0, STOP), exact[:, 0], method="DOP853", t_eval=r["time"], rtol=tol,
                                atol=tol / 100)
     err_lib = np.abs(res.x - exact).max()

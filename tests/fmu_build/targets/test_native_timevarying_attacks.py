@@ -420,7 +420,6 @@ def test_model_exchange_derivatives_at_piece_breaks_and_horizon_ends(fmus):
     # the slack past them), G(t) x + g(t) equals the library's to the tables' accuracy, at two values of lambda
     import lsc
     from fmu_build import parse_spec
-    from fmu_build._model import _numeric_dae
 
     with zipfile.ZipFile(fmus["rot2"]["fmu"]) as zf:
         header = zf.read("sources/model.h").decode()
@@ -433,7 +432,7 @@ def test_model_exchange_derivatives_at_piece_breaks_and_horizon_ends(fmus):
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-3000:]
     got = np.array(json.loads(proc.stdout.strip().splitlines()[-1]))
-    dae = _numeric_dae(parse_spec(PROBLEMS["Rot2"][0]))
+    dae = parse_spec(PROBLEMS["Rot2"][0]).linear_dae()
     comps = {lam: lsc.complete(dae, "alternative", lam=lam) for lam in (2.0, 5.0)}
     for (t, lam, x), d in zip(cases, got):
         G, g = comps[lam].matrices(t)

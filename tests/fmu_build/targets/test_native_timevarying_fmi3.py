@@ -19,7 +19,6 @@ import sympy as sp
 
 import lsc
 from fmu_build import build_fmu, parse_spec
-from fmu_build._model import _numeric_dae
 from fmu_build.targets import _native_tv
 from tests.fmu_build.targets.test_native import rel_err
 from tests.fmu_build.targets.test_native import run as run2
@@ -262,7 +261,7 @@ def test_c_master_under_address_and_ub_sanitizers(built, tmp_path):
     assert rel_err(np.array([float(v) for v in early[5:]]), _exact(name, [HORIZON]).ravel()) < 1e-8
     me = np.array([float(v) for v in next(line for line in lines if line.startswith("me")).split()[1:]])
     # the master's explicit Euler on the Model Exchange derivatives is explicit Euler on the library's G(t) x + g(t)
-    comp = lsc.complete(_numeric_dae(parse_spec(PROBLEMS[name][0])), "alternative", lam=2.0)
+    comp = lsc.complete(parse_spec(PROBLEMS[name][0]).linear_dae(), "alternative", lam=2.0)
     x = np.array([s["start"] for s in parse_spec(PROBLEMS[name][0]).states])
     for k in range(200):
         G, g = comp.matrices(k * DT)
@@ -281,7 +280,7 @@ def test_model_exchange_event_mode_and_the_horizon(built):
     no_event = [0, False, False, False, False, False, 0.0]  # need update, terminate, nominals, values, next time
     assert calls["updateDiscreteStates"] == calls["updateDiscreteStates_again"] == no_event
     assert calls["completedIntegratorStep"] == [0, False, False]
-    comp = lsc.complete(_numeric_dae(parse_spec(d)), "alternative", lam=2.0)
+    comp = lsc.complete(parse_spec(d).linear_dae(), "alternative", lam=2.0)
     G, g = comp.matrices(0.5)
     x0 = np.array([s["start"] for s in parse_spec(d).states])
     assert rel_err(np.array(calls["derivatives"]), G @ x0 + g) < 1e-10

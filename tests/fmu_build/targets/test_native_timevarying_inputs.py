@@ -16,7 +16,6 @@ import sympy as sp
 
 import lsc
 from fmu_build import build_fmu, parse_spec
-from fmu_build._model import _numeric_dae
 from fmu_build.targets.native import NativeTargetError
 from tests.fmu_build.targets.test_native import rel_err, run
 from tests.fmu_build.targets.test_native_timevarying import BLOCK, T, _spec, rotating_canonical_sympy
@@ -127,7 +126,7 @@ def _library(name, times, u=None, x0=None):
 
 
 def test_the_scaled_problem_is_equilibrated():
-    c = lsc.complete(_numeric_dae(parse_spec(PROBLEMS["RotForce3Scaled"][0])), "alternative", lam=2.0)
+    c = lsc.complete(parse_spec(PROBLEMS["RotForce3Scaled"][0]).linear_dae(), "alternative", lam=2.0)
     assert c._scaling.r is not None and c._scaling.c is not None
 
 
