@@ -116,11 +116,12 @@ def _package(dest, name, source_file, defines, xml):
         tmp = Path(tmp)
         (tmp / "binaries" / "linux64").mkdir(parents=True)
         subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra", "-Werror",
-                        "-DFMI2_FUNCTION_PREFIX=", f"-I{_fmpy_headers()}", *defines, str(HERE / source_file),
+                        "-DFMI2_FUNCTION_PREFIX=", f"-I{_fmpy_headers()}", f"-I{HERE}", *defines, str(HERE / source_file),
                         "-o", str(tmp / "binaries" / "linux64" / f"{name}.so"), "-lm"], check=True)
         (tmp / "modelDescription.xml").write_text(xml)
         (tmp / "sources").mkdir()
         shutil.copy(HERE / source_file, tmp / "sources")
+        shutil.copy(HERE / "plant_common.h", tmp / "sources")  # the FMI functions the plants share
         out = dest / f"{name}.fmu"
         partial = dest / f".{name}.fmu.part"
         with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
