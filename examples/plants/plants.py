@@ -97,6 +97,7 @@ def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y
         (tmp / "modelDescription.xml").write_text(xml)
         (tmp / "sources").mkdir()
         shutil.copy(HERE / "linear_plant.c", tmp / "sources")
+        shutil.copy(HERE / "plant_common.h", tmp / "sources")
         out = dest / f"{name}.fmu"
         partial = dest / f".{name}.fmu.part"
         with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
