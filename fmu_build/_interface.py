@@ -254,6 +254,36 @@ def native_interface(spec, *, fpars, kpars, lam_tunable):
     return Interface(tuple(rows))
 
 
+_SOLVERS_ALL = ("integrator per step: 0 RK45, 1 DOP853, 2 Radau, 3 BDF, 4 exact (matrix exponential; constant "
+                "coefficients only), 5 Magnus4 (fourth-order Magnus step, two evaluations of the completion per "
+                "step; time-varying coefficients)")
+
+
+def _pythonfmu_settings(add, lam, method, solver_start, solver_description):
+    """The settings every pythonfmu FMU declares first: lambda, method, solver, rtol, atol, project_initial."""
+    add("lambda", "Real", "parameter", "tunable", "lambda", start=lam, unit="1/s",
+        description="stabilization rate lam (1/time): off-manifold errors decay like exp(-lam t); unused by 'standard'")
+    add("method", "Integer", "parameter", "fixed", "option", start=METHODS.index(method),
+        description="completion: " + ", ".join(f"{i} {m}" for i, m in enumerate(METHODS)))
+    add("solver", "Integer", "parameter", "tunable", "option", start=solver_start, description=solver_description)
+    add("rtol", "Real", "parameter", "tunable", "option", start=1e-6, description="relative tolerance of the integrator")
+    add("atol", "Real", "parameter", "tunable", "option", start=1e-9, description="absolute tolerance of the integrator")
+    add("project_initial", "Boolean", "parameter", "fixed", "option", start=False, description=_PROJECT)
+
+
+def sparse_pythonfmu_settings(lam):
+    """The registration rows of a sparse model's pythonfmu FMU before its states (`Interface.registration`
+    format) and the residual's description: the FMU makes the rows of its n states when it loads
+    (`fmu_build.targets._runtime._variables.sparse_rows`), too many to write into its model module."""
+    rows = []
+
+    def add(name, kind, causality, variability, role, **kw):
+        rows.append(Variable(name, kind, len(rows), causality, variability, role, **kw))
+
+    _pythonfmu_settings(add, lam, "alternative", 0, "integrator per step: 0 RK45, 1 DOP853")
+    return Interface(tuple(rows)).registration(), _RESIDUAL
+
+
 def pythonfmu_interface(spec, *, exact_capable):
     """The variables of a pythonfmu FMU; value references in registration order (pythonfmu numbers all types
     in one sequence). `exact_capable`: constant coefficients, where the solver starts as 'exact'."""
@@ -262,17 +292,7 @@ def pythonfmu_interface(spec, *, exact_capable):
     def add(name, kind, causality, variability, role, **kw):
         rows.append(Variable(name, kind, len(rows), causality, variability, role, **kw))
 
-    add("lambda", "Real", "parameter", "tunable", "lambda", start=spec.lam, unit="1/s",
-        description="stabilization rate lam (1/time): off-manifold errors decay like exp(-lam t); unused by 'standard'")
-    add("method", "Integer", "parameter", "fixed", "option", start=METHODS.index(spec.method),
-        description="completion: " + ", ".join(f"{i} {m}" for i, m in enumerate(METHODS)))
-    add("solver", "Integer", "parameter", "tunable", "option", start=EXACT if exact_capable else 0,
-        description="integrator per step: 0 RK45, 1 DOP853, 2 Radau, 3 BDF, 4 exact (matrix exponential; "
-                    "constant coefficients only), 5 Magnus4 (fourth-order Magnus step, two evaluations of "
-                    "the completion per step; time-varying coefficients)")
-    add("rtol", "Real", "parameter", "tunable", "option", start=1e-6, description="relative tolerance of the integrator")
-    add("atol", "Real", "parameter", "tunable", "option", start=1e-9, description="absolute tolerance of the integrator")
-    add("project_initial", "Boolean", "parameter", "fixed", "option", start=False, description=_PROJECT)
+    _pythonfmu_settings(add, spec.lam, spec.method, EXACT if exact_capable else 0, _SOLVERS_ALL)
     for p in spec.parameters:
         add(p["name"], "Real", "parameter", "tunable" if p["tunable"] else "fixed", "parameter", start=p["value"],
             unit=p["unit"], description=p["description"])

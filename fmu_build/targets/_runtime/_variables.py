@@ -74,31 +74,22 @@ def sparse_rows(M):
     """The registration rows of a sparse model's FMU (`fmu_build.targets.sparse_pythonfmu`), made when the
     FMU loads: its n states come from the model's data file, too many to write into the model module.
 
-    The rows and their order are `fmu_build._interface.pythonfmu_interface`'s for a model without
-    parameters or custom outputs: lambda, method, solver, rtol, atol, project_initial, the start values,
-    the inputs, the states, constraint_residual.
+    The settings' rows come from the build (``MODEL["settings"]``,
+    `fmu_build._interface.sparse_pythonfmu_settings`); then, as `fmu_build._interface.pythonfmu_interface`
+    orders them for a model without parameters or custom outputs: the start values, the inputs, the
+    states, constraint_residual.
     """
-    rows = []
+    rows = [dict(row) for row in M["settings"]]
 
     def add(name, kind, causality, variability, role, start=None, description=""):
         rows.append({"name": name, "type": kind, "vr": len(rows), "role": role, "causality": causality,
                      "variability": variability, "start": start, "description": description})
 
-    add("lambda", "Real", "parameter", "tunable", "lambda", M["lam"],
-        "stabilization rate lam (1/time): off-manifold errors decay like exp(-lam t)")
-    add("method", "Integer", "parameter", "fixed", "option", METHODS.index(M["method"]),
-        "completion: " + ", ".join(f"{i} {m}" for i, m in enumerate(METHODS)))
-    add("solver", "Integer", "parameter", "tunable", "option", 0, "integrator per step: 0 RK45, 1 DOP853")
-    add("rtol", "Real", "parameter", "tunable", "option", 1e-6, "relative tolerance of the integrator")
-    add("atol", "Real", "parameter", "tunable", "option", 1e-9, "absolute tolerance of the integrator")
-    add("project_initial", "Boolean", "parameter", "fixed", "option", False,
-        "project the initial state onto the solution manifold before the first step")
     for s in M["states"]:
         add(start_name(s["name"]), "Real", "parameter", "fixed", "start", s["start"], f"initial value of {s['name']}")
     for u in M.get("inputs", []):
         add(u["name"], "Real", "input", "continuous", "input", u["start"], u["description"])
     for s in M["states"]:
         add(s["name"], "Real", "output", "continuous", "state", None, s["description"])
-    add("constraint_residual", "Real", "output", "continuous", "residual", None,
-        "norm of the constraint residual Z2^T (F x - g): distance from the solution manifold")
+    add("constraint_residual", "Real", "output", "continuous", "residual", None, M["residual_description"])
     return rows
