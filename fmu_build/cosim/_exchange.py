@@ -19,6 +19,7 @@ import zipfile
 
 import numpy as np
 
+from .._values import EXACT_IN_DOUBLE, FLOAT32_MAX
 from . import _fmi, _units
 from ._fmi import convert  # noqa: F401 (the rules of values, re-exported)
 from ._system import IDENTIFIER, unzip
@@ -227,7 +228,7 @@ class Component:
         if kind == "Binary":
             return bytes(x) if x is not None else b""
         x = int(x)
-        if kind == "Integer" and ref in self.coupled and abs(x) > _fmi.EXACT_IN_DOUBLE:
+        if kind == "Integer" and ref in self.coupled and abs(x) > EXACT_IN_DOUBLE:
             name = self.by_ref[(kind, ref)].name
             raise _fmi.refused(f"{self.fmu.prefix}Get{fmi_type}",
                                f"{self.name}.{name} = {x} is beyond 2^53: a connected integer travels through the "
@@ -273,9 +274,9 @@ class Component:
         """``v`` as the setter of ``fmi_type`` takes it; what ctypes would wrap or make infinite is refused."""
         if kind == "Real":
             v = float(v)
-            if fmi_type == "Float32" and math.isfinite(v) and abs(v) > _fmi.FLOAT32_MAX:
+            if fmi_type == "Float32" and math.isfinite(v) and abs(v) > FLOAT32_MAX:
                 raise _fmi.refused("fmi3SetFloat32", f"{self._name(kind, ref)}: {v!r} is beyond the range of a "
-                                   f"Float32 (magnitudes up to {_fmi.FLOAT32_MAX!r})")
+                                   f"Float32 (magnitudes up to {FLOAT32_MAX!r})")
             return v  # non-finite values are passed on: the FMU must reject them
         if kind == "Integer":
             if isinstance(v, (float, np.floating)) and math.isfinite(v) and v == int(v):

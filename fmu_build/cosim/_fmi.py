@@ -25,8 +25,7 @@ same names, so that the numerics see one interface. What differs is said here:
 
 import numpy as np
 
-# FLOAT32_MAX, RANGES, EXACT_IN_DOUBLE (the coupling array's exact integers) are read from here too
-from .._values import EXACT_IN_DOUBLE, FLOAT32_MAX, RANGES, FMIValueError, fmi_value  # noqa: F401
+from .._values import FMIValueError, fmi_value
 _CLASSES = {}  # the slave classes and the refusal, created on first use (fmpy is imported late)
 
 KINDS = {"Real": "Real", "Float64": "Real", "Float32": "Real",
