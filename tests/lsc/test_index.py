@@ -46,7 +46,16 @@ def test_singular_pencil_without_zero_rows_is_refused():
         differentiation_index(LinearDAE(A, B))
 
 
-@pytest.mark.parametrize("b22, where", [("sin(10*t + 1)", (np.pi - 1) / 10), ("0.93 - t", 0.93), ("(t - 0.401)*(t - 0.83)", 0.401)])
+_MISSED = pytest.mark.xfail(strict=True, reason="each sample's margin is compared under its own equilibration, which "
+                                                "normalizes the vanishing row: a double root, a scaled row's zero or "
+                                                "two zeros in one gap are not seen (solve_completion still ends at the "
+                                                "singular time; a native build refuses at its tables)")
+
+
+@pytest.mark.parametrize("b22, where", [("sin(10*t + 1)", (np.pi - 1) / 10), ("0.93 - t", 0.93), ("(t - 0.401)*(t - 0.83)", 0.401),
+                                        pytest.param("(t - 0.93)**2", 0.93, marks=_MISSED),
+                                        pytest.param("1e-2*(0.93 - t)", 0.93, marks=_MISSED),
+                                        pytest.param("(t - 0.23)*(t - 0.24)", 0.23, marks=_MISSED)])
 def test_a_rank_drop_between_the_sampled_times_is_found_and_named(b22, where):
     # at the 21 sampled times (0, 0.05, ..., 1) every rank is clear; the coefficient vanishes in between
     import sympy
@@ -72,21 +81,3 @@ def test_a_coefficient_that_comes_close_to_zero_but_stays_clear_is_solvable():
     dae = LinearDAE(np.diag([1.0, 0.0]), sympy.Matrix([[1, -1], [0, (t - sympy.Rational(1, 3)) ** 2 + 1e-6]]))
     assert check_solvability(dae, (0.0, 1.0)).k == 1
 
-
-@pytest.mark.xfail(strict=True, reason="the search between samples compares each sample's margin under its own "
-                                       "equilibration, which normalizes the vanishing row: a double root or a "
-                                       "scaled row's zero is not seen as a dip (solve_completion still ends at "
-                                       "the singular time; a native build refuses at its tables)")
-@pytest.mark.parametrize("b22, where", [("(t - 0.93)**2", 0.93), ("1e-2*(0.93 - t)", 0.93),
-                                        ("(t - 0.23)*(t - 0.24)", 0.23)])
-def test_a_double_root_or_a_scaled_row_between_the_samples_is_found(b22, where):
-    import sympy
-
-    from lsc import IndexDeterminationError, check_solvability
-
-    t = sympy.Symbol("t")
-    dae = LinearDAE(np.diag([1.0, 0.0]), sympy.Matrix([[1, -1], [0, sympy.sympify(b22, locals={"t": t})]]))
-    with pytest.raises(IndexDeterminationError, match=r"loses rank at t=([0-9.]+)") as info:
-        check_solvability(dae, (0.0, 1.0))
-    found = float(re.search(r"loses rank at t=([0-9.e-]+)", str(info.value)).group(1))
-    assert abs(found - where) < 1e-6, (found, where)
