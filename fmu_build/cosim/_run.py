@@ -15,7 +15,7 @@ from ._coupling import Coupling
 from ._derivatives import OutputDerivatives
 from ._divergence import DivergenceMonitor
 from ._exchange import convert
-from ._extrapolate import Band, History
+from ._extrapolate import Band, History, taylor
 from ._layout import MAX_INPUT_ORDER, LSC_TOOL, Layout, built_by_lsc, lambda_targets  # noqa: F401 (re-exported)
 from ._loops import LoopSolver
 from ._result import AlgebraicLoopWarning, _Discarded, _Early, _Stop
@@ -138,6 +138,12 @@ class Run:
         band = self.band(t, H)
         jet, has = band.jet, band.has
         if end_values is not None:
+            if self.event_end is not None:
+                # the values after an event at the step's end are no input over the step: the event FMU's slots
+                # are interpolated through their extrapolation there, as a step without iteration gives them
+                end_values = end_values.copy()
+                mine = np.array([a == self.event_end for a, _ in self.layout.sources], dtype=bool)
+                end_values[mine] = taylor(band.jet, H, self.p)[mine]
             # Integer and Boolean inputs hold the step-start value as in every other step (no polynomial);
             # the step iteration (iterations > 0) converges all of them
             hold[slice(None) if self.iterations else real] = end_values[slice(None) if self.iterations else real]

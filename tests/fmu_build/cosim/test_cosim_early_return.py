@@ -122,6 +122,19 @@ def error(res):
     return float(np.max(np.abs(np.array(res["x"]) - exact(res["time"]))))
 
 
+def test_iterated_steps_end_at_the_early_return_without_the_jump_in_their_inputs(fmus):
+    """The step iteration (``iterations``) and the start-up steps (the first ``p`` steps, repeated with inputs
+    interpolated through their end values) take the values after the event at the step's end for no input over
+    the step: the source's slot is interpolated through its extrapolation there, and the lag stays exact."""
+    calls = {"iterated": "1.0, 0.1, iterations=3, extrapolation=1, output=['src.y', 'lag.y']",
+             "startup": "1.0, 0.5, extrapolation=2, output=['src.y', 'lag.y']"}
+    out = cosim_runs(fmus, calls)
+    for key, r in out.items():
+        assert r["success"], (key, r["message"])
+        assert r["early"] == [[pytest.approx(T_EVENT, abs=1e-15), "src"]], key
+        assert error(r) < 1e-14, (key, error(r))
+
+
 @pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
 def test_a_fixed_step_ends_at_the_early_return_and_resumes_its_grid(fmus, algorithm):
     """H = 0.1 on [0, 1]: the step from 0.3 ends at 0.37 where the source returned early (an extra row, the
