@@ -212,3 +212,29 @@ print(json.dumps({{"success": bool(r.success), "message": r.message, "early": [e
     assert up >= 8 and len(out["early"]) <= up + 1  # the last bounce may stop the ball (v below v_min: v = 0)
     grid = np.setdiff1d(t, out["early"])
     assert np.allclose(grid, np.round(grid / 0.01) * 0.01, atol=1e-12, rtol=0)
+
+
+def test_lsc_fmu_cosim_honours_early_return_unless_told_not_to(fmus, tmp_path):
+    """`lsc-fmu cosim` on an SSP of the source and the lag: the CSV has the row at 0.37 and the exact lag;
+    with --no-early-return the grid only."""
+    import csv
+    import sys
+
+    import plants
+
+    ssp = plants.write_ssp(tmp_path / "early.ssp", "early", {"src": fmus["early"], "lag": fmus["lag"]},
+                           [("src.y", "lag.u")])
+    env = {**os.environ, "PATH": os.path.dirname(sys.executable) + os.pathsep + os.environ.get("PATH", "")}
+    rows = {}
+    for flag in ([], ["--no-early-return"]):
+        result = tmp_path / f"r{len(flag)}.csv"
+        proc = subprocess.run(["lsc-fmu", "cosim", str(ssp), "--stop-time", "1", "--step-size", "0.1", "--algorithm",
+                               "jacobi", "--output", "lag.y", "-o", str(result), *flag],
+                              capture_output=True, text=True, env=env, timeout=300)
+        assert proc.returncode == 0, proc.stderr
+        with open(result, newline="") as f:
+            rows[len(flag)] = [[float(x) for x in row] for row in list(csv.reader(f))[1:]]
+    on, off = np.array(rows[0]), np.array(rows[1])
+    assert len(on) == 12 and len(off) == 11 and T_EVENT in on[:, 0]
+    assert np.max(np.abs(on[:, 1] - exact(on[:, 0]))) < 1e-14
+    assert np.max(np.abs(off[:, 1] - exact(off[:, 0]))) > 0.02
