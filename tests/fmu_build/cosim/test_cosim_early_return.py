@@ -1,82 +1,25 @@
 """Early return from fmi3DoStep: the master re-plans the step to end where the FMU stopped.
 
-The system: an FMI 3.0 C source (tests/support/early_return_source.c) whose output jumps from 0 to 1 at
+The system: an FMI 3.0 C source (examples/plants/event_source3.c) whose output jumps from 0 to 1 at
 t_e = 0.37, inside a step, feeding an FMI 2.0 C lag x' = -(x - y) (examples/plants/scalar.c, exact for the
 input it receives). Exact solution: x = 0 before t_e, 1 - exp(-(t - t_e)) after. With early return the jump
 is located exactly, so the lag's error is rounding; without it a fixed step smears the jump over a step and
 step control locates it by bisection. FMUs run in subprocesses (test_cosim.run).
 """
 import json
-import math
 import os
 import shutil
 import subprocess
-import tempfile
-import uuid
-import zipfile
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from tests.support import ROOT, helpers
+from tests.support import helpers
 from tests.fmu_build.cosim.test_cosim import run
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="the test FMUs are compiled with gcc")
 
 T_EVENT = 0.37
-HEADERS = ROOT / "fmu_build" / "templates" / "fmi3" / "headers"
-SOURCE = ROOT / "tests" / "support" / "early_return_source.c"
-
-
-IMPLEMENTED = {"fmi3InstantiateCoSimulation", "fmi3FreeInstance", "fmi3GetVersion", "fmi3SetDebugLogging",
-               "fmi3EnterInitializationMode", "fmi3ExitInitializationMode", "fmi3Terminate", "fmi3Reset",
-               "fmi3GetFloat64", "fmi3SetFloat64", "fmi3DoStep", "fmi3GetFMUState", "fmi3SetFMUState",
-               "fmi3FreeFMUState"}
-
-
-def _stubs():
-    """C definitions, without prototypes (their own translation unit), of every other FMI 3.0 function:
-    fmi3Error (3)."""
-    import re
-
-    names = sorted(set(re.findall(r"(fmi3\w+)TYPE", (HEADERS / "fmi3FunctionTypes.h").read_text())) - IMPLEMENTED)
-    return "".join(f"int {n}(void) {{ return 3; }}\n" for n in names)
-
-
-def build_early_source(dest, name="early", declare=True):
-    """The FMI 3.0 Co-Simulation FMU of ``early_return_source.c`` at ``dest/name.fmu``; ``declare``:
-    ``mightReturnEarlyFromDoStep`` (without it the FMU never returns early)."""
-    dest = Path(dest)
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        (tmp / "binaries" / "x86_64-linux").mkdir(parents=True)
-        (tmp / "stubs.c").write_text(_stubs())
-        subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra", "-Werror", f"-I{HEADERS}",
-                        f"-DDECLARE_EARLY={int(declare)}", str(SOURCE), str(tmp / "stubs.c"), "-o",
-                        str(tmp / "binaries" / "x86_64-linux" / f"{name}.so"), "-lm"], check=True)
-        (tmp / "modelDescription.xml").write_text(f"""<?xml version="1.0" encoding="UTF-8"?>
-<fmiModelDescription fmiVersion="3.0" modelName="{name}" instantiationToken="{{{uuid.uuid4()}}}"
-  generationTool="lsc tests">
-  <CoSimulation modelIdentifier="{name}" canGetAndSetFMUState="true" canHandleVariableCommunicationStepSize="true"
-    mightReturnEarlyFromDoStep="{str(declare).lower()}"/>
-  <ModelVariables>
-    <Float64 name="time" valueReference="0" causality="independent" variability="continuous"/>
-    <Float64 name="y" valueReference="1" causality="output" variability="continuous"/>
-    <Float64 name="t_event" valueReference="2" causality="parameter" variability="fixed" start="{T_EVENT!r}"/>
-  </ModelVariables>
-  <ModelStructure>
-    <Output valueReference="1" dependencies=""/>
-  </ModelStructure>
-</fmiModelDescription>
-""")
-        (tmp / "stubs.c").unlink()
-        out = dest / f"{name}.fmu"
-        with zipfile.ZipFile(out, "w") as zf:
-            for f in sorted(tmp.rglob("*")):
-                if f.is_file():
-                    zf.write(f, f.relative_to(tmp).as_posix())
-    return str(out)
 
 
 @pytest.fixture(scope="module")
@@ -84,7 +27,8 @@ def fmus(tmp_path_factory):
     import plants  # examples/plants, on the path through test_cosim
 
     d = tmp_path_factory.mktemp("early")
-    return {"early": build_early_source(d), "undeclared": build_early_source(d, "undeclared", declare=False),
+    return {"early": str(plants.build_event_source3(d, "early", T_EVENT)),
+            "undeclared": str(plants.build_event_source3(d, "undeclared", T_EVENT, declare_early=False)),
             "lag": str(plants.build_scalar_plant(d, "lag", a=-1.0, b=1.0)),
             "lag_norollback": str(plants.build_scalar_plant(d, "lagnr", a=-1.0, b=1.0, rollback=False))}
 

@@ -1,7 +1,7 @@
-/* An FMI 3.0 Co-Simulation source whose output jumps inside a step, for the tests of early return.
+/* An FMI 3.0 Co-Simulation source whose output jumps inside a step: early return (plants.build_event_source3).
  *
  * y = 0 for t < t_event, y = 1 from t_event on (Float64 output, value reference 1; t_event a fixed
- * parameter, value reference 2, default 0.37). Instantiated with earlyReturnAllowed, a step that
+ * parameter, value reference 2, default T_EVENT: 0.37). Instantiated with earlyReturnAllowed, a step that
  * would cross t_event stops there: the FMU handles its event (y becomes 1), returns earlyReturn =
  * true and lastSuccessfulTime = t_event, and expects the next step to start there. Without early
  * return it handles the event inside the step, as an FMI 2.0 FMU must: y is 1 at the step's end.
@@ -10,7 +10,7 @@
  * State get/set work (the state is the time and whether the event happened). Declares
  * mightReturnEarlyFromDoStep; compiled with -DDECLARE_EARLY=0 it does not (and never returns early).
  * The FMI 3.0 functions a Co-Simulation master without Event Mode does not call are stubs returning
- * fmi3Error, compiled from a second file the test writes (fmpy binds every function at load).
+ * fmi3Error, compiled from a second file plants.py writes (fmpy binds every function at load).
  */
 #include <math.h>
 #include <stdio.h>
@@ -21,6 +21,9 @@
 
 #ifndef DECLARE_EARLY
 #define DECLARE_EARLY 1
+#endif
+#ifndef T_EVENT
+#define T_EVENT 0.37
 #endif
 
 typedef struct {
@@ -62,7 +65,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     if (!inst) {
         return NULL;
     }
-    inst->t_event = 0.37;
+    inst->t_event = T_EVENT;
     inst->early_allowed = DECLARE_EARLY && earlyReturnAllowed;
     inst->env = instanceEnvironment;
     inst->log = logMessage;
