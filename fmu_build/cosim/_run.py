@@ -225,6 +225,7 @@ class Run:
         history.push(t, coupling.value, self.read_derivatives(t), coupling.extras)
         old, extras_old = coupling.value.copy(), coupling.extras.copy()
         snap = self.save(t)
+        event_end, self.event_end = self.event_end, None  # (the tiny step from t ends at no event)
         try:
             self.set_lambda(h, t)
             self.step_all(t, h)
@@ -236,6 +237,7 @@ class Run:
             self.restore(snap, t)
             self.release(snap)
             history.t, history.v, history.d, history.x = kept
+            self.event_end = event_end
         return change
 
     def accept(self, t_new, H, m):
