@@ -218,14 +218,17 @@ def _fmu3_class():
                                   f"the step from t = {t!r}, at t = {last!r}")
                 # an FMU stopped within rounding of the end has reached it (a flag raised for an event at the end
                 # of the step is no early return)
-                if not (early and end - last > 1e-12 * max(abs(end), communicationStepSize)):
+                rounding = 1e-12 * max(abs(end), communicationStepSize)
+                if not early:
+                    return None
+                if not t <= last <= end + rounding:  # a time outside the step cannot be a communication point of it
+                    raise refused("fmi3DoStep", f"the FMU returned early from the step from t = {t!r} to {end!r} with "
+                                  f"lastSuccessfulTime = {last!r}, outside the step")
+                if end - last <= rounding:
                     return None
                 if not self.early_return:
                     raise refused("fmi3DoStep", f"the FMU returned early from the step from t = {t!r} (at t = "
                                   f"{last!r}, before t = {end!r}) although earlyReturnAllowed is false")
-                if not t <= last < end:  # a time outside the step cannot be a communication point of it
-                    raise refused("fmi3DoStep", f"the FMU returned early from the step from t = {t!r} to {end!r} with "
-                                  f"lastSuccessfulTime = {last!r}, outside the step")
                 return last  # the time the FMU reached: the master re-plans the step to end there
 
             def getRealOutputDerivatives(self, vr, order):

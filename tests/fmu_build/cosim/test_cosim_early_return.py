@@ -182,3 +182,27 @@ def test_lsc_fmu_cosim_honours_early_return_unless_told_not_to(fmus, tmp_path):
     assert len(on) == 12 and len(off) == 11 and T_EVENT in on[:, 0]
     assert np.max(np.abs(on[:, 1] - exact(on[:, 0]))) < 1e-14
     assert np.max(np.abs(off[:, 1] - exact(off[:, 0]))) > 0.02
+
+
+@pytest.mark.parametrize("reply, message", [
+    ("t", "returned early at its start (lastSuccessfulTime = 0.5): an event at the communication point"),
+    ("t + 2 * H", "with lastSuccessfulTime = 0.70"),
+])
+def test_an_early_return_the_master_cannot_take_ends_the_run_with_the_reason(fmus, reply, message):
+    """An FMU that returns early at the step's very start (an event at the communication point: Event Mode would
+    be needed) or at a time outside the step: the run stops there with success=False naming it, the rows before
+    kept. (fmpy's fmi3DoStep answer is replaced from t = 0.5 on; the FMU itself is the event source.)"""
+    system = {"components": {"src": fmus["early"], "lag": fmus["lag"]}, "connections": [("src.y", "lag.u")]}
+    out, _ = run(f"""
+from fmpy.fmi3 import FMU3Slave
+original = FMU3Slave.doStep
+def doStep(self, t, H, *args):
+    answer = original(self, t, H, *args)
+    return answer if t < 0.5 else (False, False, True, {reply})
+FMU3Slave.doStep = doStep
+r = cosimulate({system!r}, 1.0, 0.1, algorithm="jacobi", output=["lag.y"])
+print(json.dumps({{"success": bool(r.success), "message": r.message, "time": r["time"].tolist()}}))
+""")
+    assert not out["success"] and message in out["message"] and "in src" in out["message"], out["message"]
+    assert reply == "t" or "outside the step" in out["message"]
+    assert out["time"][-1] == pytest.approx(0.5)
