@@ -93,7 +93,8 @@ def main():
                                   ("step control, rtol 1e-3", {"step_control": True, "rtol": 1e-3})):
                 runs = [cosimulate({"components": {"bb": ref[v]["BouncingBall"], "ft": ref[v]["Feedthrough"]},
                                     "connections": [("bb.h", "ft.Float64_continuous_input")]},
-                                   3.0, 0.01, output=bb, progress=False, **kwargs) for v in ("2.0", "3.0")]
+                                   3.0, 0.01, output=bb, progress=False, early_return=False, **kwargs)
+                        for v in ("2.0", "3.0")]
                 rows.append(("Reference BouncingBall -> Feedthrough (events inside the step)", label, len(runs[0]),
                              compare(*runs, bb), ""))
         studies = []

@@ -463,6 +463,8 @@ def _add_cosim(sub):
     cosim.add_argument("--step-control", action="store_true", help="vary the macro step (--step-size: the first)")
     cosim.add_argument("--rtol", type=float, default=1e-4, help="relative tolerance of the step control")
     cosim.add_argument("--lambda-per-step", type=float, help="set each DAE FMU's lambda to this / H")
+    cosim.add_argument("--no-early-return", action="store_true",
+                       help="instantiate FMI 3.0 FMUs without early return (events handled inside the step)")
     cosim.add_argument("--start", action="append", default=[], metavar="COMP.VAR=VALUE", help="a start value (repeatable)")
     cosim.add_argument("--output", action="append", metavar="COMP.VAR", help="a variable to record (repeatable)")
     cosim.add_argument("-o", "--result", default="result.csv", help="CSV file to write (default: result.csv)")
@@ -525,7 +527,8 @@ def _run_cosim(args):
             result = cosimulate(args.system, args.stop_time, args.step_size, algorithm=args.algorithm,
                                 extrapolation=args.extrapolation, iterations=args.iterations, start_values=start,
                                 output=args.output, step_control=args.step_control,
-                                rtol=args.rtol if args.step_control else 1e-10, lambda_per_step=args.lambda_per_step)
+                                rtol=args.rtol if args.step_control else 1e-10, lambda_per_step=args.lambda_per_step,
+                                early_return=not args.no_early_return)
     except (ValueError, TypeError, OSError) as exc:
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2

@@ -10,6 +10,8 @@
   with or without output derivatives, input interpolation and rollback (test cases for the master).
 - :func:`build_expression_fmu`: a C FMU whose states, outputs and output derivatives are C expressions
   (source: ``expression.c``), with optional discarded steps and a broken rollback (attack cases).
+- :func:`build_event_source3`: an FMI 3.0 C source whose output jumps from 0 to 1 at ``t_event``
+  inside a step, returning early there where allowed (source: ``event_source3.c``).
 - :func:`write_ssp`: an ``.ssp`` archive (``SystemStructure.ssd`` + the FMUs).
 """
 import os
@@ -260,6 +262,63 @@ def build_lag_plant(dest, name="LagPlant", g=0.2, w0=1.0):
             zf.writestr(n, data)
     os.replace(partial, fmu)
     return fmu
+
+
+_FMI3_IMPLEMENTED = {"fmi3InstantiateCoSimulation", "fmi3FreeInstance", "fmi3GetVersion", "fmi3SetDebugLogging",
+                     "fmi3EnterInitializationMode", "fmi3ExitInitializationMode", "fmi3Terminate", "fmi3Reset",
+                     "fmi3GetFloat64", "fmi3SetFloat64", "fmi3DoStep", "fmi3GetFMUState", "fmi3SetFMUState",
+                     "fmi3FreeFMUState"}
+
+
+def build_event_source3(dest, name="EventSource", t_event=0.37, declare_early=True):
+    """An FMI 3.0 Co-Simulation C FMU ``dest/name.fmu`` with the output ``y = 0`` before ``t_event``, 1 from it
+    on (source: ``event_source3.c``).
+
+    Instantiated with ``earlyReturnAllowed`` it returns early at ``t_event`` from a step that would cross it;
+    ``declare_early``: ``mightReturnEarlyFromDoStep`` (False: it never returns early). State get/set work.
+    """
+    import re
+
+    headers = HERE.parent.parent / "fmu_build" / "templates" / "fmi3" / "headers"
+    names = set(re.findall(r"(fmi3\w+)TYPE", (headers / "fmi3FunctionTypes.h").read_text())) - _FMI3_IMPLEMENTED
+    dest = Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        (tmp / "binaries" / "x86_64-linux").mkdir(parents=True)
+        # the functions a master without Event Mode never calls, as stubs returning fmi3Error, in a translation
+        # unit of their own (without the header's prototypes)
+        stubs = Path(tmp) / "stubs.c"
+        stubs.write_text("".join(f"int {n}(void) {{ return 3; }}\n" for n in sorted(names)))
+        subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra", "-Werror", f"-I{headers}",
+                        f"-DDECLARE_EARLY={int(bool(declare_early))}", f"-DT_EVENT={float(t_event)!r}",
+                        str(HERE / "event_source3.c"), str(stubs), "-o", str(tmp / "binaries" / "x86_64-linux" / f"{name}.so"), "-lm"], check=True)
+        stubs.unlink()
+        (tmp / "modelDescription.xml").write_text(f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="3.0" modelName="{name}" instantiationToken="{{{uuid.uuid4()}}}"
+  description="y = 0 before t_event, 1 from it on" generationTool="lsc examples/plants">
+  <CoSimulation modelIdentifier="{name}" canGetAndSetFMUState="true" canHandleVariableCommunicationStepSize="true"
+    mightReturnEarlyFromDoStep="{str(bool(declare_early)).lower()}"/>
+  <ModelVariables>
+    <Float64 name="time" valueReference="0" causality="independent" variability="continuous"/>
+    <Float64 name="y" valueReference="1" causality="output" variability="continuous"/>
+    <Float64 name="t_event" valueReference="2" causality="parameter" variability="fixed" start="{float(t_event)!r}"/>
+  </ModelVariables>
+  <ModelStructure>
+    <Output valueReference="1" dependencies=""/>
+  </ModelStructure>
+</fmiModelDescription>
+""")
+        (tmp / "sources").mkdir()
+        shutil.copy(HERE / "event_source3.c", tmp / "sources")
+        out = dest / f"{name}.fmu"
+        partial = dest / f".{name}.fmu.part"
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
+            for f in sorted(tmp.rglob("*")):
+                if f.is_file():
+                    zf.write(f, f.relative_to(tmp).as_posix())
+        os.replace(partial, out)
+    return out
 
 
 def write_ssp(path, name, components, connections):

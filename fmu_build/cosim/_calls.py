@@ -1,6 +1,6 @@
 """FMI calls of a run: each failure stops the run with a message naming the component, variable and time."""
 
-from ._result import _Discarded, _Stop
+from ._result import _Discarded, _Early, _Stop
 
 
 class Calls:
@@ -40,10 +40,12 @@ class Calls:
         self.call(n, fmu.exitInitializationMode, t, self.name(n, "ExitInitializationMode"))
 
     def do_step(self, n, t_start, H):
+        """``fmi2DoStep`` / ``fmi3DoStep`` of ``n`` from ``t_start`` over ``H``; an FMU that returned early (FMI 3.0,
+        where allowed) raises `_Early` with the time it reached."""
         from fmpy.fmi1 import FMICallException
 
         try:
-            self.comps[n].fmu.doStep(currentCommunicationPoint=t_start, communicationStepSize=H)
+            last = self.comps[n].fmu.doStep(currentCommunicationPoint=t_start, communicationStepSize=H)
         except FMICallException as exc:
             if getattr(exc, "status", None) == 2:  # fmi2Discard / fmi3Discard: the FMU asks for another (smaller) step
                 try:
@@ -52,6 +54,15 @@ class Calls:
                 except _Stop as stop:
                     raise _Discarded(str(stop)) from None
             self.fail(n, f"{self.name(n, 'DoStep')} from t = {t_start!r} failed ({exc})", t_start)
+        if last is None:
+            return
+        if not last > t_start:
+            # an event at the communication point itself: no step to re-plan to (it would need Event Mode)
+            self.fail(n, f"fmi3DoStep from t = {t_start!r} returned early at its start (lastSuccessfulTime = "
+                         f"{last!r}): an event at the communication point, which a master without Event Mode cannot "
+                         "take; refused", t_start)
+        raise _Early(f"{n} returned early from fmi3DoStep at t = {last!r} (step from t = {t_start!r} over {H!r}), "
+                     "where the master could not re-plan the step", n, t_start, last)
 
     def get(self, n, wire, refs, t_now):
         return self.call(n, lambda: self.comps[n].get(wire, refs), t_now, self.comps[n].function("Get", wire, refs))

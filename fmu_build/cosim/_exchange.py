@@ -66,6 +66,7 @@ class Component:
         from fmpy import read_model_description
 
         self.name, self.path, self.started, self.initialized = name, path, False, False
+        self.early_return = False  # instantiated with earlyReturnAllowed (`start`)
         where = self.where = f"component {name!r} ({path})"
         if not os.path.isfile(path):
             raise ValueError(f"{where}: no such FMU file.")
@@ -126,12 +127,14 @@ class Component:
             self.feedthrough[unknown.variable.name] = (
                 list(inputs) if deps is None else [d.name for d in deps if d.causality == "input"])
 
-    def start(self, callbacks, logger):
+    def start(self, callbacks, logger, early_return=False):
         """Instantiate the FMU: FMI 2.0 with ``callbacks`` (the process-wide structure), FMI 3.0 with
-        ``logger(status, message)`` (without Event Mode, early return or intermediate update)."""
+        ``logger(status, message)`` (without Event Mode or intermediate update; with early return if
+        ``early_return``)."""
+        self.early_return = bool(early_return)
         try:
             # logging on: pythonfmu FMUs pass their messages (errors included) to the logger only then
-            self.fmu.start(callbacks, logger)
+            self.fmu.start(callbacks, logger, early_return=self.early_return)
         except Exception as exc:  # noqa: BLE001 -- fmpy raises a bare Exception when instantiation fails
             raise RuntimeError(f"{self.where}: {self.fmu.prefix}Instantiate"
                                f"{'CoSimulation' if self.is_fmi3 else ''} failed ({exc}).") from None

@@ -13,10 +13,12 @@ same names, so that the numerics see one interface. What differs is said here:
   rounded to the nearest Float32.
 - **Start and steps.** FMI 3.0 has no ``fmi3SetupExperiment``: the start and stop time go to
   ``fmi3EnterInitializationMode``. The master instantiates without Event Mode (``eventModeUsed =
-  false``: the FMU handles its events inside ``fmi3DoStep``), without early return
-  (``earlyReturnAllowed = false``: every step ends where it was asked to) and without an intermediate
-  update callback. ``fmi3DoStep`` reports what ``fmi2DoStep`` cannot; each of these ends the run with
+  false``: the FMU handles its events inside ``fmi3DoStep``) and without an intermediate update callback. ``fmi3DoStep`` reports what ``fmi2DoStep`` cannot; each of these ends the run with
   the reason: a request for Event Mode, a request to terminate, an early return the master did not allow.
+- **Early return.** An FMU that declares ``mightReturnEarlyFromDoStep`` is instantiated with
+  ``earlyReturnAllowed = true`` where the master can honour it (`_master.early_return_allowed`); its ``doStep``
+  then returns the time ``lastSuccessfulTime`` it stopped at, before the end of the step (None when it
+  reached the end), and the master re-plans the step to end there.
 - **Derivatives.** FMI 3.0 Co-Simulation has ``fmi3GetOutputDerivatives`` (up to the description's
   ``maxOutputDerivativeOrder``) but no setter of input derivatives (its intermediate update mode
   replaces it): an FMI 3.0 FMU receives input values only.
@@ -171,7 +173,7 @@ def _fmu2_class():
 
             prefix = "fmi2"
 
-            def start(self, callbacks, logger):
+            def start(self, callbacks, logger, early_return=False):
                 self.instantiate(callbacks=callbacks, loggingOn=True)
 
         _CLASSES["2"] = FMU2
@@ -186,12 +188,14 @@ def _fmu3_class():
             """fmpy's FMI 3.0 Co-Simulation slave under the names of the FMI 2.0 one (see the module)."""
 
             prefix = "fmi3"
-            start_time, stop_time = 0.0, None
+            start_time, stop_time, early_return = 0.0, None, False
 
-            def start(self, callbacks, logger):
-                """``fmi3InstantiateCoSimulation`` without Event Mode, early return or intermediate update;
-                ``logger(status, message)`` receives the FMU's messages."""
-                self.instantiate(loggingOn=True, eventModeUsed=False, earlyReturnAllowed=False,
+            def start(self, callbacks, logger, early_return=False):
+                """``fmi3InstantiateCoSimulation`` without Event Mode or intermediate update, with early return
+                if ``early_return`` (the master can honour it); ``logger(status, message)`` receives the FMU's
+                messages."""
+                self.early_return = bool(early_return)
+                self.instantiate(loggingOn=True, eventModeUsed=False, earlyReturnAllowed=self.early_return,
                                  requiredIntermediateVariables=None, intermediateUpdate=None,
                                  logMessage=lambda env, status, category, message: logger(status, message))
 
@@ -214,9 +218,18 @@ def _fmu3_class():
                                   f"the step from t = {t!r}, at t = {last!r}")
                 # an FMU stopped within rounding of the end has reached it (a flag raised for an event at the end
                 # of the step is no early return)
-                if early and end - last > 1e-12 * max(abs(end), communicationStepSize):
+                rounding = 1e-12 * max(abs(end), communicationStepSize)
+                if not early:
+                    return None
+                if not t <= last <= end + rounding:  # a time outside the step cannot be a communication point of it
+                    raise refused("fmi3DoStep", f"the FMU returned early from the step from t = {t!r} to {end!r} with "
+                                  f"lastSuccessfulTime = {last!r}, outside the step")
+                if end - last <= rounding:
+                    return None
+                if not self.early_return:
                     raise refused("fmi3DoStep", f"the FMU returned early from the step from t = {t!r} (at t = "
                                   f"{last!r}, before t = {end!r}) although earlyReturnAllowed is false")
+                return last  # the time the FMU reached: the master re-plans the step to end there
 
             def getRealOutputDerivatives(self, vr, order):
                 return self.getOutputDerivatives(vr, order)

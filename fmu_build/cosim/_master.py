@@ -25,7 +25,8 @@ logger = logging.getLogger("fmu_build.cosim")
 def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrapolation=0, iterations=0,
                start_values=None, output=None, start_time=0.0, rtol=1e-10, progress=None, exchange="ordered",
                step_control=False, atol=None, min_step=None, max_step=None, lambda_per_step=None,
-               max_growth=None, max_input_order=None, allow_external=False, max_unpacked=MAX_UNPACKED):
+               max_growth=None, max_input_order=None, allow_external=False, max_unpacked=MAX_UNPACKED,
+               early_return=True):
     """Co-simulate connected FMI 2.0 and FMI 3.0 Co-Simulation FMUs, at a fixed or controlled macro step.
 
     Parameters
@@ -111,6 +112,14 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
     progress : bool, optional
         Show a progress bar on stderr once a run takes more than 2 s
         (default: when stderr is a terminal).
+    early_return : bool
+        Let FMI 3.0 FMUs that declare ``mightReturnEarlyFromDoStep`` return
+        early from ``fmi3DoStep`` (at an event inside the step) where every
+        FMU of the system can roll back: the step is then re-planned to end
+        where the FMU stopped (every FMU rolled back and stepped there), a
+        fixed-step run gets an extra row there and resumes its grid, a
+        controlled run treats it as a located jump. False (or an FMU that
+        cannot roll back): instantiated with ``earlyReturnAllowed = false``.
 
     Returns
     -------
@@ -138,6 +147,8 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         _check_horizon(start_time, stop_time, step_size)
     if not isinstance(allow_external, (bool, np.bool_)):
         raise TypeError(f"`allow_external` must be True or False; found {allow_external!r}.")
+    if not isinstance(early_return, (bool, np.bool_)):
+        raise TypeError(f"`early_return` must be True or False; found {early_return!r}.")
     control = StepControl.from_options(step_control, step_size, stop_time - start_time, rtol, atol, min_step,
                                        max_step, iterations)
     if output is not None:
@@ -158,8 +169,10 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
             for index, (name, path) in enumerate(system.components.items()):
                 comps[name] = Component(name, path, os.path.join(workdir, str(index)), budget)
             check_types(comps, system.connections, system.connectors, system.origin, system)
+            early = early_return_allowed(comps, early_return)
             for name, c in comps.items():
-                c.start(_callbacks.callbacks() if not c.is_fmi3 else None, _callbacks.fmi3_logger(name))
+                c.start(_callbacks.callbacks() if not c.is_fmi3 else None, _callbacks.fmi3_logger(name),
+                        early_return=name in early)
             start_values = {**_bound(comps, system), **(start_values or {})}  # given values take precedence
             _check_start_values(comps, start_values)
             run = Run(comps, system.connections, sink, algorithm=algorithm, p=extrapolation, iterations=iterations,
@@ -171,6 +184,22 @@ def cosimulate(system, stop_time, step_size, *, algorithm="gauss-seidel", extrap
         _free(comps)
         shutil.rmtree(workdir, ignore_errors=True)
         system.close()
+
+
+def early_return_allowed(comps, wanted):
+    """The components instantiated with ``earlyReturnAllowed = true``: the FMI 3.0 FMUs that declare
+    ``mightReturnEarlyFromDoStep``, when ``wanted`` and every component can roll back.
+
+    An early return at ``t_e`` inside the step from ``t`` is honoured by re-planning the step to end at
+    ``t_e``: every FMU is rolled back to ``t`` (``fmi2SetFMUstate`` / ``fmi3SetFMUState``) and stepped to
+    ``t_e``. In a Jacobi step the others have already advanced to ``t + H`` (in a Gauss-Seidel step those
+    before it), and an FMU that cannot roll back cannot be brought to ``t_e``: such a system would
+    desynchronise, so its FMUs are instantiated without early return (they handle their events inside the
+    step, as an FMI 2.0 FMU does)."""
+    if not wanted or not all(c.can_rollback for c in comps.values()):
+        return set()
+    return {n for n, c in comps.items()
+            if c.is_fmi3 and getattr(c.md.coSimulation, "mightReturnEarlyFromDoStep", False)}
 
 
 def _check_arguments(algorithm, extrapolation, exchange, iterations, step_size, stop_time, start_time, max_growth,
@@ -305,6 +334,7 @@ def _execute(run, start_values, t0, stop_time, H, progress):
     result.error_estimates = list(run.estimates)
     result.loop_gains = list(run.loops.gains)
     result.jumps = list(run.jumps)
+    result.early_returns = list(run.early_returns)
     result.dropped_derivatives = dict(run.derivs.dropped)
     return result
 

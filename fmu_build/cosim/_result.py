@@ -33,6 +33,10 @@ class CosimResult(np.ndarray):
     jumps : list of tuple
         ``(t, t_end, "component.variable", size)`` of every jump the step control located and
         crossed in the step ``[t, t_end]`` (the extrapolation restarts after each).
+    early_returns : list of tuple
+        ``(t_e, component)`` of every step that ended where an FMI 3.0 FMU returned early from
+        ``fmi3DoStep`` (an event inside the step): the row at ``t_e`` is an extra communication point
+        of a fixed-step run (its grid resumes after it).
     dropped_derivatives : dict
         ``{"component.variable": t}``: outputs whose derivatives the master stopped using at ``t``
         because they were no Taylor coefficients of the values produced (a warning says so).
@@ -49,7 +53,8 @@ class CosimResult(np.ndarray):
 
     def __array_finalize__(self, obj):
         for key, default in (("success", True), ("message", "ok"), ("loops", []), ("order", []), ("steps", 0),
-                             ("rejected", 0), ("error_estimates", []), ("jumps", []), ("dropped_derivatives", {}),
+                             ("rejected", 0), ("error_estimates", []), ("jumps", []), ("early_returns", []),
+                             ("dropped_derivatives", {}),
                              ("loop_gains", [])):
             setattr(self, key, getattr(obj, key, default))
 
@@ -88,3 +93,12 @@ class _Stop(Exception):
 class _Discarded(_Stop):
     """An FMU returned fmi2Discard from fmi2DoStep: the step was not taken; the run ends unless it can be
     repeated smaller after a rollback (step control)."""
+
+
+class _Early(_Stop):
+    """An FMU returned early from fmi3DoStep (``earlyReturn``) at ``t_early`` inside the step from ``t``: the
+    step is re-planned to end there (every FMU rolled back to ``t``); uncaught, it ends the run with its text."""
+
+    def __init__(self, text, component, t, t_early):
+        super().__init__(text)
+        self.component, self.t, self.t_early = component, t, t_early

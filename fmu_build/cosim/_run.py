@@ -15,12 +15,12 @@ from ._coupling import Coupling
 from ._derivatives import OutputDerivatives
 from ._divergence import DivergenceMonitor
 from ._exchange import convert
-from ._extrapolate import Band, History
+from ._extrapolate import Band, History, taylor
 from ._layout import MAX_INPUT_ORDER, LSC_TOOL, Layout, built_by_lsc, lambda_targets  # noqa: F401 (re-exported)
 from ._loops import LoopSolver
-from ._result import AlgebraicLoopWarning, _Discarded, _Stop
+from ._result import AlgebraicLoopWarning, _Discarded, _Early, _Stop
 from ._rollback import Rollback
-from ._stepper import Controller
+from ._stepper import MAX_REPLANS, Controller
 from ._system import _split
 
 
@@ -34,6 +34,16 @@ class Measure:
         self.worst = int(np.argmax(scaled)) if len(scaled) else 0
         self.err = float(scaled[self.worst]) if len(scaled) else 0.0
         self.order = int(orders[self.worst]) if len(orders) else 1
+        self.orders = orders
+
+    def without(self, indices):
+        """The measure with the checked values ``indices`` left out (the outputs of an FMU that returned early at
+        the step's end: their value there is the one after its event, a located jump, not a coupling error)."""
+        defect, scaled = self.defect.copy(), self.scaled.copy()
+        defect[indices], scaled[indices] = 0.0, 0.0
+        m = Measure(defect, scaled, self.orders, self.names, self.dropped, self.recorded)
+        m.change, m.scale = self.change, self.scale
+        return m
 
 
 class Run:
@@ -67,6 +77,9 @@ class Run:
         self.lambda_refs = lambda_targets(comps, lambda_per_step, control.enabled)
         self.exchange_needed = bool(layout.feeds) and exchange == "ordered"
         self.rows, self.estimates, self.jumps, self.accepted, self.rejected = [], [], [], 0, 0
+        self.early = [n for n in layout.names if getattr(comps[n], "early_return", False)]
+        self.early_returns = []  # (t_e, component) of every step re-planned to end where an FMU returned early
+        self.event_end = None  # the FMU whose early return the step being taken ends at (its end values jumped)
         names = [layout.name(s) for s in range(len(layout.sources))]
         self.checked_names = names + ["{}.{}".format(*layout.extra[k]) for k in layout.watched]
 
@@ -125,6 +138,12 @@ class Run:
         band = self.band(t, H)
         jet, has = band.jet, band.has
         if end_values is not None:
+            if self.event_end is not None:
+                # the values after an event at the step's end are no input over the step: the event FMU's slots
+                # are interpolated through their extrapolation there, as a step without iteration gives them
+                end_values = end_values.copy()
+                mine = np.array([a == self.event_end for a, _ in self.layout.sources], dtype=bool)
+                end_values[mine] = taylor(band.jet, H, self.p)[mine]
             # Integer and Boolean inputs hold the step-start value as in every other step (no polynomial);
             # the step iteration (iterations > 0) converges all of them
             hold[slice(None) if self.iterations else real] = end_values[slice(None) if self.iterations else real]
@@ -148,7 +167,8 @@ class Run:
             coupling.set_inputs(n, t, jet_n, has_n, np.where(done, value, hold), higher)
             self.calls.do_step(n, t, H)
             self.loops.exchange({n}, t + H)
-            done |= np.array([a == n for a, _ in self.layout.sources], dtype=bool)
+            if n != self.event_end:  # values after an event at the step's end are no input over the step
+                done |= np.array([a == n for a, _ in self.layout.sources], dtype=bool)
         if self.exchange_needed:
             self.loops.exchange(None, t + H)
         return band
@@ -205,17 +225,19 @@ class Run:
         history.push(t, coupling.value, self.read_derivatives(t), coupling.extras)
         old, extras_old = coupling.value.copy(), coupling.extras.copy()
         snap = self.save(t)
+        event_end, self.event_end = self.event_end, None  # (the tiny step from t ends at no event)
         try:
             self.set_lambda(h, t)
             self.step_all(t, h)
             coupling.read_recorded(t + h)
             change = np.concatenate([np.where(real, coupling.value - old, 0.0), coupling.extras - extras_old])
-        except _Discarded:
+        except (_Discarded, _Early):  # (an event within the tiny step: no measurement of the late error)
             change = None
         finally:
             self.restore(snap, t)
             self.release(snap)
             history.t, history.v, history.d, history.x = kept
+            self.event_end = event_end
         return change
 
     def accept(self, t_new, H, m):
@@ -232,6 +254,31 @@ class Run:
         """A jump of ``name`` lies in ``(t, t_new]`` and was crossed: the extrapolation restarts after it."""
         self.jumps.append((t, t_new, name, float(size)))
         self.history.restart()
+
+    def component_of(self, i):
+        """The FMU of checked value ``i`` (a slot, then a watched recorded value)."""
+        n = len(self.layout.sources)
+        return self.layout.sources[i][0] if i < n else self.layout.extra[self.layout.watched[i - n]][0]
+
+    def at_event(self, comp, m):
+        """The step ends where ``comp`` returned early (an event inside the step): its checked values are left out of the step's measure (what they read there is the value after the event); returns
+        that measure and ``(name, size)`` of the largest jump they made beyond the tolerance (None if none did:
+        the history is kept)."""
+        mine = [i for i in range(len(m.names)) if self.component_of(i) == comp]
+        jump = None
+        if mine:
+            i = max(mine, key=lambda k: m.scaled[k])
+            if m.scaled[i] > 1.0:
+                jump = (m.names[i], float(m.defect[i]))
+        return m.without(mine), jump
+
+    def replan(self, early, t, replans):
+        """The step from ``t`` re-planned to end where an FMU returned early (`_Early`): the step to take; at most
+        ``MAX_REPLANS`` times in a row (each ends earlier than the last)."""
+        if replans > MAX_REPLANS:
+            raise _Stop(f"{early.component} returned early from fmi3DoStep {replans} times in a row from t = {t!r} "
+                        f"(last at t = {early.t_early!r}): the step could not be re-planned to a point the FMUs reach")
+        return early.t_early - t
 
     def has_inputs(self, i):
         """Whether the FMU of checked value ``i`` (a slot, then a watched recorded value) has inputs."""
@@ -296,27 +343,56 @@ class Run:
         # roll back, they are repeated with the inputs interpolated through the values just computed.
         startup = self.p if self.rollback.available else 0
         progress.total = n_steps
-        for i in range(n_steps):
-            t = t0 + i * H
-            while True:
-                # while sources' derivatives are in use, a step that shows them to be no Taylor coefficients
-                # is repeated without them if it can be
-                snap = self.save(t) if self.rollback.available and self.derivs.in_use() else None
+        t, i = t0, 0
+        while i < n_steps:
+            t_grid = t0 + (i + 1) * H
+            # H on the grid; after an early return the rest of the grid step, then the grid resumes
+            h, m, event = self._fixed_step(t, t_grid - t, i < startup)
+            if event is None:
+                self.accept(t_grid, h, m)
+                t, i = t_grid, i + 1
+                progress.update(i)
+                continue
+            t_new = t + h
+            m, jump = self.at_event(event, m)
+            self.accept(t_new, h, m)
+            self.early_returns.append((t_new, event))
+            if jump is not None:  # the values jump at the event: the extrapolation restarts there
+                self.crossed(t, t_new, *jump)
+            t = t_new
+
+    def _fixed_step(self, t, h, startup):
+        """One step of a fixed-step run from ``t`` over ``h``, shortened to end where an FMU returned early:
+        ``(step taken, measure, component that returned early or None)``."""
+        event, replans = None, 0
+        while True:
+            # while sources' derivatives are in use, a step that shows them to be no Taylor coefficients
+            # is repeated without them if it can be; where an FMU may return early, it is re-planned
+            snap = self.save(t) if self.rollback.available and (self.derivs.in_use() or self.early) else None
+            try:
                 if self.iterations:
-                    band = self.iterated_step(t, H, self.iterations, converge=True)
-                elif i < startup:
-                    band = self.iterated_step(t, H, 2, converge=False)
+                    band = self.iterated_step(t, h, self.iterations, converge=True)
+                elif startup:
+                    band = self.iterated_step(t, h, 2, converge=False)
                 else:
-                    band = self.step_all(t, H)
-                m = self.measure(band, t, H)
-                if snap is not None and m.dropped:
-                    self.restore(snap, t)
-                if snap is not None:
-                    self.release(snap)
-                if snap is None or not m.dropped:
-                    break
-            self.accept(t0 + (i + 1) * H, H, m)
-            progress.update(i + 1)
+                    band = self.step_all(t, h)
+            except _Early as early:
+                if snap is None:  # (early return is allowed only where every FMU can roll back)
+                    raise
+                self.restore(snap, t)
+                self.release(snap)
+                replans += 1
+                h, event = self.replan(early, t, replans), early.component
+                self.event_end = event
+                continue
+            m = self.measure(band, t, h)
+            if snap is not None and m.dropped:
+                self.restore(snap, t)
+            if snap is not None:
+                self.release(snap)
+            if snap is None or not m.dropped:
+                self.event_end = None
+                return h, m, event
 
     def iterated_step(self, t, H, repeats, converge):
         """A macro step repeated with the inputs interpolated through the end values just computed, until

@@ -38,11 +38,12 @@ import warnings
 
 import numpy as np
 
-from ._result import _Discarded, _Stop
+from ._result import _Discarded, _Early, _Stop
 
 MAX_STEPS = 10 ** 7  # macro steps one run may take (attempts of a controlled run included)
 PACE = 1000  # steps over which the pace of a controlled run is measured against MAX_STEPS
 BUDGET = 10.0  # estimate of a step that could not be repeated, or sum of err H over the span, that ends a run
+MAX_REPLANS = 50  # re-plans of one step in a row to where an FMU returned early (each ends earlier)
 
 
 class StepControl:
@@ -114,6 +115,7 @@ class Controller:
         self.ahead = None  # (t, H, error) of the last step from t repeated for the error found at its end
         self.attempts, self.budget, self.warned = 0, 0.0, False
         self.recent, self.last_worst = collections.deque(maxlen=PACE), None
+        self.event, self.replans = None, 0  # (t_e, component) where an FMU returned early from the step being taken
 
     def advance(self, t0, stop_time, H, progress):
         control = self.control
@@ -155,6 +157,12 @@ class Controller:
         snap = run.save(t) if run.rollback.available else None
         try:
             band = run.step_all(t, H)
+        except _Early:
+            if snap is None:  # (early return is allowed only where every FMU can roll back)
+                raise
+            run.restore(snap, t)
+            run.release(snap)
+            raise
         except _Discarded:
             # an FMU refused a step this long (fmi2Discard): repeated smaller after the rollback, if there is one
             if snap is None or H <= self.control.min_step * (1 + 1e-12):
@@ -169,8 +177,17 @@ class Controller:
         """Step from ``t`` with ``H`` or smaller until a step is taken: (H taken, next H)."""
         run = self.run
         H_ref = H if self.jump is None else self.jump.H_ref
+        self.event, self.replans = None, 0
         while True:
-            m, snap = self._attempt(t, H)
+            run.event_end = self.event[1] if self.event is not None and t + H == self.event[0] else None
+            try:
+                m, snap = self._attempt(t, H)
+            except _Early as early:  # an event inside the step: the step is re-planned to end at it
+                H = self._replan(early, t)
+                continue
+            jump = None
+            if self.event is not None and t + H == self.event[0] and m is not None:
+                m, jump = run.at_event(self.event[1], m)
             if m is None:  # discarded by an FMU: half the step
                 run.rejected += 1
                 self.after_reject, H = True, max(0.5 * H, self.control.min_step)
@@ -203,9 +220,17 @@ class Controller:
                 continue
             if snap is not None:
                 run.release(snap)
+            run.event_end = None
             run.accept(t_new, H, m)
             self.budget += m.err * H
             self.H_last = H
+            if self.event is not None and t + H == self.event[0]:
+                # a located event: the step ends at it, the extrapolation restarts there if the values jump
+                run.early_returns.append((t_new, self.event[1]))
+                if jump is not None:
+                    run.crossed(t, t_new, *jump)
+                    self.prev, self.err_prev, self.after_reject = None, None, False
+            self.event = None
             if verdict == "cross":
                 run.crossed(t, t_new, m.names[self.jump.index], self.jump.size)
                 self.jump, self.prev, self.err_prev, self.after_reject = None, None, None, False
@@ -213,6 +238,15 @@ class Controller:
             # a crossing step's estimate is the jump; its share err H of the budget is one ordinary step's
             self._kept(t, t_new, 0.0 if verdict == "cross" else m.err, m.names[m.worst])
             return H, H_next
+
+    def _replan(self, early, t):
+        """The step from ``t`` shortened to end at ``early.t_early``, where an FMU returned early (every FMU was
+        rolled back to ``t``): an event located by the FMU, crossed like a jump (``_step``)."""
+        self.replans += 1
+        self.run.rejected += 1
+        H = self.run.replan(early, t, self.replans)
+        self.event = (t + H, early.component)
+        return H
 
     def _looks_ahead(self):
         """Whether the next step's end is checked by a look-ahead (``_late_error``): while the history is
@@ -279,7 +313,10 @@ class Controller:
         run, control = self.run, self.control
         i = m.worst
         if run.has_inputs(i) and (self.floor is None or self.floor[0] != t):  # one floor per point
-            probe, snap = self._attempt(t, max(1e-6 * H, control.min_step))
+            try:
+                probe, snap = self._attempt(t, max(1e-6 * H, control.min_step))
+            except _Early as early:  # an event within the tiny step: the next step ends at it
+                return self._replan(early, t)
             if probe is not None:  # (a discarded probe was rolled back already)
                 run.restore(snap, t)
                 run.release(snap)

@@ -238,15 +238,17 @@ print(json.dumps(res))
 
 
 def test_events_are_handled_inside_the_step_without_early_return(ref):
-    """BouncingBall 3.0 declares mightReturnEarlyFromDoStep; the master instantiates it with earlyReturnAllowed =
-    false and eventModeUsed = false, so it handles each bounce inside fmi3DoStep as BouncingBall 2.0 does inside
-    fmi2DoStep: fixed step, iterated step and step control give the FMI 2.0 rows bit for bit, Feedthrough passes h
-    on, and the ball bounces (v changes sign from below to above zero at least 8 times in 3 s, once in 0.7 s)."""
+    """BouncingBall 3.0 declares mightReturnEarlyFromDoStep; with ``early_return=False`` the master instantiates it
+    with earlyReturnAllowed = false and eventModeUsed = false, so it handles each bounce inside fmi3DoStep as
+    BouncingBall 2.0 does inside fmi2DoStep: fixed step, iterated step and step control give the FMI 2.0 rows bit
+    for bit, Feedthrough passes h on, and the ball bounces (v changes sign from below to above zero at least 8
+    times in 3 s, once in 0.7 s). (With early return: tests/fmu_build/cosim/test_cosim_early_return.py.)"""
     systems = {v: {"components": {"bb": ref[v]["BouncingBall"], "ft": ref[v]["Feedthrough"]},
                    "connections": [("bb.h", "ft.Float64_continuous_input")]} for v in ("2.0", "3.0")}
     outputs = ["bb.h", "bb.v", "ft.Float64_continuous_output"]
-    calls = {"fixed": f"3.0, 0.01, output={outputs!r}", "iterated": f"3.0, 0.01, iterations=2, output={outputs!r}",
-             "controlled": f"0.7, 0.01, step_control=True, rtol=1e-3, output={outputs!r}"}
+    calls = {"fixed": f"3.0, 0.01, early_return=False, output={outputs!r}",
+             "iterated": f"3.0, 0.01, iterations=2, early_return=False, output={outputs!r}",
+             "controlled": f"0.7, 0.01, step_control=True, rtol=1e-3, early_return=False, output={outputs!r}"}
     out = runs(systems, calls)
     for key in calls:
         two, three = out["2.0"][key], out["3.0"][key]
