@@ -133,10 +133,13 @@ def _package(dest, name, source_file, defines, xml):
     return out
 
 
-def _scalar_xml(name, description, variables, outputs, derivatives, interpolate, rollback, initial=None):
-    """``initial``: the ``(index, dependencies)`` of the initial unknowns (default: ``outputs``)."""
+def _scalar_xml(name, description, variables, outputs, derivatives, interpolate, rollback, initial=None,
+                directional=False):
+    """``initial``: the ``(index, dependencies)`` of the initial unknowns (default: ``outputs``);
+    ``directional``: declare ``providesDirectionalDerivative``."""
     flags = (f'canInterpolateInputs="{str(interpolate).lower()}" maxOutputDerivativeOrder="{2 if derivatives else 0}" '
-             f'canGetAndSetFMUstate="{str(rollback).lower()}" canSerializeFMUstate="{str(rollback).lower()}"')
+             f'canGetAndSetFMUstate="{str(rollback).lower()}" canSerializeFMUstate="{str(rollback).lower()}"'
+             + (' providesDirectionalDerivative="true"' if directional else ''))
     unknowns = "".join(f'<Unknown index="{i}" dependencies="{deps}"/>' for i, deps in outputs)
     initial = unknowns if initial is None else "".join(f'<Unknown index="{i}" dependencies="{deps}"/>'
                                                        for i, deps in initial)
@@ -169,16 +172,20 @@ def build_source(dest, name, y, d1=None, d2=None, rollback=True):
 
 
 def build_scalar_plant(dest, name, a, b, c=0.0, d=0.0, e=0.0, x0=0.0, derivatives=False, interpolate=True,
-                       rollback=True):
+                       rollback=True, directional=None):
     """A C FMU ``dest/name.fmu`` of ``x' = a x + b u, y = x, z = c x + d u + e`` (exact steps for the
     received input polynomial); ``z`` depends on ``u`` directly when ``d != 0``.
 
     ``derivatives``: output derivatives of orders 1 and 2 (``maxOutputDerivativeOrder = 2``);
-    ``interpolate``: ``canInterpolateInputs``; ``rollback``: ``canGetAndSetFMUstate``.
+    ``interpolate``: ``canInterpolateInputs``; ``rollback``: ``canGetAndSetFMUstate``;
+    ``directional``: None (``fmi2GetDirectionalDerivative`` refused, not declared) or a factor: declared
+    and implemented as ``dz/du = factor * d`` (1: exact; another factor: an FMU whose derivatives are wrong).
     """
     values = [float(v) for v in (a, b, c, d, e, x0)]
     defines = [f"-DSCALAR_DERIVATIVES={int(bool(derivatives))}",
                "-DPLANT_PARAMETERS=" + ",".join(repr(v) for v in values)]
+    if directional is not None:
+        defines += ["-DSCALAR_DIRECTIONAL=1", f"-DSCALAR_DIRECTIONAL_FACTOR={float(directional)!r}"]
     variables = [f'<ScalarVariable name="{key}" valueReference="{vr}" causality="parameter" variability="fixed">'
                  f'<Real start="{v!r}"/></ScalarVariable>' for vr, (key, v) in enumerate(zip("abcde", values))]
     variables.append(f'<ScalarVariable name="x0" valueReference="5" causality="parameter" variability="fixed">'
@@ -191,7 +198,8 @@ def build_scalar_plant(dest, name, a, b, c=0.0, d=0.0, e=0.0, x0=0.0, derivative
                      '<Real/></ScalarVariable>')
     outputs = [(8, ""), (9, "7" if values[3] != 0.0 else "")]
     description = f"x' = {a} x + {b} u, y = x, z = {c} x + {d} u + {e}"
-    xml = _scalar_xml(name, description, variables, outputs, bool(derivatives), bool(interpolate), bool(rollback))
+    xml = _scalar_xml(name, description, variables, outputs, bool(derivatives), bool(interpolate), bool(rollback),
+                      directional=directional is not None)
     return _package(dest, name, "scalar.c", defines, xml)
 
 _LAG = '''
