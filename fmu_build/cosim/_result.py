@@ -39,6 +39,11 @@ class CosimResult(np.ndarray):
     loop_gains : list of float
         The gain of each algebraic loop (``loops``) measured at its cut connection (NaN if its
         iterates never moved).
+    loop_stats : dict
+        How the algebraic loops were solved: ``method`` (``"newton"`` with the FMUs' directional
+        derivatives, ``"anderson"``; None without loops), ``solves``, the ``passes`` of the exchange plan
+        they took, ``derivative_calls`` (``GetDirectionalDerivative``), ``check_passes`` (gain checks) and
+        ``fallbacks`` (from Newton's method to Anderson acceleration, each with a warning).
 
     Examples
     --------
@@ -50,7 +55,7 @@ class CosimResult(np.ndarray):
     def __array_finalize__(self, obj):
         for key, default in (("success", True), ("message", "ok"), ("loops", []), ("order", []), ("steps", 0),
                              ("rejected", 0), ("error_estimates", []), ("jumps", []), ("dropped_derivatives", {}),
-                             ("loop_gains", [])):
+                             ("loop_gains", []), ("loop_stats", {})):
             setattr(self, key, getattr(obj, key, default))
 
 

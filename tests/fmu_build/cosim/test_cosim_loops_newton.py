@@ -82,14 +82,16 @@ def test_a_loop_with_directional_derivatives_is_solved_by_newton_or_refused(fmus
         assert out["stats"]["passes"] <= out["stats"]["solves"] + 1, out["stats"]
 
 
-def test_newton_takes_fewer_passes_per_solve_than_anderson_side_by_side(fmus):
+def test_newton_takes_fewer_passes_than_anderson_side_by_side(fmus):
     """z1 = e^t + u1, z2 = 0.999 u2: the fixed point moves with t, each exchange solves it again from the last
-    one. Anderson needs three passes of the exchange plan per solve, Newton two (and one directional derivative
-    per FMU on the loop); both reach e^t / (1 - g) to 1e-8."""
+    one (and once more, unmoved, in the step iteration). From a moved point Anderson needs three passes of the
+    exchange plan, Newton two and one directional derivative per FMU on the loop; both reach e^t / (1 - g) to
+    1e-8. Measured: 33 passes + 24 derivative calls against 54 passes; FMU calls (a pass: two gets, two sets)
+    156 against 216."""
     g = 0.999
     runs = {"newton": cosim(loop(fmus["exp"], fmus[g]), 50), "anderson": cosim(loop(fmus["exp_plain"],
                                                                                      fmus[("plain", g)]), 50)}
-    per_solve = {}
+    calls = {}
     for method, out in runs.items():
         assert out["success"], out["message"]
         t = np.array(out["t"])
@@ -97,10 +99,11 @@ def test_newton_takes_fewer_passes_per_solve_than_anderson_side_by_side(fmus):
         err = np.abs(np.array(out["z"]) - exact).max() / np.abs(exact).max()
         assert err <= 1e-8, (method, err)
         stats = out["stats"]
-        assert stats["method"] == method, stats
-        per_solve[method] = stats["passes"] / stats["solves"]
-        print(method, stats, f"passes per solve {per_solve[method]:.2f}", f"error {err:.2e}")
-    assert per_solve["newton"] <= 2.0 + 1e-12 and per_solve["anderson"] >= 2.9, per_solve
+        assert stats["method"] == method and stats["fallbacks"] == 0, stats
+        calls[method] = (stats["passes"], 4 * stats["passes"] + stats["derivative_calls"])
+    assert runs["newton"]["stats"]["solves"] == runs["anderson"]["stats"]["solves"]
+    assert calls["newton"][0] <= 0.7 * calls["anderson"][0], calls
+    assert calls["newton"][1] <= 0.8 * calls["anderson"][1], calls
 
 
 @pytest.mark.parametrize("factor", [2.0, 1.5])
