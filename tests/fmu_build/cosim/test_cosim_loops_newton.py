@@ -37,6 +37,12 @@ def fmus(tmp_path_factory):
     for g, factor in ((0.999, 2.0), (0.999, 1.5), (1.001, 0.5), (0.2, 3.0)):
         out[("lying", g, factor)] = plants.build_scalar_plant(d, f"GL{_tag(g)}x{int(10 * factor)}", 0.0, 0.0, 0.0, g,
                                                               0.0, directional=factor)
+    # the loop through a unit conversion: one.z in m feeds g.u in cm (x 100); g.z in m feeds one.u in m
+    defs = {"m": {"m": 1}, "cm": {"m": 1, "factor": 0.01}}
+    out["one_m"] = plants.build_scalar_plant(d, "OneM", 0.0, 0.0, 0.0, 1.0, 1.0, directional=1.0,
+                                             units={"u": "m", "z": "m"}, unit_definitions=defs)
+    out["g_cm"] = plants.build_scalar_plant(d, "GCm", 0.0, 0.0, 0.0, 0.00999, 0.0, directional=1.0,
+                                            units={"u": "cm", "z": "m"}, unit_definitions=defs)
     return {k: str(v) for k, v in out.items()}
 
 
@@ -80,6 +86,17 @@ def test_a_loop_with_directional_derivatives_is_solved_by_newton_or_refused(fmus
     if iterations:
         # the solve at the start from 0: one Newton step and the pass that confirms it
         assert out["stats"]["passes"] <= out["stats"]["solves"] + 1, out["stats"]
+
+
+def test_the_loop_jacobian_carries_the_connections_unit_factors(fmus):
+    """one.z (m) -> g.u (cm): the value arrives multiplied by 100, so the loop gain is 100 * 0.00999 = 0.999 and
+    z1 = 1 / (1 - 0.999) = 1000. A Jacobian without the factor (gain 0.00999) would not reduce the residual and
+    Newton's method would be given up; with it, one step solves the loop."""
+    out = cosim(loop(fmus["one_m"], fmus["g_cm"]), 50)
+    assert out["success"], out["message"]
+    assert np.abs(np.array(out["z"]) - 1000.0).max() <= 1e-8 * 1000.0, out["z"][-3:]
+    assert out["stats"]["method"] == "newton" and out["stats"]["fallbacks"] == 0, (out["stats"], out["warned"])
+    assert abs(out["gains"][0] - 0.999) <= 1e-12, out["gains"]
 
 
 def test_newton_takes_fewer_passes_than_anderson_side_by_side(fmus):
