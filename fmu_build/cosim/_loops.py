@@ -170,10 +170,12 @@ class Partials:
         nodes = {node for loop in layout.loops for node in loop}
         self.names = sorted({c for c, _ in nodes})
         vr = layout.vr
-        self.ins = {c: [vr[(c, v)] for cc, v in sorted(nodes) if cc == c and comps[c].variables[v].causality == "input"]
-                    for c in self.names}
-        self.outs = {c: [vr[(c, v)] for cc, v in sorted(nodes) if cc == c and comps[c].variables[v].causality == "output"]
-                     for c in self.names}
+
+        def refs(c, causality):
+            return [vr[(c, v)] for cc, v in sorted(nodes) if cc == c and comps[c].variables[v].causality == causality]
+
+        self.ins = {c: refs(c, "input") for c in self.names}
+        self.outs = {c: refs(c, "output") for c in self.names}
 
     @staticmethod
     def usable(layout, comps):
@@ -389,5 +391,5 @@ class LoopSolver:
         singular = " (gain 1: the loop's equations are singular there)" if abs(g - 1.0) < 1e-9 else ""
         how = f" ({before} by Newton's method, then Anderson acceleration)" if before else ""
         raise _Stop(f"the algebraic loop through {', '.join(self.layout.loop_names[loop])} did not converge at "
-                    f"t = {t!r}: after {fp.evaluations + before} passes{how} the change of {self.layout.name(slots[i])} "
-                    f"is {residual[i]:.3g} times the tolerance{known}{singular}")
+                    f"t = {t!r}: after {fp.evaluations + before} passes{how} the change of "
+                    f"{self.layout.name(slots[i])} is {residual[i]:.3g} times the tolerance{known}{singular}")
