@@ -17,6 +17,7 @@ pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="the test FM
 sys.path.insert(0, str(PLANTS))
 
 GAINS = (-1.0, -0.999, 0.999, 1.001)
+NATIVE_GAIN = -1.998  # half of it through the native FMU's w = x + 0.5 p
 
 
 def _tag(g):
@@ -31,7 +32,7 @@ def fmus(tmp_path_factory):
     out = {"one": plants.build_scalar_plant(d, "OneD", 0.0, 0.0, 0.0, 1.0, 1.0, directional=1.0),
            "exp": plants.build_scalar_plant(d, "ExpD", 1.0, 0.0, 1.0, 1.0, 0.0, x0=1.0, directional=1.0),
            "exp_plain": plants.build_scalar_plant(d, "ExpPlain", 1.0, 0.0, 1.0, 1.0, 0.0, x0=1.0)}
-    for g in GAINS:
+    for g in GAINS + (NATIVE_GAIN,):
         out[g] = plants.build_scalar_plant(d, "GD" + _tag(g), 0.0, 0.0, 0.0, g, 0.0, directional=1.0)
         out[("plain", g)] = plants.build_scalar_plant(d, "GP" + _tag(g), 0.0, 0.0, 0.0, g, 0.0)
     for g, factor in ((0.999, 2.0), (0.999, 1.5), (1.001, 0.5), (0.2, 3.0)):
@@ -150,3 +151,37 @@ def test_a_lying_fmu_whose_newton_iteration_still_contracts_converges_to_the_fix
     assert out["success"], out["message"]
     assert np.abs(np.array(out["z"]) - 1.25).max() <= 1e-8 * 1.25, out["z"][-3:]
     assert abs(out["gains"][0] - 0.2) <= 1e-6, out["gains"]
+
+
+# a native lsc DAE FMU on the loop (FMI 2.0 and 3.0): x' = -x + p, output w = x + 0.5 p (direct feedthrough)
+NATIVE = {"model": {"name": "LagOut"}, "states": {"x": {"start": 1.0}}, "inputs": {"p": {"start": 0.0}},
+          "outputs": {"w": {"expr": "x + 0.5*p"}}, "equations": {"A": [[1]], "B": [[1]], "f": ["p"]},
+          "completion": {"method": "alternative", "lam": 5.0}}
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_native_fmu_on_the_loop_gives_newton_its_derivatives(fmus, tmp_path, version):
+    """dae.w -> g.u, g.z = -1.998 u -> dae.p: the loop gain is 0.5 * -1.998 = -0.999, read from the native
+    FMU's fmi2/fmi3GetDirectionalDerivative (FMI 3.0: providesDirectionalDerivatives, which fmpy does not read).
+    The run with Newton's method gives the Anderson run's numbers (loops solved to the same tolerance) with
+    two passes per moved solve instead of three."""
+    from fmu_build import build_fmu
+
+    dae = build_fmu(NATIVE, tmp_path, target="native", fmi_version=version)
+    runs = {}
+    for method, g in (("newton", fmus[-1.998]), ("anderson", fmus[("plain", -1.998)])):
+        system = {"components": {"dae": str(dae), "g": g}, "connections": [("dae.w", "g.u"), ("g.z", "dae.p")]}
+        out, _ = run(PACK.replace('r["one.z"]', 'r["dae.x"]') + f"""
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    r = cosimulate({system!r}, 1.0, 0.05, iterations=20, output=["dae.x"])
+print(json.dumps(pack(r)))
+""")
+        assert out["success"], out["message"]
+        assert out["stats"]["method"] == method and out["stats"]["fallbacks"] == 0, out["stats"]
+        runs[method] = out
+    assert abs(runs["newton"]["gains"][0] + 0.999) <= 1e-12, runs["newton"]["gains"]
+    x_newton, x_anderson = np.array(runs["newton"]["z"]), np.array(runs["anderson"]["z"])
+    assert np.abs(x_newton - x_anderson).max() <= 1e-9, np.abs(x_newton - x_anderson).max()
+    assert runs["newton"]["stats"]["passes"] * 3 <= runs["anderson"]["stats"]["passes"] * 2 + 3, \
+        (runs["newton"]["stats"], runs["anderson"]["stats"])
