@@ -18,19 +18,24 @@ FMI 3.0 ``providesDirectionalDerivatives``), the Jacobian ``J = dG/dx`` of one p
 connections' unit factors) and the loops are solved by Newton's method, ``(I - J) dx = G(x) - x``: a linear
 loop in one step and the pass that confirms it (Anderson: ``m + 2`` passes from a point off the fixed point).
 The derivatives are an FMU's claim, never trusted alone: every Newton iterate is judged by the same residual
-``G(x) - x``, a step that does not halve it ends Newton's method, and the gain of a loop read from ``J`` is
-checked against one more pass of ``G``. Where either fails (or an FMU refuses the call), a warning names the
-reason and the run goes on with Anderson acceleration and difference quotients.
+``G(x) - x``; where no (shortened) step reduces it, and wherever a gain is read from ``J``, ``J`` is checked
+against one more pass of ``G``. A ``J`` the check contradicts (or a refused call) is given up with a warning
+naming the reason, and the run goes on with Anderson acceleration and difference quotients; a ``J`` that
+passes leaves only that solve to Anderson acceleration (a nonlinear loop too far from its fixed point).
 """
 
+import logging
 import warnings
 
 import numpy as np
 
 from ._result import AlgebraicLoopWarning, _Stop
 
+logger = logging.getLogger("fmu_build.cosim")
+
 MAX_SWEEPS = 50  # evaluations of a derivative loop (Anderson: a linear loop of m unknowns needs m + 1)
 MEMORY = 8  # differences Anderson keeps
+BACKTRACKS = 3  # shortenings of a Newton step (1/2, 1/4, 1/8) before Newton's method is given up
 
 
 class FixedPoint:
@@ -39,6 +44,7 @@ class FixedPoint:
 
     def __init__(self, x, gx, converged, evaluations, reason=""):
         self.x, self.gx, self.converged, self.evaluations, self.reason = x, gx, converged, evaluations, reason
+        self.last = (x, gx)  # the last point evaluated (the FMUs are there)
 
 
 class PartialsFailed(Exception):
@@ -58,52 +64,63 @@ def _slope(gains, n):
     return np.ones(n) if gains is None else np.where(np.isfinite(gains), np.abs(1.0 - gains), 1.0)
 
 
-def newton(G, jac, x0, tol, max_evaluations, gains=None):
+def newton(G, jac, x0, tol, max_evaluations, gains=None, backtracks=BACKTRACKS):
     """Solve ``x = G(x)`` from ``x0`` by Newton's method with ``jac(x)``, the Jacobian of ``G`` at ``x``
-    (called after ``G(x)``): ``(I - J) dx = G(x) - x``.
+    (called right after ``G(x)``): ``(I - J) dx = G(x) - x``, the step shortened (``x + a dx``, ``a = 1, 1/2,
+    ...``, at most ``backtracks`` times) until the residual ``|G(x) - x|`` (scaled by the tolerance) falls
+    to ``(1 - a / 2)`` of what it was (Armijo's rule on the residual).
 
-    Converged as in :func:`anderson`. A step that does not halve the residual ``G(x) - x`` (scaled by the
-    tolerance) ends the iteration unconverged with the ``reason``, and ``x`` the last iterate before it: the
-    Jacobian does not describe ``G`` there (wrong derivatives, or a nonlinear loop far from its fixed point).
+    Converged as in :func:`anderson`. No step that reduces the residual ends the iteration unconverged with the
+    ``reason``, ``x`` the last accepted iterate and ``last = (x, G(x))`` the last point evaluated: the Jacobian
+    does not describe ``G`` there (wrong derivatives, or a nonlinear loop too far from its fixed point).
+    `PartialsFailed` from ``jac`` is passed on.
 
     Examples
     --------
-    >>> fp = newton(lambda x: 0.999 * x + 1.0, lambda x: np.array([[0.999]]), np.zeros(1),
-    ...             lambda x: 1e-12 * (1 + abs(x)), 10)
+    >>> tol = lambda x: 1e-12 * (1 + abs(x))
+    >>> fp = newton(lambda x: 0.999 * x + 1.0, lambda x: np.array([[0.999]]), np.zeros(1), tol, 10)
     >>> fp.converged, fp.evaluations, round(float(fp.x[0]), 6)
     (True, 2, 1000.0)
-    >>> fp = newton(lambda x: 0.999 * x + 1.0, lambda x: np.array([[1.998]]), np.zeros(1),
-    ...             lambda x: 1e-12 * (1 + abs(x)), 10)
+    >>> fp = newton(lambda x: 0.999 * x + 1.0, lambda x: np.array([[1.998]]), np.zeros(1), tol, 10)
     >>> fp.converged, fp.reason.split(":")[0]
-    (False, 'the Newton step did not reduce the residual')
+    (False, 'no Newton step reduced the residual')
     """
     x = np.asarray(x0, dtype=float).copy()
     gx = G(x)
     slope = _slope(gains, len(x))
-    evaluations = 1
+    evaluations, last = 1, (x, gx)
     while True:
         f = gx - x
         if _converged(f, x, tol, slope):
             return FixedPoint(x, gx, True, evaluations)
         if evaluations >= max_evaluations or not np.all(np.isfinite(gx)):
             return FixedPoint(x, gx, False, evaluations)
+        J = np.asarray(jac(x), dtype=float)
         try:
-            J = np.asarray(jac(x), dtype=float)
             dx = np.linalg.solve(np.eye(len(x)) - J, f)
-        except PartialsFailed as exc:
-            return FixedPoint(x, gx, False, evaluations, str(exc))
         except np.linalg.LinAlgError:
-            return FixedPoint(x, gx, False, evaluations, "I - J is singular (a loop gain of 1)")
+            dx = np.full(len(x), np.nan)
         if not np.all(np.isfinite(dx)):
-            return FixedPoint(x, gx, False, evaluations, "the Newton step is not finite")
-        x_new = x + dx
-        g_new = G(x_new)
-        evaluations += 1
-        before, after = _scaled(f, x, tol), _scaled(g_new - x_new, x_new, tol)
-        if not after <= 0.5 * before:
-            return FixedPoint(x, gx, False, evaluations,
-                              f"the Newton step did not reduce the residual: {after:.3g} times the tolerance after "
-                              f"it, {before:.3g} before")
+            fp = FixedPoint(x, gx, False, evaluations, "I - J is singular (a loop gain of 1) or the step not finite")
+            fp.last = last
+            return fp
+        before, step, tried = _scaled(f, x, tol), 1.0, []
+        while True:
+            x_new = x + step * dx
+            g_new = G(x_new)
+            evaluations += 1
+            last = (x_new, g_new)
+            after = _scaled(g_new - x_new, x, tol)  # in the weights of x: a step does not move the yardstick
+            tried.append(after)
+            if after <= (1.0 - 0.5 * step) * before or _converged(g_new - x_new, x_new, tol, slope):
+                break
+            if len(tried) > backtracks or evaluations >= max_evaluations:
+                fp = FixedPoint(x, gx, False, evaluations,
+                                f"no Newton step reduced the residual: {before:.3g} times the tolerance, after the "
+                                f"step and its shortenings {', '.join(f'{a:.3g}' for a in tried)}")
+                fp.last = last
+                return fp
+            step *= 0.5
         x, gx = x_new, g_new
 
 
@@ -259,30 +276,33 @@ class LoopSolver:
                       "here on", AlgebraicLoopWarning, stacklevel=2)
         self.partials = None
         self.stats["method"] = "anderson"
-        self.stats["fallbacks"] += 1
 
-    def _exact_jacobian(self, t):
-        """The Jacobian of one pass from the directional derivatives (the FMUs just passed), or None."""
+    def _verified(self, one_pass, x, gx, t, why=""):
+        """The Jacobian of one pass at ``x`` (``gx = G(x)``, the FMUs just passed there) from the directional
+        derivatives, checked by one more pass along a direction that moves every cut value; None (and the
+        derivatives given up, ``why`` added to the reason) if a call fails or the check contradicts it."""
         try:
-            return self.partials.jacobian(self.slots, t)
+            J = self.partials.jacobian(self.slots, t)
         except PartialsFailed as exc:
-            self._distrust(t, str(exc))
+            self._distrust(t, why + str(exc))
             return None
+        step = 1e-6 * np.maximum(1.0, np.abs(x)) * (1.0 + 0.5 * np.sin(np.arange(1, len(x) + 1)))
+        change, predicted = one_pass(x + step) - gx, J @ step
+        scale = max(np.max(np.abs(step)), np.max(np.abs(predicted)), np.max(np.abs(change)))
+        mismatch = float(np.max(np.abs(change - predicted)) / scale)
+        if mismatch <= 1e-5:
+            return J
+        self._distrust(t, f"{why}their Jacobian of the loop differs from the loop's own change over one pass by "
+                          f"{mismatch:.3g} relative")
+        return None
 
     def _gain_jacobian(self, one_pass, x, gx, t):
         """``dG/dx`` at ``x`` (``gx = G(x)``, the FMUs just passed there) for the gain checks: the exact one,
-        checked by one pass along a direction that moves every cut value, or by difference quotients."""
+        checked by one pass (`_verified`), or by difference quotients."""
         if self.partials is not None:
-            J = self._exact_jacobian(t)
+            J = self._verified(one_pass, x, gx, t)
             if J is not None:
-                step = 1e-6 * np.maximum(1.0, np.abs(x)) * (1.0 + 0.5 * np.sin(np.arange(1, len(x) + 1)))
-                change, predicted = one_pass(x + step) - gx, J @ step
-                scale = max(np.max(np.abs(step)), np.max(np.abs(predicted)), np.max(np.abs(change)))
-                mismatch = float(np.max(np.abs(change - predicted)) / scale)
-                if mismatch <= 1e-5:
-                    return J
-                self._distrust(t, f"their Jacobian of the loop differs from the loop's own change over one pass by "
-                               f"{mismatch:.3g} relative")
+                return J
         return jacobian(one_pass, x, gx)
 
     def tolerance(self, x):
@@ -369,14 +389,23 @@ class LoopSolver:
         self.stats["solves"] += 1
         used = 0
         if self.partials is not None:
-            fp = newton(G, lambda x: self.partials.jacobian(slots, t), x0, self.tolerance, max_passes, gains=gains)
-            if fp.converged:
+            try:
+                fp = newton(G, lambda x: self.partials.jacobian(slots, t), x0, self.tolerance, max_passes,
+                            gains=gains)
+            except PartialsFailed as exc:
+                self._distrust(t, str(exc))
+                fp = None
+            if fp is not None and fp.converged:
                 return fp
-            used, x0 = fp.evaluations, fp.x
-            if fp.reason:
-                self._distrust(t, fp.reason)
-            else:
+            if fp is not None and not fp.reason:
                 self._raise_unconverged(fp, gains, t)
+            if fp is not None:
+                # no step reduced the residual: wrong derivatives (given up, with a warning), or a nonlinear loop
+                # too far from its fixed point for Newton (then Anderson for this solve only)
+                used, x0 = fp.evaluations + 1, fp.x
+                if self._verified(G, *fp.last, t, why=fp.reason + "; ") is not None:
+                    logger.debug("algebraic loop at t = %r: %s; Anderson acceleration for this solve", t, fp.reason)
+            self.stats["fallbacks"] += 1
         fp = anderson(G, x0, self.tolerance, max(max_passes - used, 1), gains=gains, plain=~self.layout.real[slots])
         if not fp.converged:
             self._raise_unconverged(fp, gains, t, used)

@@ -43,7 +43,8 @@ class CosimResult(np.ndarray):
         How the algebraic loops were solved: ``method`` (``"newton"`` with the FMUs' directional
         derivatives, ``"anderson"``; None without loops), ``solves``, the ``passes`` of the exchange plan
         they took, ``derivative_calls`` (``GetDirectionalDerivative``), ``check_passes`` (gain checks) and
-        ``fallbacks`` (from Newton's method to Anderson acceleration, each with a warning).
+        ``fallbacks`` (solves Newton's method did not finish, ended by Anderson acceleration; a warning
+        says when the derivatives were given up).
 
     Examples
     --------

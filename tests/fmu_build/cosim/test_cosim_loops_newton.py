@@ -185,3 +185,53 @@ print(json.dumps(pack(r)))
     assert np.abs(x_newton - x_anderson).max() <= 1e-9, np.abs(x_newton - x_anderson).max()
     assert runs["newton"]["stats"]["passes"] * 3 <= runs["anderson"]["stats"]["passes"] * 2 + 3, \
         (runs["newton"]["stats"], runs["anderson"]["stats"])
+
+
+# -- the iteration itself (no FMU) ----------------------------------------------------------------------------
+
+def _tol(x):
+    return 1e-12 * (1.0 + np.abs(x))
+
+
+@pytest.mark.parametrize("a", [0.9, 0.99])
+def test_newton_solves_a_nonlinear_loop_in_fewer_passes_than_anderson(a):
+    """G(x) = M a tanh(x) + 0.5 (two coupled values): the gain a M sech^2(x) is no constant; from 0 the full
+    Newton step overshoots and is shortened, then the iteration converges quadratically."""
+    from fmu_build.cosim._loops import anderson, newton
+
+    M = np.array([[0.6, 0.3], [0.2, 0.7]])
+
+    def G(x):
+        return M @ (a * np.tanh(x)) + 0.5
+
+    def jac(x):
+        return M * (a / np.cosh(x) ** 2)
+
+    fn = newton(G, jac, np.zeros(2), _tol, 50)
+    fa = anderson(G, np.zeros(2), _tol, 50)
+    assert fn.converged and fa.converged, (fn.reason, fn.evaluations, fa.evaluations)
+    assert np.abs(G(fn.x) - fn.x).max() <= 1e-11 and np.abs(fn.x - fa.x).max() <= 1e-10
+    assert fn.evaluations <= 8 and fn.evaluations < fa.evaluations, (fn.evaluations, fa.evaluations)
+
+
+def test_newton_gives_up_with_the_reason_where_no_step_reduces_the_residual():
+    """A wrong slope (1.998 for 0.999): every shortened step increases the residual; the tolerance's weights
+    (growing with |x|) must not make a step away from the fixed point look like progress."""
+    from fmu_build.cosim._loops import newton
+
+    fp = newton(lambda x: 0.999 * x + 1.0, lambda x: np.array([[1.998]]), np.zeros(1), _tol, 50)
+    assert not fp.converged and fp.reason.startswith("no Newton step reduced the residual"), fp.reason
+    assert fp.evaluations == 5 and fp.x[0] == 0.0  # the step and three shortenings; x left where it was
+
+
+def test_a_newton_step_at_the_rounding_floor_is_accepted_when_converged():
+    """A step that cannot reduce a residual already within the tolerance enough is no failure."""
+    from fmu_build.cosim._loops import newton
+
+    noise = iter([1.2, 2.0])  # G(x) - x: 1.2 tolerances at x0 = 2, then 0.8 after the exact step
+
+    def G(x):
+        return 0.5 * x + 1.0 + next(noise) * _tol(np.array([2.0]))
+
+    fp = newton(G, lambda x: np.array([[0.5]]), np.array([2.0]), _tol, 10)
+    assert fp.converged and not fp.reason and fp.evaluations == 2, (fp.reason, fp.evaluations)
