@@ -5,7 +5,9 @@
  *   PLANT                the instance type; it has the fields `s` (a State) and `cb` (the host's callbacks);
  *   PLANT_FAKE_ROLLBACK  (optional, default 0) 1: fmi2SetFMUstate reports fmi2OK and restores nothing
  *                        (a broken FMU, for the master's tests);
- *   PLANT_GET_INTEGER    (optional, default 0) 1: the plant defines fmi2GetInteger itself. */
+ *   PLANT_GET_INTEGER    (optional, default 0) 1: the plant defines fmi2GetInteger itself;
+ *   PLANT_DIRECTIONAL    (optional, default 0) 1: the plant defines fmi2GetDirectionalDerivative itself
+ *                        (otherwise it is refused). */
 #ifndef PLANT
 #error "define PLANT (the instance type) before including plant_common.h"
 #endif
@@ -14,6 +16,9 @@
 #endif
 #ifndef PLANT_GET_INTEGER
 #define PLANT_GET_INTEGER 0
+#endif
+#ifndef PLANT_DIRECTIONAL
+#define PLANT_DIRECTIONAL 0
 #endif
 
 fmi2Status fmi2CancelStep(fmi2Component c) { (void)c; return fmi2Error; }
@@ -71,11 +76,13 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer v[]) { (void)c; (void)vr; (void)v; return n ? fmi2Error : fmi2OK; }
 fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean v[]) { (void)c; (void)vr; (void)v; return n ? fmi2Error : fmi2OK; }
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[]) { (void)c; (void)vr; (void)v; return n ? fmi2Error : fmi2OK; }
+#if !PLANT_DIRECTIONAL
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu,
                                         const fmi2ValueReference z[], size_t nz, const fmi2Real dz[], fmi2Real dv[]) {
     (void)c; (void)u; (void)nu; (void)z; (void)nz; (void)dz; (void)dv;
     return fmi2Error;
 }
+#endif
 fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *v) { (void)c; (void)s; (void)v; return fmi2Discard; }
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *v) { (void)c; (void)s; (void)v; return fmi2Discard; }
 fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *v) { (void)c; (void)s; (void)v; return fmi2Discard; }

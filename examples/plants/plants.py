@@ -70,14 +70,7 @@ def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y
             variables.append(f'<ScalarVariable name="{out}" valueReference="{10 + i}" causality="output" '
                              f'variability="continuous" initial="exact"><Real start="{values[6 + i]!r}"{unit(out)}/>'
                              '</ScalarVariable>')
-        definitions = ""
-        if unit_definitions:
-            items = []
-            for uname, base in unit_definitions.items():
-                attrs = "".join(f' {k}="{v!r}"' for k, v in (base or {}).items())
-                items.append(f'<Unit name="{escape(uname)}">' + (f"<BaseUnit{attrs}/>" if base is not None else "")
-                             + "</Unit>")
-            definitions = "<UnitDefinitions>" + "".join(items) + "</UnitDefinitions>"
+        definitions = _unit_definitions(unit_definitions)
         xml = f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{{{uuid.uuid4()}}}"
   description="linear two-state plant x' = A x + b u (RK4, output derivatives)" generationTool="lsc examples/plants"
@@ -111,6 +104,17 @@ def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y
 
 
 
+def _unit_definitions(unit_definitions):
+    """The ``<UnitDefinitions>`` element of ``{unit name: {"m": 1, "factor": 0.01, ...} or None}`` ("" if none)."""
+    if not unit_definitions:
+        return ""
+    items = []
+    for uname, base in unit_definitions.items():
+        attrs = "".join(f' {k}="{v!r}"' for k, v in (base or {}).items())
+        items.append(f'<Unit name="{escape(uname)}">' + (f"<BaseUnit{attrs}/>" if base is not None else "") + "</Unit>")
+    return "<UnitDefinitions>" + "".join(items) + "</UnitDefinitions>"
+
+
 def _package(dest, name, source_file, defines, xml):
     """Compile ``source_file`` with ``defines`` and zip it with ``xml`` into ``dest/name.fmu`` (atomically)."""
     dest = Path(dest)
@@ -135,10 +139,13 @@ def _package(dest, name, source_file, defines, xml):
     return out
 
 
-def _scalar_xml(name, description, variables, outputs, derivatives, interpolate, rollback, initial=None):
-    """``initial``: the ``(index, dependencies)`` of the initial unknowns (default: ``outputs``)."""
+def _scalar_xml(name, description, variables, outputs, derivatives, interpolate, rollback, initial=None,
+                directional=False, definitions=""):
+    """``initial``: the ``(index, dependencies)`` of the initial unknowns (default: ``outputs``);
+    ``directional``: declare ``providesDirectionalDerivative``; ``definitions``: a ``<UnitDefinitions>``."""
     flags = (f'canInterpolateInputs="{str(interpolate).lower()}" maxOutputDerivativeOrder="{2 if derivatives else 0}" '
-             f'canGetAndSetFMUstate="{str(rollback).lower()}" canSerializeFMUstate="{str(rollback).lower()}"')
+             f'canGetAndSetFMUstate="{str(rollback).lower()}" canSerializeFMUstate="{str(rollback).lower()}"'
+             + (' providesDirectionalDerivative="true"' if directional else ''))
     unknowns = "".join(f'<Unknown index="{i}" dependencies="{deps}"/>' for i, deps in outputs)
     initial = unknowns if initial is None else "".join(f'<Unknown index="{i}" dependencies="{deps}"/>'
                                                        for i, deps in initial)
@@ -146,6 +153,7 @@ def _scalar_xml(name, description, variables, outputs, derivatives, interpolate,
 <fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{{{uuid.uuid4()}}}"
   description="{escape(description)}" generationTool="lsc examples/plants" numberOfEventIndicators="0">
   <CoSimulation modelIdentifier="{name}" canHandleVariableCommunicationStepSize="true" {flags}/>
+  {definitions}
   <ModelVariables>
     {chr(10).join(variables)}
   </ModelVariables>
@@ -171,29 +179,37 @@ def build_source(dest, name, y, d1=None, d2=None, rollback=True):
 
 
 def build_scalar_plant(dest, name, a, b, c=0.0, d=0.0, e=0.0, x0=0.0, derivatives=False, interpolate=True,
-                       rollback=True):
+                       rollback=True, directional=None, units=None, unit_definitions=None):
     """A C FMU ``dest/name.fmu`` of ``x' = a x + b u, y = x, z = c x + d u + e`` (exact steps for the
     received input polynomial); ``z`` depends on ``u`` directly when ``d != 0``.
 
     ``derivatives``: output derivatives of orders 1 and 2 (``maxOutputDerivativeOrder = 2``);
-    ``interpolate``: ``canInterpolateInputs``; ``rollback``: ``canGetAndSetFMUstate``.
+    ``interpolate``: ``canInterpolateInputs``; ``rollback``: ``canGetAndSetFMUstate``;
+    ``directional``: None (``fmi2GetDirectionalDerivative`` refused, not declared) or a factor: declared
+    and implemented as ``dz/du = factor * d`` (1: exact; another factor: an FMU whose derivatives are wrong);
+    ``units``, ``unit_definitions``: the units of ``u``, ``y``, ``z`` (as in :func:`build_linear_plant`).
     """
+    units = units or {}
+    unit = lambda key: f' unit="{escape(units[key])}"' if key in units else ""  # noqa: E731
     values = [float(v) for v in (a, b, c, d, e, x0)]
     defines = [f"-DSCALAR_DERIVATIVES={int(bool(derivatives))}",
                "-DPLANT_PARAMETERS=" + ",".join(repr(v) for v in values)]
+    if directional is not None:
+        defines += ["-DSCALAR_DIRECTIONAL=1", f"-DSCALAR_DIRECTIONAL_FACTOR={float(directional)!r}"]
     variables = [f'<ScalarVariable name="{key}" valueReference="{vr}" causality="parameter" variability="fixed">'
                  f'<Real start="{v!r}"/></ScalarVariable>' for vr, (key, v) in enumerate(zip("abcde", values))]
     variables.append(f'<ScalarVariable name="x0" valueReference="5" causality="parameter" variability="fixed">'
                      f'<Real start="{values[5]!r}"/></ScalarVariable>')
     variables.append('<ScalarVariable name="u" valueReference="6" causality="input" variability="continuous">'
-                     '<Real start="0.0"/></ScalarVariable>')
+                     f'<Real start="0.0"{unit("u")}/></ScalarVariable>')
     variables.append('<ScalarVariable name="y" valueReference="7" causality="output" variability="continuous">'
-                     '<Real/></ScalarVariable>')
+                     f'<Real{unit("y")}/></ScalarVariable>')
     variables.append('<ScalarVariable name="z" valueReference="8" causality="output" variability="continuous">'
-                     '<Real/></ScalarVariable>')
+                     f'<Real{unit("z")}/></ScalarVariable>')
     outputs = [(8, ""), (9, "7" if values[3] != 0.0 else "")]
     description = f"x' = {a} x + {b} u, y = x, z = {c} x + {d} u + {e}"
-    xml = _scalar_xml(name, description, variables, outputs, bool(derivatives), bool(interpolate), bool(rollback))
+    xml = _scalar_xml(name, description, variables, outputs, bool(derivatives), bool(interpolate), bool(rollback),
+                      directional=directional is not None, definitions=_unit_definitions(unit_definitions))
     return _package(dest, name, "scalar.c", defines, xml)
 
 _LAG = '''

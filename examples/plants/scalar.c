@@ -11,6 +11,10 @@
  * at the current inputs: the exact derivatives of the trajectory over the step ahead, which are no
  * Taylor coefficients of the trajectory the plant follows once its input changes (a stiff plant).
  *
+ * With -DSCALAR_DIRECTIONAL=1 the plant gives fmi2GetDirectionalDerivative of y and z in the input u
+ * (dy/du = 0, dz/du = d), multiplied by SCALAR_DIRECTIONAL_FACTOR (default 1; another value makes an FMU
+ * whose declared derivatives are wrong, for the master's tests).
+ *
  * Real value references: plant 0..5 a b c d e x0 (parameters), 6 u (input), 7 y, 8 z (outputs);
  * source 0 y (output). State get/set always work; the model description declares them as asked.
  */
@@ -27,6 +31,12 @@
 #endif
 #ifndef SCALAR_DERIVATIVES
 #define SCALAR_DERIVATIVES 0
+#endif
+#ifndef SCALAR_DIRECTIONAL
+#define SCALAR_DIRECTIONAL 0
+#endif
+#ifndef SCALAR_DIRECTIONAL_FACTOR
+#define SCALAR_DIRECTIONAL_FACTOR 1.0
 #endif
 #if SCALAR_SOURCE
 #ifndef SOURCE_Y
@@ -257,6 +267,36 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
     m->s.t = t + h;
     return fmi2OK;
 }
+
+#if SCALAR_DIRECTIONAL
+/* d(unknowns)/d(knowns) times the seed: the unknowns y, z, the known u (the plant's only direct dependency) */
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference unknown[], size_t nu,
+                                        const fmi2ValueReference known[], size_t nk, const fmi2Real seed[],
+                                        fmi2Real out[]) {
+    Scalar *m = c;
+    if (SCALAR_SOURCE || m->mode == MODE_INSTANTIATED || m->mode == MODE_TERMINATED) {
+        log_error(m, "fmi2GetDirectionalDerivative: not available in this state");
+        return fmi2Error;
+    }
+    double du = 0.0;
+    for (size_t j = 0; j < nk; j++) {
+        if (known[j] != VR_U || !isfinite(seed[j])) {
+            log_error(m, "fmi2GetDirectionalDerivative: known %u is no input (or its seed is not finite)", known[j]);
+            return fmi2Error;
+        }
+        du += seed[j];
+    }
+    for (size_t i = 0; i < nu; i++) {
+        if (unknown[i] != VR_Y && unknown[i] != VR_Z) {
+            log_error(m, "fmi2GetDirectionalDerivative: unknown %u is no output", unknown[i]);
+            return fmi2Error;
+        }
+        out[i] = unknown[i] == VR_Z ? SCALAR_DIRECTIONAL_FACTOR * m->par[3] * du : 0.0;
+    }
+    return fmi2OK;
+}
+#define PLANT_DIRECTIONAL 1
+#endif
 
 #define PLANT Scalar
 #include "plant_common.h"

@@ -108,6 +108,7 @@ class Component:
         self.can_interpolate = bool(cs.canInterpolateInputs) and not self.is_fmi3
         self.max_derivative = int(cs.maxOutputDerivativeOrder or 0)
         self.can_rollback = bool(cs.canGetAndSetFMUstate)
+        self.provides_partials = _fmi.provides_directional_derivatives(self.md, self.unzipdir)
         self.units = _units.fmu_units(self.md)
         # (kind, value reference) -> variable: FMI 2.0 references are unique per type (an Enumeration shares
         # the Integers'), FMI 3.0 references over all types
@@ -255,6 +256,13 @@ class Component:
         if self.maps:
             values = [self._converted(r, v, True) for r, v in zip(refs, values)]
         self.fmu.setRealInputDerivatives(refs, [order] * len(refs), [float(v) for v in values])
+
+    def directional(self, unknowns, knowns, seed):
+        """``fmi2GetDirectionalDerivative`` / ``fmi3GetDirectionalDerivative``: the change of the outputs
+        ``unknowns`` for the change ``seed`` of the inputs ``knowns`` (value references; each in its variable's
+        own unit)."""
+        return [float(x) for x in self.fmu.getDirectionalDerivative(list(unknowns), list(knowns),
+                                                                    [float(v) for v in seed])]
 
     def _converted(self, ref, v, derivative):
         m = self.maps.get(ref)

@@ -159,6 +159,21 @@ def binary_folder(unzipdir, md):
     return folder, None, found
 
 
+def provides_directional_derivatives(md, unzipdir):
+    """Whether a Co-Simulation FMU declares directional derivatives: FMI 2.0 ``providesDirectionalDerivative``
+    (read by fmpy), FMI 3.0 ``providesDirectionalDerivatives`` (read here: fmpy keeps only the FMI 2.0 name)."""
+    if not fmi3(md):
+        return bool(md.coSimulation.providesDirectionalDerivative)
+    import os
+    import xml.etree.ElementTree as ET
+
+    try:
+        cs = ET.parse(os.path.join(unzipdir, "modelDescription.xml")).getroot().find("CoSimulation")
+    except (OSError, ET.ParseError):
+        return False
+    return cs is not None and cs.get("providesDirectionalDerivatives") in ("true", "1")
+
+
 def slave_class(is_fmi3):
     """fmpy's FMI 2.0 or FMI 3.0 Co-Simulation slave class, with the master's interface."""
     return _fmu3_class() if is_fmi3 else _fmu2_class()

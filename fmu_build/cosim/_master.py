@@ -333,6 +333,7 @@ def _execute(run, start_values, t0, stop_time, H, progress):
     result.steps, result.rejected = run.accepted, run.rejected
     result.error_estimates = list(run.estimates)
     result.loop_gains = list(run.loops.gains)
+    result.loop_stats = dict(run.loops.stats)
     result.jumps = list(run.jumps)
     result.early_returns = list(run.early_returns)
     result.dropped_derivatives = dict(run.derivs.dropped)

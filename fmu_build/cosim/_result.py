@@ -43,6 +43,12 @@ class CosimResult(np.ndarray):
     loop_gains : list of float
         The gain of each algebraic loop (``loops``) measured at its cut connection (NaN if its
         iterates never moved).
+    loop_stats : dict
+        How the algebraic loops were solved: ``method`` (``"newton"`` with the FMUs' directional
+        derivatives, ``"anderson"``; None without loops), ``solves``, the ``passes`` of the exchange plan
+        they took, ``derivative_calls`` (``GetDirectionalDerivative``), ``check_passes`` (gain checks) and
+        ``fallbacks`` (solves Newton's method did not finish, ended by Anderson acceleration; a warning
+        says when the derivatives were given up).
 
     Examples
     --------
@@ -54,8 +60,7 @@ class CosimResult(np.ndarray):
     def __array_finalize__(self, obj):
         for key, default in (("success", True), ("message", "ok"), ("loops", []), ("order", []), ("steps", 0),
                              ("rejected", 0), ("error_estimates", []), ("jumps", []), ("early_returns", []),
-                             ("dropped_derivatives", {}),
-                             ("loop_gains", [])):
+                             ("dropped_derivatives", {}), ("loop_gains", []), ("loop_stats", {})):
             setattr(self, key, getattr(obj, key, default))
 
 
