@@ -89,7 +89,8 @@ class OutputDerivatives:
         They may depend on the FMU's inputs: the inputs' values (and, for an FMU that interpolates, the
         derivatives known so far) are set first. When such input derivatives come from other FMUs' output
         derivatives (``loop``), the derivatives are the fixed point of one sweep over the FMUs, solved
-        by Anderson acceleration to ``rtol``; a loop that does not converge ends the run naming it.
+        by Anderson acceleration to ``rtol`` in the derivatives a sweep sends on (the orders nobody
+        receives follow from them); a loop that does not converge ends the run naming it.
         ``fallback[j - 1, s]``: the input derivative of order ``j`` sent for slot ``s`` where its
         derivative is unknown or not trusted (the extrapolation polynomial's, as at the step start).
         """
@@ -133,8 +134,7 @@ class OutputDerivatives:
                 sweep(fp.x)  # the FMUs back at the fixed point
                 self._check_gain(unknown, t)
             # the unknowns at the fixed point, the other derivatives as the last sweep (from it) gave them
-            last = swept[0]
-            d = np.where(np.isfinite(d) & np.isfinite(last), last, d)
+            d = swept[0].copy()
             d[unknown] = fp.gx
         self._drop_non_finite(d, t)
         d[:, ~self.trusted] = np.nan
