@@ -89,7 +89,8 @@ class OutputDerivatives:
         They may depend on the FMU's inputs: the inputs' values (and, for an FMU that interpolates, the
         derivatives known so far) are set first. When such input derivatives come from other FMUs' output
         derivatives (``loop``), the derivatives are the fixed point of one sweep over the FMUs, solved
-        by Anderson acceleration to ``rtol``; a loop that does not converge ends the run naming it.
+        by Anderson acceleration to ``rtol`` in the derivatives a sweep sends on (the orders nobody
+        receives follow from them); a loop that does not converge ends the run naming it.
         ``fallback[j - 1, s]``: the input derivative of order ``j`` sent for slot ``s`` where its
         derivative is unknown or not trusted (the extrapolation polynomial's, as at the step start).
         """
@@ -99,34 +100,59 @@ class OutputDerivatives:
         first = d.copy()
         if self.loop:
             self._sweep(d, t)  # the second sweep sees every derivative the first one found
-            known = np.isfinite(d)
-            settled = np.array_equal(known, np.isfinite(first)) and np.all(
-                np.abs(d[known] - first[known]) <= max(self.rtol, 1e-13) * (1.0 + np.abs(d[known])))
+            # the loop's unknowns are the derivatives a sweep sends on as input derivatives; the others are
+            # functions of them, iterated on only through them: a native DAE FMU's third and fourth
+            # derivatives of a state are -lambda and lambda^2 times its second, itself a cancellation
+            # -lambda (x' + u''), so that the unknowns' rounding reaches them times lambda^k, beyond any
+            # tolerance at a large lambda (docs/cosimulation.md, 'With our own DAE FMU')
+            sent = self._sent()
+            unknown = np.isfinite(d) & sent
+            settled = np.array_equal(unknown, np.isfinite(first) & sent) and np.all(
+                np.abs(d[unknown] - first[unknown]) <= max(self.rtol, 1e-13) * (1.0 + np.abs(d[unknown])))
+            swept = [d]
 
             def sweep(x):
                 trial = np.full_like(d, np.nan)
-                trial[known] = x
+                trial[unknown] = x
                 self._sweep(trial, t)
-                return np.where(np.isfinite(trial[known]), trial[known], x)
+                swept[0] = trial
+                return np.where(np.isfinite(trial[unknown]), trial[unknown], x)
 
             def tolerance(x):
                 return max(self.rtol, 1e-13) * (1.0 + np.abs(x))
 
-            fp = anderson(sweep, d[known], tolerance, MAX_SWEEPS) if not settled or self.gain is None else None
+            fp = anderson(sweep, d[unknown], tolerance, MAX_SWEEPS) if not settled or self.gain is None else None
             if fp is None:
                 self._drop_non_finite(d, t)
                 d[:, ~self.trusted] = np.nan
                 return d
             if not fp.converged:
-                self._not_converged(fp, known, t)
-            if self.gain is None and known.any():  # measured once, at the start
-                self.gain = float(np.max(np.abs(np.linalg.eigvals(jacobian(sweep, fp.x, fp.gx)))))
+                self._not_converged(fp, unknown, t)
+            if self.gain is None:  # measured once, at the start
+                self.gain = (float(np.max(np.abs(np.linalg.eigvals(jacobian(sweep, fp.x, fp.gx)))))
+                             if unknown.any() else 0.0)
                 sweep(fp.x)  # the FMUs back at the fixed point
-                self._check_gain(known, t)
-            d[known] = fp.gx
+                self._check_gain(unknown, t)
+            # the unknowns at the fixed point, the other derivatives as the last sweep (from it) gave them
+            d = swept[0].copy()
+            d[unknown] = fp.gx
         self._drop_non_finite(d, t)
         d[:, ~self.trusted] = np.nan
         return d
+
+    def _sent(self):
+        """Mask over ``(order - 1, slot)``: the derivatives a sweep sends to the FMUs of ``loop`` (``_of``)."""
+        mask = np.zeros((self.nder, len(self.layout.sources)), dtype=bool)
+        for n in self.loop:
+            top = self._top(n)
+            for s, _, w in self.layout.inputs_of[n]:
+                if w == "Real":
+                    mask[:top, s] = True
+        return mask
+
+    def _top(self, n):
+        """The highest input-derivative order a sweep sends ``n`` from the derivatives it reads."""
+        return min(self.nder, 2, max(self.coupling.accepts.get(n, 0), 1))
 
     def _drop_non_finite(self, d, t):
         """An FMU that gives output derivatives and returns one that is not finite: that output's derivatives
@@ -178,7 +204,7 @@ class OutputDerivatives:
             reals = [(s, v) for s, v, w in layout.inputs_of[n] if w == "Real"]
             if n in self.loop and reals:
                 accepts = coupling.accepts.get(n, 0)
-                top = min(self.nder, 2, max(accepts, 1))
+                top = self._top(n)
                 # in a cycle the orders beyond are sent as 0 (for the reason given in Coupling.set_inputs)
                 last = max(top, accepts) if n in coupling.zero_fill else top
                 for j in range(1, last + 1):

@@ -386,6 +386,17 @@ def test_native_dae_fmu_in_the_loop_converges_at_order_p_with_lambda_h_fixed(nat
     assert errs[1] < (5e-3 if p == 1 else 2e-4), errs
 
 
+def test_native_dae_fmu_in_the_loop_derivative_sweeps_settle_at_large_lambda(native_loops):
+    """g = 0.2, p = 2, every order the master has, lambda H = 1 down to H = 0.005 (lambda = 200). The loop
+    through the derivatives has the gain 0.2 and settles in three sweeps; the FMU's third and fourth
+    derivatives of x2 (no FMU receives them) are its second times -lambda and lambda^2, and the second,
+    -lambda (x2' + w''), is a cancellation: rounding of 1e-14 that grows to 6e-10, beyond the sweeps'
+    tolerance. They are no unknowns of the loop, and a run whose loop has converged goes on: order 2."""
+    errs = _native_loop_errors(native_loops[0.2], 0.2, 2, 1.0, steps=(0.01, 0.005))
+    assert np.all(np.isfinite(errs)), errs
+    assert abs(np.log2(errs[0] / errs[1]) - 2) < 0.25 and errs[1] < 1e-5, errs
+
+
 def test_native_dae_fmu_with_fixed_lambda_loses_one_order(native_loops):
     """lambda fixed (10) while H shrinks: x2 lags -w' by O(w''/lambda) with p = 1: no convergence."""
     errs = _native_loop_errors(native_loops[0.2], 0.2, 1, None, options=", max_input_order=1")
