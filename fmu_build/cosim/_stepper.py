@@ -26,6 +26,11 @@ extrapolation restarts at degree 0). FMUs that cannot roll back keep every step:
 an indicator (a warning says so) and the run ends when the steps kept add up to ``sum err H`` beyond
 ``BUDGET`` times the time span.
 
+A jump of the checked values right at a communication point (an FMU whose outputs move as soon as it
+receives new inputs) is the error of the step before, found one step late, when that step is already
+taken: it raises that step's estimate and counts in ``sum err H``; above ``BUDGET`` the run goes on to
+the stop time (every point kept) and ends with ``success=False`` naming the largest such point.
+
 While the history is shorter than the extrapolation's degree (the start, after a jump) the orders the
 master lacks reach the FMUs as 0: an output that follows its input's derivative (``x2 = -u'``) is then off
 by the derivative of the input error, and its band, made of the FMU's derivatives computed from the same
@@ -113,6 +118,7 @@ class Controller:
         self.H_last = None  # the last step taken
         self.ahead = None  # (t, H, error) of the last step from t repeated for the error found at its end
         self.attempts, self.budget, self.warned = 0, 0.0, False
+        self.late_points, self.late_worst = 0, None  # late errors above BUDGET: (t, t_end, err, name, value, jump)
         self.recent, self.last_worst = collections.deque(maxlen=PACE), None
 
     def advance(self, t0, stop_time, H, progress):
@@ -130,6 +136,15 @@ class Controller:
             t = stop_time if H_taken == stop_time - t else t + H_taken
             progress.update(t - t0)
             self._pace(t, stop_time)
+        if self.late_worst is not None:
+            t_from, t_at, late, name, value, change = self.late_worst
+            raise _Stop(f"{self.late_points} communication point(s) beyond {BUDGET:g} times the tolerance, found one "
+                        f"step late (the jump of the checked values when the FMUs received the next step's inputs), "
+                        f"the largest at t = {t_at!r}: {name} = {value:.6g} there, off by {abs(change):.3g} "
+                        f"({late:.3g} times the tolerance; the step from t = {t_from!r}); every point is kept. An "
+                        "output that follows its input's derivative needs a smaller `max_step`; an FMU relaxing a "
+                        "start that is not consistent at the rate of the step (`lambda_per_step`) a consistent "
+                        "start, which no step size replaces")
 
     def _pace(self, t, stop_time):
         """A tolerance met only by ever tinier steps: the run ends when, at the pace of its last ``PACE``
@@ -299,7 +314,13 @@ class Controller:
             run.estimates[-1] = max(run.estimates[-1], late)
         if self.H_last is not None:
             self.budget += late * self.H_last
-            self._kept(t - self.H_last, t, late, m.names[int(np.argmax(np.abs(change) / m.scale))], late=True)
+            j = int(np.argmax(np.abs(change) / m.scale))
+            if late > BUDGET:  # the point t is off by more than the run may claim: no success at the end
+                self.late_points += 1
+                if self.late_worst is None or late > self.late_worst[2]:
+                    value = np.concatenate([run.history.v[-1], run.history.x[-1]])[j]
+                    self.late_worst = (t - self.H_last, t, late, m.names[j], float(value), float(change[j]))
+            self._kept(t - self.H_last, t, late, m.names[j], late=True)
             if late > 1.0:  # the step before was too large: so would be one of its size now
                 H_ref = min(H_ref, self.H_last * max(0.2, 0.9 * late ** (-1.0 / m.order)))
         return H_ref
