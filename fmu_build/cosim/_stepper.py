@@ -138,13 +138,13 @@ class Controller:
             self._pace(t, stop_time)
         if self.late_worst is not None:
             t_from, t_at, late, name, value, change = self.late_worst
-            raise _Stop(f"{self.late_points} communication point(s) beyond {BUDGET:g} times the tolerance, found one "
-                        f"step late (the jump of the checked values when the FMUs received the next step's inputs), "
-                        f"the largest at t = {t_at!r}: {name} = {value:.6g} there, off by {abs(change):.3g} "
-                        f"({late:.3g} times the tolerance; the step from t = {t_from!r}); every point is kept. An "
-                        "output that follows its input's derivative needs a smaller `max_step`; an FMU relaxing a "
-                        "start that is not consistent at the rate of the step (`lambda_per_step`) a consistent "
-                        "start, which no step size replaces")
+            raise _Stop(f"the run cannot claim its tolerance at {self.late_points} communication point(s): an error "
+                        f"beyond {BUDGET:g} times the tolerance found one step late, the largest at t = {t_at!r}, where "
+                        f"{name} = {value:.6g} jumped by {change:.3g} ({late:.3g} times the tolerance) as soon as its "
+                        f"FMU received the next step's inputs (counted as the error of the step from t = {t_from!r}, "
+                        "already taken); every point is kept. An output that follows its input's derivative needs "
+                        "a smaller `max_step`; an FMU relaxing a start that is not consistent at the rate of the step "
+                        "(`lambda_per_step`) a consistent start, which no step size replaces")
 
     def _pace(self, t, stop_time):
         """A tolerance met only by ever tinier steps: the run ends when, at the pace of its last ``PACE``
@@ -341,7 +341,8 @@ class Controller:
         """A step kept with the estimate ``err``: beyond ``BUDGET`` times the tolerance (or the steps kept so far
         beyond ``BUDGET`` times it over the span) the run cannot claim its tolerance and ends. An estimate found
         ``late`` (a jump at the next step's start, e.g. an FMU relaxing a start that was not consistent at the
-        rate of the step, which no smaller step undoes) counts in the sum only."""
+        rate of the step, which no smaller step undoes) counts in the sum here; above ``BUDGET`` ``_floor`` records
+        it, and the run, taken to the stop time, ends with ``success=False`` (``advance``)."""
         if (late or err <= BUDGET) and self.budget <= BUDGET * self.span:
             return
         if late:
