@@ -69,3 +69,22 @@ def test_a_consistent_start_is_not_refused(follower_system):
     assert out["success"], out["message"]
     assert t[-1] == 2.0 and scaled.max() <= 10, scaled.max()
     assert max(out["estimates"]) <= 10, max(out["estimates"])
+
+
+def test_a_run_with_jumps_claims_no_estimate_above_ten_times_the_tolerance(tmp_path):
+    """A square wave into a lag: each located jump is crossed by a step of at most H_ref / err, whose share
+    of the run's error is one ordinary step's. Found: result.error_estimates held the jump itself (1000
+    times the tolerance) for each crossing step of a run that says success=True."""
+    import plants
+
+    system = {"components": {"s": str(plants.build_source(tmp_path, "Square", "fmod(t, 2.0) < 1.0 ? 1.0 : -1.0")),
+                             "l": str(plants.build_scalar_plant(tmp_path, "Lag", -1.0, 1.0))},
+              "connections": [("s.y", "l.u")]}
+    out, _ = run(f"""
+r = cosimulate({system!r}, 5.0, 0.01, step_control=True, rtol=1e-3, extrapolation=2, output=["l.y"])
+print(json.dumps({{"success": bool(r.success), "message": r.message, "estimates": list(r.error_estimates),
+                   "jumps": len(r.jumps)}}))
+""")
+    assert out["success"], out["message"]
+    assert out["jumps"] >= 4
+    assert max(out["estimates"]) <= 10, sorted(out["estimates"])[-5:]
