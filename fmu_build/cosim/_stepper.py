@@ -221,12 +221,16 @@ class Controller:
             run.accept(t_new, H, m)
             self.budget += m.err * H
             self.H_last = H
+            err = m.err
             if verdict == "cross":
+                # a crossing step's defect is the jump (``result.jumps``); its share err H of the run's error is
+                # that of an ordinary step of H_ref with the estimate err H / H_ref (at most 1 unless min_step
+                # bounded the crossing step): that is its estimate
+                err = run.estimates[-1] = m.err * H / self.jump.H_ref
                 run.crossed(t, t_new, m.names[self.jump.index], self.jump.size)
                 self.jump, self.prev, self.err_prev, self.after_reject = None, None, None, False
             self.last_worst = m.names[m.worst]
-            # a crossing step's estimate is the jump; its share err H of the budget is one ordinary step's
-            self._kept(t, t_new, 0.0 if verdict == "cross" else m.err, m.names[m.worst])
+            self._kept(t, t_new, err, m.names[m.worst])
             return H, H_next
 
     def _looks_ahead(self):
