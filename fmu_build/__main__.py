@@ -4,6 +4,7 @@ Each subcommand is one pair of functions: ``_add_<name>(sub)`` declares its
 arguments and ``_run_<name>(args)`` runs it and returns the exit status.
 """
 import argparse
+import math
 import os
 import subprocess
 import sys
@@ -462,6 +463,12 @@ def _add_cosim(sub):
     cosim.add_argument("--iterations", type=int, default=0, help="step repeats with rollback (0: explicit)")
     cosim.add_argument("--step-control", action="store_true", help="vary the macro step (--step-size: the first)")
     cosim.add_argument("--rtol", type=float, default=1e-4, help="relative tolerance of the step control")
+    cosim.add_argument("--atol", type=float, help="absolute tolerance of the step control (default: --rtol)")
+    cosim.add_argument("--min-step", type=float,
+                       help="smallest macro step of the step control (default: 1e-12 times --step-size)")
+    cosim.add_argument("--max-step", type=float,
+                       help="largest macro step of the step control (default: the time span); below the "
+                            "shortest event of the sources, which no master sees inside a step")
     cosim.add_argument("--lambda-per-step", type=float, help="set each DAE FMU's lambda to this / H")
     cosim.add_argument("--no-early-return", action="store_true",
                        help="instantiate FMI 3.0 FMUs without early return (events handled inside the step)")
@@ -496,6 +503,24 @@ def _write_csv(path, result):
             writer.writerow([cell(row[n]) for n in names])
 
 
+def _check_step_control(args):
+    """The step control's options: positive and finite, ``--min-step <= --step-size <= --max-step``, and only
+    with ``--step-control`` (a fixed-step run would ignore them)."""
+    from ._cli_checks import check_step
+
+    for option in ("--rtol", "--atol", "--min-step", "--max-step"):
+        value = getattr(args, option[2:].replace("-", "_"))
+        check_step(value, option)
+        if value is not None and option != "--rtol" and not args.step_control:
+            raise ValueError(f"`{option}` bounds the step control: it needs `--step-control` (found {value!r} "
+                             "without it; a fixed-step run takes --step-size).")
+    low = args.min_step if args.min_step is not None else 0.0
+    high = args.max_step if args.max_step is not None else math.inf
+    if not low <= args.step_size <= high:
+        raise ValueError(f"`--min-step` <= `--step-size` <= `--max-step` must hold; found {args.min_step!r}, "
+                         f"{args.step_size!r}, {args.max_step!r}.")
+
+
 def _run_cosim(args):
     """``lsc-fmu cosim``: run fmu_build.cosimulate and write CSV (and a plot)."""
     import warnings
@@ -507,6 +532,7 @@ def _run_cosim(args):
     try:
         check_span(0.0, check_time(args.stop_time, "--stop-time"), check_step(args.step_size, "--step-size"),
                    "--stop-time", "--step-size")
+        _check_step_control(args)
         outputs = [Path(args.result)] + ([Path(args.result).with_suffix(".png")] if args.plot else [])
         if args.plot and outputs[1] == outputs[0]:
             raise ValueError(f"`--plot` writes the plot to the result's name with .png, which is the result "
@@ -528,7 +554,8 @@ def _run_cosim(args):
                                 extrapolation=args.extrapolation, iterations=args.iterations, start_values=start,
                                 output=args.output, step_control=args.step_control,
                                 rtol=args.rtol if args.step_control else 1e-10, lambda_per_step=args.lambda_per_step,
-                                early_return=not args.no_early_return)
+                                early_return=not args.no_early_return,
+                                atol=args.atol, min_step=args.min_step, max_step=args.max_step)
     except (ValueError, TypeError, OSError) as exc:
         print(f"lsc-fmu: error: {exc}", file=sys.stderr)
         return 2

@@ -11,11 +11,16 @@ and calls a value divergent when, over the last ``WINDOW`` steps, its defect exc
 magnitude it had before in all but two of them, it changed sign, and it grew ``GROWTH``-fold. A root above
 +1 makes an exponential like any physical one and cannot be told from the values; the loops that make one
 (an algebraic loop cut with gain above 1) are checked at the start (``LoopSolver.start``). What can be told
-is whether the step resolves the growth: a value along a cycle that grew past ``FAR`` times the coupling's
-start scale while its defect stayed above ``UNRESOLVED`` of its size in all but two of the last ``WINDOW``
-steps changes faster than the extrapolation follows (for ``e^(mu t)`` the relative defect of a degree-q extrapolation is about
-``(mu H)^(q + 1)``): the run stops, naming it, whether the growth is the coupling's own instability (a
-root ``r > 1`` gives ``(r - 1)^(q + 1) / r``) or a physical one the macro step is too long for. A
+is whether the step resolves the growth, from quantities without a scale: the relative defect
+``|d| / |y|`` of a value and its growth per step. A growth ``e^(mu t)`` that the step resolves keeps both
+small and steady (a held input: ``|d| / |y| = 1 - e^(-mu H)``, ``mu H`` per step); a value that more than
+doubles in a step while its extrapolation misses it by more than half its size (``UNRESOLVED``) is
+followed by no extrapolation, whatever its amplitude. When that holds in ``FAST - 1`` of the last ``FAST``
+steps, and the value has passed the coupling's start scale (so that a start from zero, ``t^k``, whose
+first steps also double, is not taken for it), the run stops, naming it, whether the growth is the
+coupling's own instability (a root ``r >= 2`` gives ``|d| / |y| >= (r - 1)^(q + 1) / r >= 1/2``) or a
+physical one the macro step is too long for. An instability growing less than twofold per step looks
+like a resolved exponential and is not stopped by this check (a swing through zero is, above). A
 ``max_growth`` the user sets replaces this check.
 """
 
@@ -30,8 +35,13 @@ RECOMMENDED = ("docs/cosimulation.md recommends, for a loop through a differenti
                "lambda_per_step=1.0 (or a smaller loop gain; see 'Divergence')")
 WINDOW = 8  # consecutive steps of a value off its extrapolation by more than its size that mean divergence
 GROWTH = 2.0  # growth of the value over those steps
-UNRESOLVED = 0.05  # a defect above this fraction of the value, step after step: the step does not resolve it
-FAR = 1e3  # ... of a value grown past this multiple of the coupling's start scale
+UNRESOLVED = 0.5  # a defect above this fraction of the value while it more than doubles: the step does not follow it
+FAST = 4  # ... in all but one of this many consecutive steps
+
+
+def first_of(values, n):
+    """``|values|`` ``n`` steps before the last row (the oldest row kept if fewer)."""
+    return np.abs(values[max(0, len(values) - 1 - n)])
 
 
 class DivergenceMonitor:
@@ -64,31 +74,33 @@ class DivergenceMonitor:
             raise _Stop(f"|{self.layout.name(s)}| = {mag[s]:.3g} exceeds max_growth ({self.max_growth:.3g}) times "
                         f"the start scale ({self.scale:.3g}) at t = {t!r}")
         off = self.watch & (defect > self.peak) & (self.peak > 0)
-        fast = self.watch & (defect > UNRESOLVED * mag) & (mag > 0)
+        before = np.abs(self.values[-1])
+        fast = self.watch & (defect > UNRESOLVED * mag) & (mag > 2.0 * before) & (mag > 0)
         self.peak = np.maximum(self.peak, mag)
         self.off = np.vstack([self.off, off])[-WINDOW:]
-        self.fast = np.vstack([self.fast, fast])[-WINDOW:]
+        self.fast = np.vstack([self.fast, fast])[-FAST:]
         self.values = np.vstack([self.values, value])[-(WINDOW + 1):]
-        if len(self.off) < WINDOW:
-            return
-        first = np.abs(self.values[0])
-        swings = np.any(np.sign(self.values[1:]) != np.sign(self.values[:-1]), axis=0)
-        bad = np.flatnonzero((self.off.sum(axis=0) >= WINDOW - 2) & swings & (mag > GROWTH * first))
-        if bad.size:
-            s = int(bad[0])
-            self._diverged(s, t, f"{self.layout.name(s)} left its extrapolation by more than the largest magnitude "
-                                 f"it had before in {int(self.off[:, s].sum())} of the last {WINDOW} steps, swinging "
-                                 f"through zero and growing {mag[s] / first[s]:.3g}-fold (to {value[s]:.3g})")
-        if self.max_growth is None:  # (a bound the user set replaces this one)
-            grows = np.flatnonzero((self.fast.sum(axis=0) >= WINDOW - 2) & (mag > FAR * self.scale))
+        if len(self.off) == WINDOW:
+            first = np.abs(self.values[0])
+            swings = np.any(np.sign(self.values[1:]) != np.sign(self.values[:-1]), axis=0)
+            bad = np.flatnonzero((self.off.sum(axis=0) >= WINDOW - 2) & swings & (mag > GROWTH * first))
+            if bad.size:
+                s = int(bad[0])
+                self._diverged(s, t, f"{self.layout.name(s)} left its extrapolation by more than the largest "
+                                     f"magnitude it had before in {int(self.off[:, s].sum())} of the last {WINDOW} "
+                                     f"steps, swinging through zero and growing {mag[s] / first[s]:.3g}-fold (to "
+                                     f"{value[s]:.3g})")
+        if self.max_growth is None and len(self.fast) == FAST:  # (a bound the user set replaces this one)
+            grows = np.flatnonzero((self.fast.sum(axis=0) >= FAST - 1) & (mag > self.scale))
             if grows.size:
                 s = int(grows[0])
-                raise _Stop(f"the coupling is not resolved by the macro step: {self.layout.name(s)} grew to "
-                            f"{value[s]:.3g} ({mag[s] / self.scale:.3g} times the coupling's start scale), off its "
-                            f"extrapolation by more than {UNRESOLVED:.0%} of its size in {int(self.fast[:, s].sum())} of "
-                            f"the last {WINDOW} steps, at t = {t!r}: a physical growth that fast needs a shorter step "
-                            "(or step_control=True); one the components do not have is the coupling's own instability: "
-                            f"{RECOMMENDED}")
+                grown = mag[s] / max(first_of(self.values, FAST)[s], 1e-300)
+                raise _Stop(f"the coupling is not resolved by the macro step: {self.layout.name(s)} grew "
+                            f"{grown:.3g}-fold in the last {FAST} steps (to {value[s]:.3g}), more than doubling "
+                            f"while off its extrapolation by more than {UNRESOLVED:.0%} of its size in "
+                            f"{int(self.fast[:, s].sum())} of them, at t = {t!r}: a physical growth that fast needs a "
+                            "shorter step (or step_control=True); one the components do not have is the coupling's "
+                            f"own instability: {RECOMMENDED}")
 
     def _diverged(self, s, t, what):
         name = self.layout.name(s)

@@ -29,7 +29,9 @@ class CosimResult(np.ndarray):
     rejected : int
         Macro steps rejected by the step control (and repeated smaller).
     error_estimates : list of float
-        The step control's scaled error estimate of every accepted step (empty without it).
+        The step control's scaled error estimate of every accepted step (empty without it); a step
+        that crossed a jump (``jumps``) carries its share ``err H / H_ref`` of the run's error (``H_ref``:
+        the step before the jump), an error found one step late raises the step it belongs to.
     jumps : list of tuple
         ``(t, t_end, "component.variable", size)`` of every jump the step control located and
         crossed in the step ``[t, t_end]`` (the extrapolation restarts after each).

@@ -26,6 +26,11 @@ extrapolation restarts at degree 0). FMUs that cannot roll back keep every step:
 an indicator (a warning says so) and the run ends when the steps kept add up to ``sum err H`` beyond
 ``BUDGET`` times the time span.
 
+A jump of the checked values right at a communication point (an FMU whose outputs move as soon as it
+receives new inputs) is the error of the step before, found one step late, when that step is already
+taken: it raises that step's estimate and counts in ``sum err H``; above ``BUDGET`` the run goes on to
+the stop time (every point kept) and ends with ``success=False`` naming the largest such point.
+
 While the history is shorter than the extrapolation's degree (the start, after a jump) the orders the
 master lacks reach the FMUs as 0: an output that follows its input's derivative (``x2 = -u'``) is then off
 by the derivative of the input error, and its band, made of the FMU's derivatives computed from the same
@@ -114,6 +119,7 @@ class Controller:
         self.H_last = None  # the last step taken
         self.ahead = None  # (t, H, error) of the last step from t repeated for the error found at its end
         self.attempts, self.budget, self.warned = 0, 0.0, False
+        self.late_points, self.late_worst = 0, None  # late errors above BUDGET: (t, t_end, err, name, value, jump)
         self.recent, self.last_worst = collections.deque(maxlen=PACE), None
         self.event, self.replans = None, 0  # (t_e, component) where an FMU returned early from the step being taken
 
@@ -132,6 +138,15 @@ class Controller:
             t = stop_time if H_taken == stop_time - t else t + H_taken
             progress.update(t - t0)
             self._pace(t, stop_time)
+        if self.late_worst is not None:
+            t_from, t_at, late, name, value, change = self.late_worst
+            raise _Stop(f"the run cannot claim its tolerance at {self.late_points} communication point(s): an error "
+                        f"beyond {BUDGET:g} times the tolerance found one step late, the largest at t = {t_at!r}, where "
+                        f"{name} = {value:.6g} jumped by {change:.3g} ({late:.3g} times the tolerance) as soon as its "
+                        f"FMU received the next step's inputs (counted as the error of the step from t = {t_from!r}, "
+                        "already taken); every point is kept. An output that follows its input's derivative needs "
+                        "a smaller `max_step`; an FMU relaxing a start that is not consistent at the rate of the step "
+                        "(`lambda_per_step`) a consistent start, which no step size replaces")
 
     def _pace(self, t, stop_time):
         """A tolerance met only by ever tinier steps: the run ends when, at the pace of its last ``PACE``
@@ -231,12 +246,16 @@ class Controller:
                     run.crossed(t, t_new, *jump)
                     self.prev, self.err_prev, self.after_reject = None, None, False
             self.event = None
+            err = m.err
             if verdict == "cross":
+                # a crossing step's defect is the jump (``result.jumps``); its share err H of the run's error is
+                # that of an ordinary step of H_ref with the estimate err H / H_ref (at most 1 unless min_step
+                # bounded the crossing step): that is its estimate
+                err = run.estimates[-1] = m.err * H / self.jump.H_ref
                 run.crossed(t, t_new, m.names[self.jump.index], self.jump.size)
                 self.jump, self.prev, self.err_prev, self.after_reject = None, None, None, False
             self.last_worst = m.names[m.worst]
-            # a crossing step's estimate is the jump; its share err H of the budget is one ordinary step's
-            self._kept(t, t_new, 0.0 if verdict == "cross" else m.err, m.names[m.worst])
+            self._kept(t, t_new, err, m.names[m.worst])
             return H, H_next
 
     def _replan(self, early, t):
@@ -336,7 +355,13 @@ class Controller:
             run.estimates[-1] = max(run.estimates[-1], late)
         if self.H_last is not None:
             self.budget += late * self.H_last
-            self._kept(t - self.H_last, t, late, m.names[int(np.argmax(np.abs(change) / m.scale))], late=True)
+            j = int(np.argmax(np.abs(change) / m.scale))
+            if late > BUDGET:  # the point t is off by more than the run may claim: no success at the end
+                self.late_points += 1
+                if self.late_worst is None or late > self.late_worst[2]:
+                    value = np.concatenate([run.history.v[-1], run.history.x[-1]])[j]
+                    self.late_worst = (t - self.H_last, t, late, m.names[j], float(value), float(change[j]))
+            self._kept(t - self.H_last, t, late, m.names[j], late=True)
             if late > 1.0:  # the step before was too large: so would be one of its size now
                 H_ref = min(H_ref, self.H_last * max(0.2, 0.9 * late ** (-1.0 / m.order)))
         return H_ref
@@ -357,7 +382,8 @@ class Controller:
         """A step kept with the estimate ``err``: beyond ``BUDGET`` times the tolerance (or the steps kept so far
         beyond ``BUDGET`` times it over the span) the run cannot claim its tolerance and ends. An estimate found
         ``late`` (a jump at the next step's start, e.g. an FMU relaxing a start that was not consistent at the
-        rate of the step, which no smaller step undoes) counts in the sum only."""
+        rate of the step, which no smaller step undoes) counts in the sum here; above ``BUDGET`` ``_floor`` records
+        it, and the run, taken to the stop time, ends with ``success=False`` (``advance``)."""
         if (late or err <= BUDGET) and self.budget <= BUDGET * self.span:
             return
         if late:

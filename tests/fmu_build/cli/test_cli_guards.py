@@ -197,3 +197,45 @@ def test_an_input_csv_with_a_byte_order_mark_or_quoted_names_is_read(tmp_path):
     csv.write_bytes(b'\xef\xbb\xbf"time","p"\n0,0\n1,2.5\n')
     data = check_input_csv(csv, {"p": 0.0}, set_names=())
     assert data.dtype.names == ("time", "p") and data["p"].tolist() == [0.0, 2.5]
+
+
+# -- the step control's bounds: checked by the command, passed to cosimulate ---------------------------
+def _empty_ssp(tmp_path):
+    ssp = tmp_path / "S.ssp"
+    with zipfile.ZipFile(ssp, "w") as zf:
+        zf.writestr("SystemStructure.ssd", "<ssd/>")
+    return ssp
+
+
+@pytest.mark.parametrize("options, needle", [
+    (["--step-control", "--atol", "0"], "`--atol` must be a positive finite number; found 0.0"),
+    (["--step-control", "--min-step", "nan"], "`--min-step` must be a positive finite number"),
+    (["--step-control", "--max-step", "-1"], "`--max-step` must be a positive finite number"),
+    (["--step-control", "--rtol", "inf"], "`--rtol` must be a positive finite number"),
+    (["--max-step", "0.5"], "`--max-step` bounds the step control: it needs `--step-control`"),
+    (["--atol", "1e-6"], "`--atol` bounds the step control: it needs `--step-control`"),
+    (["--step-control", "--min-step", "0.2"], "`--min-step` <= `--step-size` <= `--max-step` must hold"),
+    (["--step-control", "--max-step", "0.05"], "`--min-step` <= `--step-size` <= `--max-step` must hold"),
+])
+def test_cosim_step_control_options_are_checked(tmp_path, capsys, options, needle):
+    args = ["cosim", _empty_ssp(tmp_path), "--stop-time", "1", "--step-size", "0.1", *options, "-o", tmp_path / "r.csv"]
+    _refused(capsys, args, needle)
+
+
+def test_cosim_step_control_options_reach_cosimulate(tmp_path, monkeypatch):
+    """--atol, --min-step and --max-step are cosimulate's atol, min_step and max_step (None when not given)."""
+    import fmu_build.cosim
+
+    seen = []
+
+    def fake(*args, **kwargs):
+        seen.append(kwargs)
+        raise ValueError("stop here")
+
+    monkeypatch.setattr(fmu_build.cosim, "cosimulate", fake)
+    base = ["cosim", str(_empty_ssp(tmp_path)), "--stop-time", "1", "--step-size", "0.1", "-o", str(tmp_path / "r.csv")]
+    assert main(base + ["--step-control", "--rtol", "1e-5", "--atol", "1e-8", "--min-step", "1e-6",
+                        "--max-step", "0.25"]) == 2
+    assert main(base + ["--step-control"]) == 2
+    assert [(k["step_control"], k["rtol"], k["atol"], k["min_step"], k["max_step"]) for k in seen] == [
+        (True, 1e-5, 1e-8, 1e-6, 0.25), (True, 1e-4, None, None, None)]
