@@ -180,3 +180,66 @@ def test_a_loop_whose_gain_is_one_within_rounding_is_refused_not_answered(tmp_pa
         assert err <= 1e-9, (err, out["stats"])
     else:
         assert "algebraic loop" in out["message"] and "rounding" in out["message"], out["message"]
+
+
+BAD = {"nan": ("t > 0.45 ? NAN : 0.999 * s", None, "not finite"),
+       "inf": ("INFINITY", None, "not finite"),
+       "error": ("0.999 * s", "fmi{v}Error", "failed"),
+       "discard_late": ("0.999 * s", "t > 0.45 ? fmi{v}Discard : fmi{v}OK", "failed"),
+       "wrong_late": ("t > 0.45 ? 1.5 * s : 0.999 * s", None, "no Newton step reduced the residual")}
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("attack", sorted(BAD))
+def test_misleading_derivatives_end_in_anderson_with_the_reason_and_the_right_answer(tmp_path, version, attack):
+    """z1 = 1 + t + u1, z2 = 0.999 u2 whose derivative call gives NaN, Inf, an error, a late discard or a slope
+    wrong from t = 0.5 on: the run reaches (1 + t) / 0.001 to 1e-9, the warning names the reason, loop_stats
+    count the fallback and report Anderson in use at the end."""
+    part, status, reason = BAD[attack]
+    a = map_fmu(tmp_path, "A", ["1.0 + t + u[0]"], [["s"]], version=version)
+    b = map_fmu(tmp_path, "B", ["0.999 * u[0]"], [[part]], version=version,
+                status=status.format(v=version) if status else None)
+    out = cosim(pair(a, b), ["a.z0"])
+    assert out["success"], out["message"]
+    t = np.array(out["t"])
+    assert np.abs(np.array(out["v"]["a.z0"]) - (1 + t) / 0.001).max() <= 1e-9 * 2000, out["v"]["a.z0"][-3:]
+    newton = [w for w in out["warned"] if "Newton" in w]
+    assert len(newton) == 1 and reason in newton[0] and "b" in newton[0], out["warned"]
+    assert out["stats"]["method"] == "anderson" and out["stats"]["fallbacks"] >= 1, out["stats"]
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_declared_derivative_function_missing_from_the_binary_is_a_clean_refusal(tmp_path, src, version):
+    a = map_fmu(tmp_path, "A", ["1.0 + t + u[0]"], [["s"]], version=version)
+    b = map_fmu(tmp_path, "B", ["0.999 * u[0]"], [["0.999 * s"]], version=version, symbol=False)
+    out = cosim(pair(a, b), ["a.z0"])
+    assert "raised" in out and "does not load" in out["raised"] and "GetDirectionalDerivative" in out["raised"], out
+
+
+NONLINEAR = {"tanh": ("2.0 * tanh(u[0])", "2.0 * s / (cosh(u[0]) * cosh(u[0]))", lambda x: 2 * np.tanh(x)),
+             "cube": ("-0.5 * u[0] * u[0] * u[0]", "-1.5 * u[0] * u[0] * s", lambda x: -0.5 * x ** 3),
+             "saturation": ("fmin(fmax(0.9 * u[0], -2.0), 2.0)", "fabs(0.9 * u[0]) < 2.0 ? 0.9 * s : 0.0",
+                            lambda x: np.clip(0.9 * x, -2.0, 2.0))}
+
+
+@pytest.mark.parametrize("name", sorted(NONLINEAR))
+def test_a_nonlinear_loop_reaches_its_exact_fixed_point(tmp_path, src, name):
+    """z1 = 1 + t + u1, z2 = h(u2) with its exact (state-dependent) derivative: the fixed point x = 1 + t + h(x)
+    by root finding, to 1e-9; the derivatives stay in use."""
+    from scipy.optimize import brentq
+
+    out_c, part, h = NONLINEAR[name]
+    b = map_fmu(tmp_path, "H", [out_c], [[part]])
+    out = cosim(pair(src, b), ["a.z0"], stop=3.0)
+    assert out["success"], out["message"]
+    exact = [brentq(lambda x: x - (1 + t + h(x)), -50, 50, xtol=1e-14) for t in out["t"]]
+    assert np.abs(np.array(out["v"]["a.z0"]) - exact).max() <= 1e-9 * np.abs(exact).max()
+    assert out["stats"]["method"] == "newton", (out["stats"], out["warned"])
+
+
+@pytest.mark.parametrize("declared", ["(0.5 + t) * s", "0.5 * s"])
+def test_a_cut_loop_whose_gain_crosses_one_is_stopped_there(tmp_path, src, declared):
+    """z2 = (0.5 + t) u2 cut (iterations=0): the gain reaches 1 at t = 0.5, with right or stale derivatives."""
+    b = map_fmu(tmp_path, "B", ["(0.5 + t) * u[0]"], [[declared]])
+    out = cosim(pair(src, b), ["a.z0"], iterations=0, H=0.05)
+    assert not out["success"] and "gain 1" in out["message"] and "t = 0.5" in out["message"], out["message"]
