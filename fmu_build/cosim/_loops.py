@@ -52,7 +52,16 @@ class PartialsFailed(Exception):
 
 
 def _converged(f, x, tol, slope):
-    return bool(np.all(np.abs(f) <= tol(x) * np.minimum(1.0, slope)))
+    # G(x) - x is known only to the rounding of the values (an ulp of x and of G(x)), which puts x within
+    # rounding / |1 - g| of the fixed point at best: where that exceeds the tolerance, a zero residual (a whole
+    # range of x is a fixed point in the doubles) is no convergence
+    return bool(np.all(np.abs(f) <= tol(x) * np.minimum(1.0, slope)) and np.all(_unresolved(f, x, tol, slope) <= 1.0))
+
+
+def _unresolved(f, x, tol, slope):
+    """How far rounding alone leaves ``x`` from the fixed point, in units of the tolerance."""
+    rounding = np.finfo(float).eps * np.maximum(np.abs(x), np.abs(x + f))
+    return rounding / np.maximum(slope, np.finfo(float).tiny) / np.maximum(tol(x), np.finfo(float).tiny)
 
 
 def _scaled(f, x, tol):
@@ -418,6 +427,12 @@ class LoopSolver:
         loop, g = self.layout.cuts[i][0], gains[i]
         known = f"; its gain is {g:.6g}" if np.isfinite(g) else ""
         singular = " (gain 1: the loop's equations are singular there)" if abs(g - 1.0) < 1e-9 else ""
+        slope = _slope(gains, len(slots))
+        floor = _unresolved(fp.gx - fp.x, fp.x, self.tolerance, slope)[i]
+        if floor > 1.0 and np.isfinite(g):
+            singular = (f"; rounding alone leaves the fixed point uncertain by {floor:.3g} times the tolerance (the "
+                        f"doubles determine it only to {np.finfo(float).eps / slope[i]:.3g} relative, as its gain is "
+                        f"{abs(1.0 - g):.3g} from 1): no tolerance below that can be met")
         how = f" ({before} by Newton's method, then Anderson acceleration)" if before else ""
         raise _Stop(f"the algebraic loop through {', '.join(self.layout.loop_names[loop])} did not converge at "
                     f"t = {t!r}: after {fp.evaluations + before} passes{how} the change of "
