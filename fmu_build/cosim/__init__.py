@@ -36,7 +36,9 @@ The master couples FMUs by their connections, at a fixed or controlled macro ste
   solved at every exchange.
 - **Step iteration**: with ``iterations > 0`` every macro step is repeated
   (rollback) with the inputs interpolated through the end values just
-  computed, until the coupling values change by less than the tolerance.
+  computed (at ``p = 0`` the line through the start and end values, for the
+  FMUs that interpolate their inputs; the end value held, first order, for
+  the others), until the coupling values change by less than the tolerance.
 - **Output derivatives** are used while they are Taylor coefficients of the
   values produced (module ``_derivatives``).
 - **Step control**: ``step_control=True`` varies ``H`` to keep the defect of

@@ -47,6 +47,32 @@ class Coupling:
             return 0
         return min(self.nder, self.max_input_order, max(self.accepts.get(n, self.p), self.p))
 
+    def takes_slope(self, n):
+        """Whether ``n`` takes the slope of its Real inputs (order 1 of ``fmi2SetRealInputDerivatives``): an
+        iterated step at ``p = 0`` gives it the line through the start and end values instead of the end value."""
+        return self.layout.comps[n].can_interpolate and any(w == "Real" for _, _, w in self.layout.inputs_of[n])
+
+    def set_line(self, n, t_start, start, slope, hold):
+        """Inputs of ``n`` for a repeated step at ``p = 0`` (the step iteration): an FMU that takes slopes
+        gets the straight line through the Real values at the step's start (``start``) and its end (``slope``:
+        their difference over the step), the trapezoidal rule's input, the orders beyond it as 0 where it is
+        in ``zero_fill``; another holds the end values ``hold`` (implicit Euler's). Integer and Boolean inputs
+        hold ``hold``."""
+        if not self.takes_slope(n):
+            return self.set_inputs(n, t_start, None, None, hold)
+        pairs = self.layout.inputs_of[n]
+        source = np.where(self.layout.real, start, hold)
+        for s, _, w in pairs:
+            if w == "Real" and not math.isfinite(source[s] + slope[s]):  # passed on: the FMU must reject it
+                logger.warning("[%s] non-finite input %r (slope %r) from %s at t = %r", n, source[s], slope[s],
+                               self.layout.name(s), t_start)
+        self.calls.set_values(n, pairs, source, t_start)
+        reals = [(s, v) for s, v, w in pairs if w == "Real"]
+        last = max(1, self.accepts.get(n, 1)) if n in self.zero_fill else 1
+        for j in range(1, last + 1):
+            self.calls.set_input_derivatives(n, [v for _, v in reals], j,
+                                             [float(slope[s]) if j == 1 else 0.0 for s, _ in reals], t_start)
+
     def set_inputs(self, n, t_start, jet, has, hold, higher=None):
         """Inputs of ``n`` for the step from ``t_start``: values, and every derivative order the master has
         (up to ``top(n)``) if it interpolates. Integer and Boolean inputs hold their value ``hold``.

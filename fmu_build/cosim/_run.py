@@ -69,6 +69,14 @@ class Run:
         nder = max(p, min(max(givers, default=0), limit)) if p > 0 else 0
         self.coupling = Coupling(layout, self.calls, p, nder, max_input_order)
         self.coupling.zero_fill = set(layout.names) if control.enabled else layout.in_cycle
+        held = [n for n in layout.names if iterations and not p and any(w == "Real" for _, _, w in layout.inputs_of[n])
+                and not self.coupling.takes_slope(n)]
+        if held:
+            warnings.warn(f"iterations={iterations} at extrapolation=0: {', '.join(held)} cannot take input "
+                          "derivatives (no canInterpolateInputs, or FMI 3.0), so each repeated step holds their Real "
+                          "inputs at the step's end value (implicit Euler): first order in the step size for them, "
+                          "where FMUs that interpolate get the line through the start and end values (second order)",
+                          RuntimeWarning, stacklevel=4)
         self.derivs = OutputDerivatives(layout, self.calls, self.coupling, sink, self.rtol)
         self.history = History(p, nder)
         self.loops = LoopSolver(layout, self.coupling, self.rtol, self.atol, iterations)
@@ -134,9 +142,10 @@ class Run:
         coupling, history, names = self.coupling, self.history, self.layout.names
         value, real = coupling.value, self.layout.real
         self.loops.check_cuts(t)  # a cut loop's gain may have reached 1 since the last step
-        hold = value.copy()
+        hold, start = value.copy(), value.copy()
         band = self.band(t, H)
         jet, has = band.jet, band.has
+        line = end_values is not None and self.p == 0  # the step iteration at p = 0: start and end values
         if end_values is not None:
             if self.event_end is not None:
                 # the values after an event at the step's end are no input over the step: the event FMU's slots
@@ -151,7 +160,10 @@ class Run:
         higher = self._higher(t)
         if self.algorithm == "jacobi":
             for n in names:
-                coupling.set_inputs(n, t, jet, has, hold, higher)
+                if line:
+                    coupling.set_line(n, t, start, (hold - start) / H, hold)
+                else:
+                    coupling.set_inputs(n, t, jet, has, hold, higher)
             for n in names:
                 self.calls.do_step(n, t, H)
             self.loops.exchange(None if self.exchange_needed else set(names), t + H)
@@ -164,7 +176,11 @@ class Run:
                 end = (t + H, value.copy(), self.read_derivatives(t + H))
                 new, new_has, _ = history.jet(t, self.derivs.trusted, end)
                 jet_n, has_n = np.where(done, new, jet), np.where(done, new_has, has)
-            coupling.set_inputs(n, t, jet_n, has_n, np.where(done, value, hold), higher)
+            if line:  # (the sources already stepped: the line to their new values)
+                end_n = np.where(done, value, hold)
+                coupling.set_line(n, t, start, (end_n - start) / H, end_n)
+            else:
+                coupling.set_inputs(n, t, jet_n, has_n, np.where(done, value, hold), higher)
             self.calls.do_step(n, t, H)
             self.loops.exchange({n}, t + H)
             if n != self.event_end:  # values after an event at the step's end are no input over the step
