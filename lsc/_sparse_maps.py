@@ -28,7 +28,18 @@ def setup_forcing(comp):
         Bu = comp._input.input_map
         if comp.structure.E_diag is None:  # a diagonal E adds E^-1 B_u u through lsc._sparse_apply instead
             comp._Wu = comp._W @ Bu[s.diff_rows]
-        comp._Gu = [g @ Bu for g in s.Gamma]
+        comp._Gu = [_small_dense(g @ Bu) for g in s.Gamma]
+
+
+# A constraint rows' input map (a x m) with at most this many entries is kept dense: a product with it is then one
+# BLAS call, where a sparse product's dispatch costs more than the arithmetic of a few rows.
+_SMALL = 2**16
+
+
+def _small_dense(M):
+    if scipy.sparse.issparse(M) and M.shape[0] * M.shape[1] <= _SMALL:
+        return M.toarray()
+    return M
 
 
 def forcing_jet(comp, t, d=0):
