@@ -215,9 +215,7 @@ class SparseCompletion:
         """Right-hand side ``G x + g(t)`` in `scipy.integrate.solve_ivp` form (x: (n,) or (n, m))."""
         x = np.asarray(x, dtype=float)
         if self._apply is not None:
-            jet = forcing_jet(self, float(t))
-            cg, dcg = constraint_forcing(self, jet)
-            return self._apply.apply(x, self.lam, jet, cg, dcg)
+            return self._apply.rhs(self, float(t), x)
         rhs_f, cg, dcg = forcing_terms(self, float(t))
         if x.ndim == 2:
             rhs_f, cg, dcg = rhs_f[:, None], cg[:, None], dcg[:, None]
@@ -228,9 +226,7 @@ class SparseCompletion:
     def forcing(self, t, d=0):
         """``g^(d)(t)``: the d-th derivative of the completion's forcing ``g`` (exact, from f's jets)."""
         if self._apply is not None:
-            jet = forcing_jet(self, float(t), d)
-            cg, dcg = constraint_forcing(self, jet, d)
-            return self._apply.finish(self._apply.add_forcing(np.zeros(self.n), jet, d), self.lam * cg + dcg)
+            return self._apply.forcing(self, float(t), d)
         rhs_f, cg, dcg = forcing_terms(self, float(t), d)
         return self._solve(rhs_f, self.lam * cg + dcg)
 

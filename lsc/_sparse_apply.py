@@ -18,6 +18,7 @@ import numpy as np
 import scipy.linalg.blas
 import scipy.sparse
 
+from ._sparse_maps import constraint_forcing, forcing_jet
 from ._sparse_problem import input_forcing_of
 from ._sparse_structure import rows
 
@@ -157,6 +158,17 @@ class DiagonalApply:
         if self._term.size:
             Y[self.alg_cols] = self.T_solver.solve(h[self._term] - self.C_td @ Y)
         return Y
+
+    def rhs(self, comp, t, x):
+        """``G x + g(t)`` of `comp` (its rate and forcing)."""
+        jet = forcing_jet(comp, t)
+        return self.apply(x, comp.lam, jet, *constraint_forcing(comp, jet))
+
+    def forcing(self, comp, t, d):
+        """``g^(d)(t)`` of `comp`."""
+        jet = forcing_jet(comp, t, d)
+        cg, dcg = constraint_forcing(comp, jet, d)
+        return self.finish(self.add_forcing(np.zeros(self.n), jet, d), comp.lam * cg + dcg)
 
     def apply(self, x, lam, jet=None, cg=None, dcg=None):
         """``G x + g`` (``jet=None``: ``G x``) at the rate `lam`; `x` of shape (n,) or (n, m)."""
