@@ -4,15 +4,21 @@ For each benchmark family of the gallery at growing n (each case in its own proc
 resident memory is its own):
 
 - set-up: ``complete(dae, 'alternative', lam=1)`` (structure, equilibration, factorizations);
-- one application: ``rhs(t, x)`` (the least time of 5);
+- one application: ``rhs(t, x)``; beside it, per operation, ``G x`` alone, one sparse product ``B x`` and the
+  simplest memory-bound kernel ``2 x`` (a fresh n-vector, as an application returns): the least time of 20,
+  the four timed in turn so that the machine's load falls on them alike;
 - a full integration with ``method='auto'`` (what it chose is listed): ``msd_ind3`` over [0, 10] at
   rtol 1e-6 from an inconsistent start (the constraint residual's decay over [0, 1] against
-  exp(-lam), the issue's 2 % target) and from the exact start (the error against the manufactured
+  exp(-lam), within 2 %) and from the exact start (the error against the manufactured
   solution); ``stokes_ind2`` over [0, 1] at rtol 1e-6 (error against the manufactured solution);
   ``triple_chain`` and ``rcl_ladder`` (``rcl``: voltage source, index 2; ``rcl1``: current source, index 1)
   over [0, 10] at rtol 1e-6;
 - peak resident memory of the process;
 - the growth exponent p of time ~ n^p fitted on n >= 10^4.
+
+``--growth``: set-up (least of 3) and the four application kernels for ``msd_ind3`` at n = 10^4, 10^5, 10^6
+only, each size in its own process, three rounds (the least time of each), no integration: the growth
+exponents of set-up and application in about two minutes. ``--max-n N`` leaves out the cases beyond N unknowns.
 
 Side by side: the dense path (``setup='auto'``: structured or dense SVDs, dense arrays of the same DAE) where
 it finishes (``msd_ind3`` up to n = 2,001), and SUNDIALS IDA (scikit-sundae, sparse direct solver SuperLU_MT)
@@ -28,7 +34,8 @@ the Schur complement of ``stokes_ind2`` at n ~ 10^5.
 Writes ``out/bench_sparse.md`` (and ``out/bench_sparse.png`` with matplotlib); with ``--docs`` both go
 to ``docs/_generated``. One BLAS thread (``OPENBLAS_NUM_THREADS=1``) unless ``--threads`` runs.
 
-Run:  python examples/bench_sparse.py [--docs] [--quick] [--only msd,stokes,triple,rcl,rcl1] [--threads] [--solvers]
+Run:  python examples/bench_sparse.py [--docs] [--quick] [--only msd,stokes,triple,rcl,rcl1] [--max-n N] [--threads]
+      [--solvers] [--growth]
 """
 
 import argparse
@@ -57,6 +64,8 @@ SIZES = {
     "rcl": [5_000, 50_000, 500_000],  # sections: n = 2 N (voltage source, index 2)
     "rcl1": [5_001, 50_001, 500_001],  # sections: n = 2 N - 1 (current source, index 1)
 }
+GROWTH_SIZES = [5_000, 50_000, 500_000]  # msd_ind3: n = 10^4, 10^5, 10^6
+TIMES = ("setup", "apply", "apply_G", "product", "floor")
 QUICK = {"msd": [5_000, 15_000], "stokes": [32, 57], "triple": [1_600], "rcl": [5_000], "rcl1": [5_001]}
 LAM = 1.0
 
@@ -71,6 +80,12 @@ def make(family, size):
     return gallery.rcl_ladder(size, "voltage" if family == "rcl" else "current")
 
 
+def approx_n(family, size):
+    """The number of unknowns of `make(family, size)` (without building it)."""
+    return {"msd": 2 * size + 1, "stokes": 3 * size * size, "triple": 6 * size + 8, "rcl": 2 * size,
+            "rcl1": 2 * size - 1}[family]
+
+
 def rel_err(X, Y):
     return float(np.abs(X - Y).max() / np.abs(Y).max())
 
@@ -82,14 +97,8 @@ def run_case(family, size):
     t0 = time.perf_counter()
     c = lsc.complete(p.dae, "alternative", lam=LAM)
     setup = time.perf_counter() - t0
-    x = p.x0 + 1e-3
-    apply = min(_timed(lambda: c.rhs(0.3, x)) for _ in range(5))
-    G, B = c.operator(), p.dae.B_sparse
-    # the homogeneous part G x alone, and the memory-bound floor of any application: one product B x
-    apply_G = min(_timed(lambda: G @ x) for _ in range(5))
-    product = min(_timed(lambda: B @ x) for _ in range(5))
-    out = dict(family=family, size=size, n=n, setup=setup, apply=apply, apply_G=apply_G, product=product,
-               index=c.index, constraints=c.n_constraints)
+    out = dict(family=family, size=size, n=n, setup=setup, index=c.index, constraints=c.n_constraints)
+    out.update(kernels(p, c, 20))
     t1 = p.t_span[1]
     rtol, atol = 1e-6, 1e-9 * float(np.abs(p.x0).max())
     t_eval = np.linspace(0.0, t1, 11)
@@ -106,6 +115,30 @@ def run_case(family, size):
                    decay=float(np.max(np.abs(r1 / r0 / np.exp(-LAM) - 1))))
     out["peak_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     return out
+
+
+def kernels(p, c, reps):
+    """Least times of one application ``rhs``, of ``G x`` alone, of one product ``B x`` and of ``2 x``, timed in turn."""
+    x = p.x0 + 1e-3
+    G, B = c.operator(), p.dae.B_sparse
+    fns = {"apply": lambda: c.rhs(0.3, x), "apply_G": lambda: G @ x, "product": lambda: B @ x,
+           "floor": lambda: 2.0 * x}
+    best = dict.fromkeys(fns, np.inf)
+    for _ in range(reps):
+        for key, fn in fns.items():
+            best[key] = min(best[key], _timed(fn))
+    return best
+
+
+def run_growth(family, size):
+    """Set-up (least of 3) and the application kernels (least of 30) of msd_ind3 (run in a child process)."""
+    p = make(family, size)
+    setups = []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        c = lsc.complete(p.dae, "alternative", lam=LAM)
+        setups.append(time.perf_counter() - t0)
+    return dict(family=family, size=size, n=p.dae.n, setup=min(setups), **kernels(p, c, 30), load=os.getloadavg()[0])
 
 
 def _timed(fn):
@@ -204,7 +237,7 @@ def _on_pattern(M, pattern):
 def child(args):
     """Run one case in this process and print its JSON (the parent reads the last line)."""
     kind, family, size = args
-    fn = {"case": run_case, "ida": run_ida}.get(kind)
+    fn = {"case": run_case, "ida": run_ida, "growth": run_growth}.get(kind)
     out = run_dense(int(size)) if kind == "dense" else fn(family, int(size))
     print(json.dumps(out))
 
@@ -231,36 +264,83 @@ def exponent(rows, key):
 
 
 def report_cases(results, lines):
-    lines += ["| family | n | index | set-up s | apply ms | method | integrate s | nfev | LUs | error | "
-              "c(1)/c(0) vs exp(-lam) | peak MiB |", "|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|"]
+    lines += ["| family | n | index | set-up s | apply ms | G x ms | B x ms | 2 x ms | method | integrate s | nfev | LUs | "
+              "error | c(1)/c(0) vs exp(-lam) | peak MiB |",
+              "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|"]
     for fam, rows in results.items():
         for r in rows:
             if "failed" in r:
-                lines.append(f"| {fam} | size {r['size']} | | failed: {r['failed']} | | | | | | | | |")
+                lines.append(f"| {fam} | size {r['size']} | | failed: {r['failed']} | | | | | | | | | | | |")
                 continue
             decay = f"{r['decay']:.1e}" if "decay" in r else ""
-            lines.append(f"| {fam} | {r['n']:,} | {r['index']} | {r['setup']:.2f} | {1e3 * r['apply']:.1f} | "
-                         f"{r['method']} | {r['integrate']:.1f} | {r['nfev']} | {r['nlu']} | {r['error']:.1e} | "
+            lines.append(f"| {fam} | {r['n']:,} | {r['index']} | {r['setup']:.2f} | {_ms(r['apply'])} | "
+                         f"{_ms(r['apply_G'])} | {_ms(r['product'])} | {_ms(r['floor'])} | {r['method']} | {r['integrate']:.1f} | {r['nfev']} | {r['nlu']} | {r['error']:.1e} | "
                          f"{decay} | {r['peak_mib']:.0f} |")
-    lines += ["", "Growth exponents p (time ~ n^p, fitted on n >= 10^4). `apply` is `rhs(t, x)`: `G x` and the "
-              "forcing `g(t)` (the manufactured forcing's dense n x 2m input map, mapped once); `G x` alone; and, "
-              "measured side by side as the memory-bound floor, one sparse product `B x`. Once the vectors leave "
-              "the caches (n of a few 10^5 on these machines, sooner under load) every kernel grows faster "
-              "than n; the ratio apply / `B x` at the largest and smallest n says whether the completion does.", "",
-              "| family | set-up | apply | G x | B x | apply / B x (smallest n, largest n) | integration |",
-              "|---|---:|---:|---:|---:|---:|---:|"]
+    lines += ["", EXPONENTS_NOTE, "", "| family | set-up | apply | G x | B x | 2 x | apply / B x (smallest n, largest n) | "
+              "G x / B x (smallest n, largest n) | integration |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for fam, rows in results.items():
-        ok = [r for r in rows if "failed" not in r and r["n"] >= 1e4 and r.get("product")]
-        ratio = f"{ok[0]['apply'] / ok[0]['product']:.1f}, {ok[-1]['apply'] / ok[-1]['product']:.1f}" if ok else ""
-        lines.append(f"| {fam} | {exponent(rows, 'setup'):.2f} | {exponent(rows, 'apply'):.2f} | "
-                     f"{exponent(rows, 'apply_G'):.2f} | {exponent(rows, 'product'):.2f} | {ratio} | "
-                     f"{exponent(rows, 'integrate'):.2f} |")
+        lines.append(_exponent_row(fam, rows) + f" {exponent(rows, 'integrate'):.2f} |")
     msd = [r for r in results.get("msd", []) if "integrate_bad" in r]
     if msd:
         lines += ["", "msd_ind3 from an inconsistent start (x*(0) + 1e-2 N(0, 1)) over [0, 10]: time, and the "
                   "largest deviation of a constraint row's c(1)/c(0) from exp(-lam):", ""]
         lines += [f"- n = {r['n']:,}: {r['integrate_bad']:.1f} s, success {r['success_bad']}, deviation "
                   f"{r['decay']:.1e} (relative)" for r in msd]
+
+
+EXPONENTS_NOTE = (
+    "Growth exponents p (time ~ n^p, fitted on n >= 10^4). `apply` is `rhs(t, x)`: `G x` and the forcing `g(t)` "
+    "(the manufactured forcing's dense n x 2m input map, mapped once); `G x` alone; and, measured side by side, "
+    "one sparse product `B x` and the simplest memory-bound kernel `2 x` (the floor of anything that returns a "
+    "fresh n-vector). Once the vectors leave the caches (n of a few 10^5 on these machines, sooner under load) "
+    "every kernel grows faster than n; the ratios to `B x` at the smallest and largest n say whether the "
+    "completion does.")
+
+
+def _ms(seconds):
+    return f"{1e3 * seconds:.3f}" if seconds < 1e-2 else f"{1e3 * seconds:.1f}"
+
+
+def _exponent_row(fam, rows):
+    ok = [r for r in rows if "failed" not in r and r["n"] >= 1e4 and r.get("product")]
+
+    def ratio(key):
+        return f"{ok[0][key] / ok[0]['product']:.2f}, {ok[-1][key] / ok[-1]['product']:.2f}" if ok else ""
+
+    return (f"| {fam} | {exponent(rows, 'setup'):.2f} | {exponent(rows, 'apply'):.2f} | {exponent(rows, 'apply_G'):.2f} "
+            f"| {exponent(rows, 'product'):.2f} | {exponent(rows, 'floor'):.2f} | {ratio('apply')} | "
+            f"{ratio('apply_G')} |")
+
+
+def growth_section(lines, rounds=3):
+    """msd_ind3 at n = 10^4, 10^5, 10^6: set-up and the application kernels, each size in its own process."""
+    best = {}
+    for _ in range(rounds):
+        for size in GROWTH_SIZES:
+            r = spawn("growth", "msd", size)
+            print("growth", r, flush=True)
+            if "failed" in r:
+                best[size] = r
+                continue
+            old = best.get(size)
+            if old is None or "failed" in old:
+                best[size] = dict(r, loads=[r["load"]])
+            else:
+                best[size] = {k: (min(v, r[k]) if k in TIMES else v) for k, v in old.items()}
+                best[size]["loads"] = old["loads"] + [r["load"]]
+    rows = [best[size] for size in GROWTH_SIZES]
+    lines += [f"Each size in its own process, {rounds} rounds of the sizes in turn; set-up the least of 3 per round, "
+              "each kernel the least of 30 per round (timed in turn), the least over the rounds.", "",
+              "| n | set-up s | apply ms | G x ms | B x ms | 2 x ms | load averages |",
+              "|---:|---:|---:|---:|---:|---:|---|"]
+    for r in rows:
+        if "failed" in r:
+            lines.append(f"| size {r['size']} | failed: {r['failed']} | | | | | |")
+            continue
+        lines.append(f"| {r['n']:,} | {r['setup']:.3f} | {_ms(r['apply'])} | {_ms(r['apply_G'])} | "
+                     f"{_ms(r['product'])} | {_ms(r['floor'])} | {', '.join(f'{v:.1f}' for v in r['loads'])} |")
+    lines += ["", EXPONENTS_NOTE, "", "| family | set-up | apply | G x | B x | 2 x | apply / B x (smallest n, largest n) | "
+              "G x / B x (smallest n, largest n) |", "|---|---:|---:|---:|---:|---:|---:|---:|", _exponent_row("msd", rows)]
 
 
 def plot(results, path):
@@ -381,21 +461,28 @@ def main():
     parser.add_argument("--only", default="msd,stokes,triple,rcl,rcl1")
     parser.add_argument("--threads", action="store_true", help="1 vs 2 BLAS threads for the dense structured set-up")
     parser.add_argument("--solvers", action="store_true", help="SuperLU against the other sparse direct solvers")
+    parser.add_argument("--growth", action="store_true",
+                        help="msd_ind3 at n = 10^4, 10^5, 10^6: set-up and one application only (minutes)")
+    parser.add_argument("--max-n", type=float, default=None, help="leave out the cases beyond this many unknowns")
     parser.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         return child(args.child)
     start = time.strftime("%Y-%m-%d %H:%M")
-    lines = [f"## Sparse completions at scale", "",
+    title = "Growth from n = 10^4 to 10^6 (msd_ind3): set-up and one application" if args.growth else \
+        "Sparse completions at scale"
+    lines = [f"## {title}", "",
              f"`python examples/bench_sparse.py`, run {start}, {os.cpu_count()} cores, load average "
              f"{os.getloadavg()[0]:.1f} at the start, OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']}; "
              "each case in its own process (peak = its maximum resident memory).", ""]
     results = {}
-    if not (args.threads or args.solvers):
+    if not (args.threads or args.solvers or args.growth):
         sizes = QUICK if args.quick else SIZES
         for fam in args.only.split(","):
             results[fam] = []
             for size in sizes[fam]:
+                if args.max_n is not None and approx_n(fam, size) > args.max_n:
+                    continue
                 results[fam].append(spawn("case", fam, size))
                 print(fam, results[fam][-1], flush=True)
         report_cases(results, lines)
@@ -426,11 +513,14 @@ def main():
             ida = f"{r['ida']:.1f}" if r["success"] else f"failed after {r['ida']:.1f}"
             lines.append(f"| {name} | {r['n']:,} | {ida} | {r['nfev']} | {r['error']:.1e} | {r['drift']:.1e} | "
                          f"{r['lsc']:.1f} ({r['lsc_method']}) | {r['lsc_error']:.1e} | {r['ida'] / r['lsc']:.1f} |")
+    if args.growth:
+        growth_section(lines)
     if args.threads:
         threads_section(lines)
     if args.solvers:
         solvers_section(lines)
-    name = "bench_sparse" + ("_threads" if args.threads else "") + ("_solvers" if args.solvers else "")
+    name = ("bench_sparse" + ("_growth" if args.growth else "") + ("_threads" if args.threads else "")
+            + ("_solvers" if args.solvers else ""))
     path = output_path(f"{name}.md", docs=args.docs)
     path.write_text("\n".join(lines) + "\n")
     print(f"wrote {path}")

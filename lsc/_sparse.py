@@ -27,8 +27,9 @@ terminal rows ``[C_t^d, T]`` (``T`` invertible) and ``H = E^T R_d^2 E``:
 (``h = -lam (C~ x - cg~) + cg~'``; the terminal rows' multipliers vanish
 because ``A``'s algebraic columns are zero). For diagonal ``E`` the first
 system is solved through its Schur complement ``C_c H^-1 C_c^T`` (the
-pressure Laplacian for Stokes, 2 x 2 for ``msd_ind3``). Nothing n x n is
-dense, and no derivative array is formed.
+pressure Laplacian for Stokes, 2 x 2 for ``msd_ind3``), and one application is
+one sparse product and updates on the constraints' support
+(`lsc._sparse_apply`). Nothing n x n is dense, and no derivative array is formed.
 """
 
 import numpy as np
@@ -38,7 +39,9 @@ import scipy.sparse.linalg
 from ._completion import SETUPS, AlternativeCompletion
 from ._exceptions import DimensionError, IndexDeterminationError
 from ._linalg import validate_rcond
-from ._sparse_maps import SparseCompletionMaps, forcing_terms, setup_forcing, sparse_lam_affine, sparse_maps
+from ._sparse_apply import DiagonalApply
+from ._sparse_maps import (SparseCompletionMaps, constraint_forcing, forcing_jet, forcing_terms, setup_forcing,
+                           sparse_lam_affine, sparse_maps)
 from ._sparse_step import step_solver
 from ._sparse_lu import DiagonalSolver, diagonal_of, factorize
 from ._sparse_problem import DENSE_MAX, SparseLinearDAE, input_forcing_of, is_sparse_dae, sparse_equilibration
@@ -156,6 +159,8 @@ class SparseCompletion:
                 self.factorizations["kkt"] = (K.shape[0], self._kkt.nnz)
             self._T_solver = s.T_solver
             self.factorizations["terminal"] = (self._T.shape[0], self._T_solver.nnz)
+            # diagonal E (lumped masses, capacitances; every benchmark family): one sparse product per application
+            self._apply = DiagonalApply(self) if s.E_diag is not None else None
         except np.linalg.LinAlgError as exc:
             raise IndexDeterminationError(
                 f"{exc} The constraints of this DAE ({s.describe()}) do not determine x' uniquely: it is not "
@@ -202,11 +207,15 @@ class SparseCompletion:
 
     def _homogeneous(self, x):
         """``G x`` (x of shape (n,) or (n, m))."""
+        if self._apply is not None:
+            return self._apply.apply(x, self.lam)
         return self._solve(-self._times_W(self._B_d @ x), -self.lam * (self.structure.C @ x))
 
     def rhs(self, t, x):
         """Right-hand side ``G x + g(t)`` in `scipy.integrate.solve_ivp` form (x: (n,) or (n, m))."""
         x = np.asarray(x, dtype=float)
+        if self._apply is not None:
+            return self._apply.rhs(self, float(t), x)
         rhs_f, cg, dcg = forcing_terms(self, float(t))
         if x.ndim == 2:
             rhs_f, cg, dcg = rhs_f[:, None], cg[:, None], dcg[:, None]
@@ -216,6 +225,8 @@ class SparseCompletion:
 
     def forcing(self, t, d=0):
         """``g^(d)(t)``: the d-th derivative of the completion's forcing ``g`` (exact, from f's jets)."""
+        if self._apply is not None:
+            return self._apply.forcing(self, float(t), d)
         rhs_f, cg, dcg = forcing_terms(self, float(t), d)
         return self._solve(rhs_f, self.lam * cg + dcg)
 
@@ -275,7 +286,7 @@ class SparseCompletion:
 
     # -- constraints ------------------------------------------------------------------------------------------
     def _cg(self, t):
-        return forcing_terms(self, float(t))[1]
+        return constraint_forcing(self, forcing_jet(self, float(t)))[0]
 
     def constraint_residual(self, t, x):
         """The constraint residual ``C x - cg(t)`` of the structural constraint rows.

@@ -14,38 +14,71 @@ from ._maps import CompletionMaps, LamAffine
 from ._sparse_lu import factorize
 from ._sparse_problem import input_forcing_of
 
-__all__ = ["SparseCompletionMaps", "forcing_terms", "jet_terms", "operators", "setup_forcing", "sparse_lam_affine",
-           "sparse_maps"]
+__all__ = ["SparseCompletionMaps", "constraint_forcing", "forcing_jet", "forcing_terms", "jet_terms", "operators",
+           "setup_forcing", "sparse_lam_affine", "sparse_maps"]
 
 
 def setup_forcing(comp):
-    """The forcing's contributions, mapped once: ``W f_d`` and ``cg = sum Gamma_i f^(i)``."""
+    """The forcing's contributions, mapped once: ``W f_d`` (when `comp` has no `DiagonalApply`) and
+    ``cg = sum Gamma_i f^(i)``."""
     s, f = comp.structure, comp.dae.f
     comp._order = s.index  # cg' needs f^(index)
     comp._input = input_forcing_of(comp.dae) if f is not None else None
     if comp._input is not None:
         Bu = comp._input.input_map
-        Bu_d = Bu[s.diff_rows]
-        comp._Wu = comp._W @ Bu_d
-        comp._Gu = [g @ Bu for g in s.Gamma]
+        if comp.structure.E_diag is None:  # a diagonal E adds E^-1 B_u u through lsc._sparse_apply instead
+            comp._Wu = comp._W @ Bu[s.diff_rows]
+        comp._Gu = [_small_dense(g @ Bu) for g in s.Gamma]
+
+
+# A constraint rows' input map (a x m) with at most this many entries is kept dense: a product with it is then one
+# BLAS call, where a sparse product's dispatch costs more than the arithmetic of a few rows.
+_SMALL = 2**16
+
+
+def _small_dense(M):
+    if scipy.sparse.issparse(M) and M.shape[0] * M.shape[1] <= _SMALL:
+        return M.toarray()
+    return M
+
+
+def forcing_jet(comp, t, d=0):
+    """``(kind, jet)``: the input's jet ``('input', [u; u'; ...])`` or the forcing's ``('f', [f; f'; ...])`` up
+    to the order the constraint rows' ``cg^(d+1)`` needs; None without forcing."""
+    if comp.dae.f is None:
+        return None
+    order = comp._order + d
+    if comp._input is not None:
+        return "input", comp._input.u.jet(t, order)
+    return "f", comp.dae.f.jet(t, order)
+
+
+def constraint_forcing(comp, jet, d=0):
+    """``(cg^(d), cg^(d+1))`` from a `forcing_jet`."""
+    a = comp.structure.n_constraints
+    if jet is None:
+        return np.zeros(a), np.zeros(a)
+    kind, J = jet
+    maps = comp._Gu if kind == "input" else comp.structure.Gamma
+    cg = sum((np.asarray(G @ J[i + d]).ravel() for i, G in enumerate(maps)), np.zeros(a))
+    dcg = sum((np.asarray(G @ J[i + d + 1]).ravel() for i, G in enumerate(maps)), np.zeros(a))
+    return cg, dcg
+
 
 def forcing_terms(comp, t, d=0):
     """``(W f_d^(d), cg^(d), cg^(d+1))`` at `t`: the forcing parts of the least-squares data."""
-    s, f = comp.structure, comp.dae.f
-    a = s.n_constraints
-    if f is None:
+    s = comp.structure
+    jet = forcing_jet(comp, t, d)
+    if jet is None:
+        a = s.n_constraints
         return np.zeros(s.diff_rows.size), np.zeros(a), np.zeros(a)
-    order = comp._order + d
-    if comp._input is not None:
-        U = comp._input.u.jet(t, order)
-        rhs = np.asarray(comp._Wu @ U[d]).ravel()
-        cg = sum((np.asarray(G @ U[i + d]).ravel() for i, G in enumerate(comp._Gu)), np.zeros(a))
-        dcg = sum((np.asarray(G @ U[i + d + 1]).ravel() for i, G in enumerate(comp._Gu)), np.zeros(a))
-        return rhs, cg, dcg
-    F = f.jet(t, order)
-    rhs = comp._W @ F[d][s.diff_rows]
-    cg = sum((G @ F[i + d] for i, G in enumerate(s.Gamma)), np.zeros(a))
-    dcg = sum((G @ F[i + d + 1] for i, G in enumerate(s.Gamma)), np.zeros(a))
+    cg, dcg = constraint_forcing(comp, jet, d)
+    kind, J = jet
+    if kind == "input":
+        rhs = (np.asarray(comp._Wu @ J[d]).ravel() if comp.structure.E_diag is None
+               else comp._times_W(np.asarray(comp._input.input_map[s.diff_rows] @ J[d]).ravel()))
+    else:
+        rhs = comp._times_W(J[d][s.diff_rows])
     return rhs, cg, dcg
 
 
@@ -64,6 +97,8 @@ def operators(comp, lam):
     s, n, w = comp.structure, comp.n, comp.n * (comp.order + 1)
 
     def G(x):
+        if comp._apply is not None:
+            return comp._apply.apply(x, lam)
         return comp._solve(-comp._times_W(comp._B_d @ x), -lam * (s.C @ x))
 
     def W(v):

@@ -206,13 +206,38 @@ LinearDAE._sparse_class = SparseLinearDAE
 
 # -- equilibration, as lsc._problem.equilibration does it on dense arrays --------------------------------------
 
+# Magnitudes whose squares (and sums of up to 1e12 squares) stay finite and normal in double precision.
+_SAFE_SQUARE = 1e150
+
+
 def _norms(M, axis):
-    """2-norms of the rows (axis=1) or columns (axis=0) of sparse `M`, without overflow near 1e308."""
-    M = abs(M).tocsr() if axis == 1 else abs(M).tocsc()
-    big = np.asarray(M.max(axis=axis).todense()).ravel()
+    """2-norms of the rows (axis=1) or columns (axis=0) of sparse `M`, without overflow near 1e308.
+
+    When every nonzero magnitude lies in [1e-150, 1e150] the squares neither overflow nor underflow and are
+    summed by one sparse product; otherwise each row's (column's) entries are divided by its largest
+    magnitude before they are squared (segment by segment on the compressed arrays).
+    """
+    M = scipy.sparse.csr_matrix(M) if axis == 1 else scipy.sparse.csc_matrix(M)
+    M.sum_duplicates()
+    data, lengths = np.abs(M.data), np.diff(M.indptr)
+    if not data.size:
+        return np.zeros(lengths.size)
+    if data.max() <= _SAFE_SQUARE and np.min(data, where=data > 0.0, initial=np.inf) >= 1.0 / _SAFE_SQUARE:
+        squares = type(M)((data * data, M.indices, M.indptr), shape=M.shape)
+        if axis == 0:
+            squares = squares.T  # CSR: each column a row
+        return np.sqrt(squares @ np.ones(squares.shape[1]))
+    nonempty = lengths > 0
+    starts = M.indptr[:-1][nonempty]
+    big = np.zeros(lengths.size)
+    if starts.size:
+        big[nonempty] = np.maximum.reduceat(data, starts)
     unit = np.where(big > 0.0, big, 1.0)
-    scaled = scipy.sparse.diags(1.0 / unit) @ M if axis == 1 else M @ scipy.sparse.diags(1.0 / unit)
-    return np.sqrt(np.asarray(scaled.multiply(scaled).sum(axis=axis)).ravel()) * big
+    scaled = data * np.repeat(1.0 / unit, lengths)
+    squares = np.zeros(lengths.size)
+    if starts.size:
+        squares[nonempty] = np.add.reduceat(scaled * scaled, starts)
+    return np.sqrt(squares) * big
 
 
 def _spread(values):
@@ -239,7 +264,10 @@ def _column_scales(A, B):
 
 
 def _scaled(M, r, c):
-    return scipy.sparse.diags(r) @ M @ scipy.sparse.diags(c)
+    """``diag(r) M diag(c)`` as CSR, scaling the nonzeros in place of two sparse products."""
+    M = scipy.sparse.csr_matrix(M)
+    data = M.data * np.repeat(r, np.diff(M.indptr)) * c[M.indices]
+    return scipy.sparse.csr_matrix((data, M.indices.copy(), M.indptr.copy()), shape=M.shape)
 
 
 def sparse_equilibration(A, B):

@@ -176,6 +176,44 @@ def test_non_diagonal_E_takes_the_saddle_point_matrix():
     np.testing.assert_allclose(k - 0.3 * (Gd @ k), r, atol=1e-10 * np.abs(Gd).max())
 
 
+@pytest.mark.parametrize("forcing", ["dense input map", "sparse input map", "callable"])
+def test_one_application_in_any_order_and_with_any_forcing(forcing):
+    """msd_ind3 with its equations and unknowns shuffled (the differential unknowns not first) and its forcing as a
+    dense or sparse input map or a plain callable: ``G x + g``, ``g``, ``g'`` and ``G`` on a batch of vectors agree
+    with the dense library's alternative completion of the same DAE."""
+    p = gallery.msd_ind3(12)
+    n, fn = p.dae.n, p.dae.f.fn
+    rng = np.random.default_rng(11)
+    pr, pc = rng.permutation(n), rng.permutation(n)
+    A, B = p.dae.A_sparse[pr][:, pc], p.dae.B_sparse[pr][:, pc]
+    U = fn.input_map[pr]
+    f = {"dense input map": lsc.InputForcing(U, fn.u),
+         "sparse input map": lsc.InputForcing(sp.csr_matrix(U), fn.u),
+         "callable": lambda t, d: U @ fn.u.jet(t, d)[d]}[forcing]
+    dae = lsc.LinearDAE(A, B, f)
+    c = lsc.complete(dae, "alternative", lam=LAM)
+    assert not np.array_equal(c.structure.diff_cols, np.arange(c.structure.diff_cols.size))
+    dense = lsc.complete(lsc.LinearDAE(A.toarray(), B.toarray(), f), "alternative", lam=LAM)
+    G = dense.jac(0.0, None)
+    scale = np.abs(G).max()
+    V = rng.standard_normal((n, 3))
+    assert np.abs(c.operator() @ V - G @ V).max() <= 1e-10 * scale * np.abs(V).max()
+    x = p.exact(0.4)[pc] + 1e-2 * rng.standard_normal(n)
+    for t in (0.4, 1.7):
+        g = dense.matrices(t)[1]
+        size = scale * (1 + np.abs(x).max() + np.abs(g).max())
+        np.testing.assert_allclose(c.rhs(t, x), G @ x + g, rtol=0, atol=1e-10 * size)
+        X = np.column_stack([x, 2 * x])
+        np.testing.assert_allclose(c.rhs(t, X), G @ X + g[:, None], rtol=0, atol=2e-10 * size)
+        np.testing.assert_allclose(c.forcing(t), g, rtol=0, atol=1e-10 * size)
+    # g' against a central difference of g (its third derivative is O(1): the difference is good to ~1e-8)
+    dg = (c.forcing(1.0 + 1e-4) - c.forcing(1.0 - 1e-4)) / 2e-4
+    np.testing.assert_allclose(c.forcing(1.0, 1), dg, rtol=0, atol=1e-6 * (1 + np.abs(dg).max()))
+    # on the exact solution (permuted) the completion is the exact derivative
+    xs, dxs = p.exact(0.9)[pc], p.exact(0.9, 1)[pc]
+    np.testing.assert_allclose(c.rhs(0.9, xs), dxs, rtol=0, atol=1e-11 * (1 + np.abs(dxs).max()))
+
+
 def _not_semi_explicit(n):
     """``x_i' + x_i + x_(i-1) / 2 = 0`` (i < n - 1) and ``x_0' + x_(n-1) + x_(n-2) / 2 = 0``: index 1, but ``A`` has
     no zero row (its last row repeats the first), so it is not of the form [[E, 0], [0, 0]]."""

@@ -7,7 +7,7 @@ import numpy as np
 
 from ._calls import INSTANTIATED, TERMINATED, CallSequence
 from ._inputs import _InputSignal
-from ._lsc import JetCallable, LinearDAE, complete
+from ._lsc import JetCallable, LinearDAE, complete, input_forcing_class
 from ._snapshot import Snapshot
 from ._stepping import Stepping
 from ._variables import EXACT, METHODS, SOLVERS, register_variables
@@ -58,9 +58,13 @@ class LscRuntime(CallSequence, Stepping, Snapshot):
         check each (about 2 us for three states); a master reads the states at
         every communication step.
         """
-        index, x = self._state_of_vr, self.x.tolist()
+        index, x = self._state_of_vr, self.x
+        # a few states by index; many (a master reading them all) through one conversion of x: converting all
+        # n for each read made pythonfmu's build, which reads every start value one by one, quadratic in n
+        if 8 * len(vrs) >= x.size:
+            x = x.tolist()
         try:
-            return [x[index[vr]] for vr in vrs]
+            return [float(x[index[vr]]) for vr in vrs]
         except KeyError:  # not all states: the general path (it also reports unknown references)
             return general(vrs)
 
@@ -203,21 +207,30 @@ class LscRuntime(CallSequence, Stepping, Snapshot):
         return self._completion
 
     def _sparse_dae(self):
-        """The sparse model's DAE: scipy.sparse ``A``, ``B``; ``f = f0 + B_u u`` with the inputs' estimated jets."""
+        """The sparse model's DAE: scipy.sparse ``A``, ``B``; ``f = f0 + B_u u`` with the inputs' estimated jets.
+
+        The forcing is an ``InputForcing`` of ``[B_u, f0]`` and ``[u; 1]``: the sparse set-up maps the input map
+        once, so a forcing evaluation costs O(nonzeros of B_u), not n-vectors per derivative.
+        """
         A, B, B_u, f0 = self.model.sparse_data()
         if B_u is None:
             return LinearDAE(A, B, f0)
+        import scipy.sparse
+
         inputs = list(self.inputs.values())  # in the order of B_u's columns (u[1], u[2], ...)
+        m = len(inputs)
+        input_map = B_u if f0 is None else scipy.sparse.hstack([B_u, scipy.sparse.csr_matrix(f0[:, None])], format="csr")
 
         def jet(t, order):
-            U = np.array([s.jet(t)[: order + 1] for s in inputs]).reshape(len(inputs), -1)
-            out = np.zeros((order + 1, A.shape[0]))
-            out[: U.shape[1]] = (B_u @ U).T
+            U = np.zeros((order + 1, input_map.shape[1]))
+            for j, signal in enumerate(inputs):
+                u = signal.jet(t)[: order + 1]
+                U[: u.size, j] = u
             if f0 is not None:
-                out[0] += f0
-            return out
+                U[0, m] = 1.0  # f0: a constant input 1
+            return U
 
-        return LinearDAE(A, B, JetCallable(jet))
+        return LinearDAE(A, B, input_forcing_class()(input_map, JetCallable(jet)))
 
     def _output(self, function):
         """A custom output at the current time, state, parameters and latest input values."""

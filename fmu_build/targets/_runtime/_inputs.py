@@ -241,7 +241,29 @@ class _InputSignal(_SignalState):
             self._r[level, slot] += (sign * w * u) * powers[: self._nr]
 
     def record(self, t):
-        """Take the current value as received at t (a repeated or earlier t replaces what came after)."""
+        """Take the current value as received at t (a repeated or earlier t replaces what came after).
+
+        Returns whether the estimate changed as a function of time: False when its polynomial is exactly the
+        one before (a constant input, or one never set), so that what was integrated with it stands.
+        """
+        before = (self._t0, self._derivs)
+        self._record(t)
+        return not self._same_polynomial(*before)
+
+    def _same_polynomial(self, t0, derivs):
+        """Whether the estimate is exactly the polynomial with Taylor coefficients `derivs` at `t0`."""
+        if derivs is None or self._derivs is None:
+            return False
+        size = max(derivs.size, self._derivs.size)
+        old, new = np.zeros(size), np.zeros(size)
+        old[: derivs.size], new[: self._derivs.size] = derivs, self._derivs
+        if not np.all(old[1:] == 0.0):  # shifted to the new time, only a constant is the same to the last bit
+            s = self._t0 - t0
+            w = s ** np.arange(size) / _FACTORIALS[:size]
+            old = np.array([old[j:] @ w[: size - j] for j in range(size)])
+        return bool(np.array_equal(old, new))
+
+    def _record(self, t):
         self._jet_at = (None, None)
         u = float(self.value)
         if self.order < 0:
@@ -254,7 +276,7 @@ class _InputSignal(_SignalState):
             self.reset()
             for tk, uk, _ in kept:
                 self.value = uk
-                self.record(tk)
+                self._record(tk)
             self.value = u
         if self.history and t == self.history[-1][0]:  # the same step again: replace its value
             _, old, w = self.history.pop()

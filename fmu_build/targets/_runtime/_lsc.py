@@ -18,4 +18,14 @@ try:  # inside a built FMU this package sits in the private copy of lsc
 except ImportError:  # imported from fmu_build itself (documentation, tests)
     from lsc import COMPLETIONS, ExactPropagator, JetCallable, LinearDAE, complete
 
-__all__ = ["BDF", "DOP853", "RK45", "Radau", "LinearDAE", "complete", "ExactPropagator", "JetCallable", "COMPLETIONS"]
+__all__ = ["BDF", "DOP853", "RK45", "Radau", "LinearDAE", "complete", "ExactPropagator", "JetCallable", "COMPLETIONS",
+           "input_forcing_class"]
+
+
+def input_forcing_class():
+    """``lsc.InputForcing``, for a sparse model's FMU only (a dense model's copy of lsc has no sparse set-up)."""
+    try:
+        from .. import InputForcing
+    except ImportError:
+        from lsc import InputForcing
+    return InputForcing

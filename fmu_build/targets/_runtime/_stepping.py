@@ -172,11 +172,13 @@ class Stepping:
             if self.values["solver"] == MAGNUS:
                 return self._magnus_step(c, self.t, h)
             if self.inputs:
-                # the input estimates change with every received value: new forcing, new solver
-                for signal in self.inputs.values():
-                    signal.record(self.t)
-                c.clear_cache()
-                self._solver = None
+                # a received value that changes an input's estimate changes the forcing: new solver. A constant
+                # input (or one never set) leaves the estimate, and the equations the solver integrates, exactly
+                # as they were: the solver steps on (a restart costs its first steps at every communication step)
+                changed = [signal.record(self.t) for signal in self.inputs.values()]
+                if any(changed):
+                    c.clear_cache()
+                    self._solver = None
             if self._solver is None or target > self._solver.t_bound:
                 self._start_solver(c, target)
             solver = self._solver

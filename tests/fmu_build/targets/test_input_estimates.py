@@ -87,6 +87,26 @@ def test_a_state_restored_estimates_bit_for_bit():
     assert b.check(broken) == "its input history is malformed"
 
 
+@pytest.mark.parametrize("value", [0.0, 1.0, -3.7e5])
+def test_record_says_whether_the_estimate_changed(value):
+    """`record` is False exactly when the estimate is the same polynomial as before: a constant input (or one never
+    set) keeps it, whatever the time; a new value changes it, and so does every value of a sine (no polynomial
+    continues it exactly). The runtime keeps its solver on False."""
+    signal = _InputSignal(3, value, 5, window=0.3)
+    assert signal.record(0.0) is True  # the first value makes the estimate
+    for t in 0.01 * np.arange(1, 80):  # across the ramp of the degree and the longest window (0.6)
+        assert signal.record(float(t)) is False, t
+        assert np.array_equal(signal.taylor(float(t), 7), np.r_[value, np.zeros(7)])
+    signal.value = value + 1.0
+    assert signal.record(0.8) is True
+    sine = _InputSignal(3, 0.0, 5, window=0.3)
+    changed = []
+    for t in 0.01 * np.arange(80):
+        sine.value = math.sin(t)
+        changed.append(sine.record(float(t)))
+    assert all(changed)
+
+
 def test_the_window_is_the_specs_or_thirty_steps():
     base = {"model": {"name": "W"}, "states": {"y": {}}, "inputs": {"p": {}},
             "equations": {"A": [[0]], "B": [[1]], "f": ["p"]}, "experiment": {"step": 0.02}}

@@ -60,6 +60,26 @@ def test_sparse_fmu_is_valid_and_runs_as_the_library(built):
     assert res[0] > 1e-3  # an inconsistent start
 
 
+def test_a_constant_input_keeps_the_solver_across_communication_steps(built):
+    """The input u[1] is never set (constant): its estimate, and the equations, stay exactly the same, so one RK45
+    run goes across the 100 communication steps, as the library's run does -- the same steps, the same values to
+    rounding (a solver restarted at every communication step differs at the level of the tolerance, 1e-3)."""
+    dae, x0, path = built
+    n = dae.n
+    names = ["x[1]", f"x[{n // 2}]", f"x[{n}]"]
+    r = run({"fmu": str(path), "dt": 0.01, "steps": 100, "outputs": names,
+             "start_values": {"solver": 0, "rtol": 1e-3, "atol": 1e-6}})
+    assert r["status"] == ["ok"] * 100, r["logs"]
+    # both solvers are bounded by the experiment's stop time 1.0 (the last communication point, 100 x 0.01 summed,
+    # lies past it by rounding: the FMU's solver starts anew for that step)
+    t = np.array(r["time"])[:-1]
+    c = lsc.complete(dae, "alternative", lam=LAM)
+    ref = lsc.solve_completion(c, (0.0, 1.0), x0, method="RK45", rtol=1e-3, atol=1e-6, t_eval=t)
+    X = np.array([r["values"][name][:-1] for name in names])
+    idx = [0, n // 2 - 1, n - 1]
+    np.testing.assert_allclose(X, ref.x[idx], rtol=0, atol=1e-12 * np.abs(ref.x[idx]).max())
+
+
 def test_sparse_fmu_refuses_what_its_completion_cannot_do(built):
     _, _, path = built
     r = run({"fmu": str(path), "dt": 0.1, "steps": 2, "outputs": ["x[1]"], "start_values": {"solver": 2}})
