@@ -51,3 +51,34 @@ print(json.dumps({{"t": r["time"].tolist(), "x": r["a.y"].tolist(), "success": b
     assert t[-1] == 3.0
     assert np.all(x >= 0.0)
     assert abs(x[-1] - 3.0 ** 5) < 0.05 * 3.0 ** 5, x[-1]  # held inputs: an O(H) error, a few per cent here
+
+
+@pytest.fixture(scope="module")
+def oscillator(tmp_path_factory):
+    import plants
+
+    d = tmp_path_factory.mktemp("truth_attacks3_osc")
+    # x'' = 0.1 x' - x split into x' = v (FMU a) and v' = 0.1 v - x (FMU b): an oscillation growing like e^(t/20)
+    a = str(plants.build_scalar_plant(d, "OscX", 0.0, 1.0, x0=1.0))
+    b = str(plants.build_scalar_plant(d, "OscV", 0.1, -1.0, x0=0.0))
+    return {"components": {"a": a, "b": b}, "connections": [("a.y", "b.u"), ("b.y", "a.u")]}
+
+
+@pytest.mark.xfail(strict=True, reason="the step control bounds the error per unit step; over ten periods of a growing "
+                                       "oscillation the phase error accumulates to 113 times the tolerance at a zero "
+                                       "crossing (0.012 absolute, 6e-4 of the amplitude): no global-error control yet")
+def test_a_slowly_growing_oscillation_under_step_control_is_within_ten_times_the_tolerance(oscillator):
+    """Found: x'' = 0.1 x' - x on [0, 60] (amplitude e^3), Gauss-Seidel, extrapolation 1, rtol 1e-4: success
+    with x off by 0.012 at t = 58.14 (113 times atol + rtol |x|); extrapolation 2: 8.5 times."""
+    from scipy.linalg import expm
+
+    out, _ = run(f"""
+r = cosimulate({oscillator!r}, 60.0, 0.05, step_control=True, rtol=1e-4, extrapolation=1, output=["a.y"])
+print(json.dumps({{"t": r["time"].tolist(), "x": r["a.y"].tolist(), "success": bool(r.success),
+                   "message": r.message}}))
+""")
+    t, x = np.array(out["t"]), np.array(out["x"])
+    m = np.array([[0.0, 1.0], [-1.0, 0.1]])
+    exact = np.array([(expm(m * s) @ [1.0, 0.0])[0] for s in t])
+    scaled = np.abs(x - exact) / (1e-4 + 1e-4 * np.abs(exact))
+    assert not out["success"] or scaled.max() <= 10, (out["message"], scaled.max(), t[np.argmax(scaled)])
