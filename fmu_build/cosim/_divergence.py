@@ -82,7 +82,8 @@ class DivergenceMonitor:
         self.values = np.vstack([self.values, value])[-(WINDOW + 1):]
         if len(self.off) == WINDOW:
             first = np.abs(self.values[0])
-            swings = np.any(np.sign(self.values[1:]) != np.sign(self.values[:-1]), axis=0)
+            # a swing through zero takes both signs; a value leaving 0 (t^k from a zero start) does not swing
+            swings = np.any(self.values > 0.0, axis=0) & np.any(self.values < 0.0, axis=0)
             bad = np.flatnonzero((self.off.sum(axis=0) >= WINDOW - 2) & swings & (mag > GROWTH * first))
             if bad.size:
                 s = int(bad[0])
