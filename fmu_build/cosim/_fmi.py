@@ -223,8 +223,10 @@ def _fmu3_class():
                 if not early:
                     return None
                 if not t <= last <= end + rounding:  # a time outside the step cannot be a communication point of it
-                    raise refused("fmi3DoStep", f"the FMU returned early from the step from t = {t!r} to {end!r} with "
-                                  f"lastSuccessfulTime = {last!r}, outside the step")
+                    exc = refused("fmi3DoStep", f"the FMU returned early from the step from t = {t!r} to {end!r} "
+                                  f"with lastSuccessfulTime = {last!r}, outside the step")
+                    exc.beyond = last > end
+                    raise exc
                 if last >= end:
                     return None
                 if not self.early_return:

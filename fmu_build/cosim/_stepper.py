@@ -38,7 +38,7 @@ import warnings
 
 import numpy as np
 
-from ._result import _Discarded, _Early, _Stop
+from ._result import _Discarded, _Early, _Overshoot, _Stop
 
 MAX_STEPS = 10 ** 7  # macro steps one run may take (attempts of a controlled run included)
 PACE = 1000  # steps over which the pace of a controlled run is measured against MAX_STEPS
@@ -158,7 +158,7 @@ class Controller:
         snap = run.save(t) if run.rollback.available else None
         try:
             band = run.step_all(t, H)
-        except _Early:
+        except (_Early, _Overshoot):
             if snap is None:  # (early return is allowed only where every FMU can roll back)
                 raise
             run.restore(snap, t)
@@ -262,6 +262,8 @@ class Controller:
                 before, snap = self._attempt(t, h)
             except _Early as early:  # an event before the one the step ended at (a rollback that moved it)
                 return self._replan(early, t)
+            except _Overshoot:  # an FMU on a grid of its own cannot stop this close before its event: no check
+                before = None
             if before is not None:
                 run.restore(snap, t)
                 run.release(snap)
@@ -353,6 +355,8 @@ class Controller:
                 probe, snap = self._attempt(t, max(1e-6 * H, control.min_step))
             except _Early as early:  # an event within the tiny step: the next step ends at it
                 return self._replan(early, t)
+            except _Overshoot:  # (an FMU that cannot stop this close before an event of its own: no probe)
+                probe = None
             if probe is not None:  # (a discarded probe was rolled back already)
                 run.restore(snap, t)
                 run.release(snap)
