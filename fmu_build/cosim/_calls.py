@@ -1,6 +1,6 @@
 """FMI calls of a run: each failure stops the run with a message naming the component, variable and time."""
 
-from ._result import _Discarded, _Early, _Stop
+from ._result import _Discarded, _Early, _Overshoot, _Stop
 
 
 class Calls:
@@ -53,6 +53,11 @@ class Calls:
                                  f"({exc})", t_start)
                 except _Stop as stop:
                     raise _Discarded(str(stop)) from None
+            if getattr(exc, "beyond", False):  # (a step just short of an event, `_stepper.Controller._before_event`)
+                try:
+                    self.fail(n, f"{self.name(n, 'DoStep')} from t = {t_start!r} failed ({exc})", t_start)
+                except _Stop as stop:
+                    raise _Overshoot(str(stop)) from None
             self.fail(n, f"{self.name(n, 'DoStep')} from t = {t_start!r} failed ({exc})", t_start)
         if last is None:
             return

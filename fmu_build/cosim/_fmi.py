@@ -231,15 +231,18 @@ def _fmu3_class():
                 if terminate:
                     raise refused("fmi3DoStep", f"the FMU asked to terminate the simulation (terminateSimulation) in "
                                   f"the step from t = {t!r}, at t = {last!r}")
-                # an FMU stopped within rounding of the end has reached it (a flag raised for an event at the end
-                # of the step is no early return)
+                # an FMU that reports the step's end (or beyond it within rounding) has reached it: a flag raised
+                # for an event at the end of the step is no early return. Any time before the end is where the FMU
+                # is, however close: its next step must start there (from the end it would be desynchronised)
                 rounding = 1e-12 * max(abs(end), communicationStepSize)
                 if not early:
                     return None
                 if not t <= last <= end + rounding:  # a time outside the step cannot be a communication point of it
-                    raise refused("fmi3DoStep", f"the FMU returned early from the step from t = {t!r} to {end!r} with "
-                                  f"lastSuccessfulTime = {last!r}, outside the step")
-                if end - last <= rounding:
+                    exc = refused("fmi3DoStep", f"the FMU returned early from the step from t = {t!r} to {end!r} "
+                                  f"with lastSuccessfulTime = {last!r}, outside the step")
+                    exc.beyond = last > end
+                    raise exc
+                if last >= end:
                     return None
                 if not self.early_return:
                     raise refused("fmi3DoStep", f"the FMU returned early from the step from t = {t!r} (at t = "

@@ -102,6 +102,11 @@ class _Discarded(_Stop):
     repeated smaller after a rollback (step control)."""
 
 
+class _Overshoot(_Stop):
+    """An FMU reported ``lastSuccessfulTime`` beyond the end of its step (an FMU stepping on a grid of its own
+    that lands on an event just past the requested end): refused; uncaught, it ends the run with its text."""
+
+
 class _Early(_Stop):
     """An FMU returned early from fmi3DoStep (``earlyReturn``) at ``t_early`` inside the step from ``t``: the
     step is re-planned to end there (every FMU rolled back to ``t``); uncaught, it ends the run with its text."""

@@ -18,7 +18,7 @@ from ._exchange import convert
 from ._extrapolate import Band, History, taylor
 from ._layout import MAX_INPUT_ORDER, LSC_TOOL, Layout, built_by_lsc, lambda_targets  # noqa: F401 (re-exported)
 from ._loops import LoopSolver
-from ._result import AlgebraicLoopWarning, _Discarded, _Early, _Stop
+from ._result import AlgebraicLoopWarning, _Discarded, _Early, _Overshoot, _Stop
 from ._rollback import Rollback
 from ._stepper import MAX_REPLANS, Controller
 from ._system import _split
@@ -247,7 +247,7 @@ class Run:
             self.step_all(t, h)
             coupling.read_recorded(t + h)
             change = np.concatenate([np.where(real, coupling.value - old, 0.0), coupling.extras - extras_old])
-        except (_Discarded, _Early):  # (an event within the tiny step: no measurement of the late error)
+        except (_Discarded, _Early, _Overshoot):  # (an event within the tiny step: no measurement of the late error)
             change = None
         finally:
             self.restore(snap, t)

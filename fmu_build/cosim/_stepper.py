@@ -43,7 +43,7 @@ import warnings
 
 import numpy as np
 
-from ._result import _Discarded, _Early, _Stop
+from ._result import _Discarded, _Early, _Overshoot, _Stop
 
 MAX_STEPS = 10 ** 7  # macro steps one run may take (attempts of a controlled run included)
 PACE = 1000  # steps over which the pace of a controlled run is measured against MAX_STEPS
@@ -122,6 +122,7 @@ class Controller:
         self.late_points, self.late_worst = 0, None  # late errors above BUDGET: (t, t_end, err, name, value, jump)
         self.recent, self.last_worst = collections.deque(maxlen=PACE), None
         self.event, self.replans = None, 0  # (t_e, component) where an FMU returned early from the step being taken
+        self.verified = None  # (t, H) of a step to an event whose values were checked just before it
 
     def advance(self, t0, stop_time, H, progress):
         control = self.control
@@ -172,7 +173,7 @@ class Controller:
         snap = run.save(t) if run.rollback.available else None
         try:
             band = run.step_all(t, H)
-        except _Early:
+        except (_Early, _Overshoot):
             if snap is None:  # (early return is allowed only where every FMU can roll back)
                 raise
             run.restore(snap, t)
@@ -203,6 +204,15 @@ class Controller:
             jump = None
             if self.event is not None and t + H == self.event[0] and m is not None:
                 m, jump = run.at_event(self.event[1], m)
+                if jump is not None and snap is not None and self.verified != (t, H):
+                    # the event FMU's values are left out of the measure: their jump must be the event's, not
+                    # one inside the step (an output that jumps without returning early)
+                    run.restore(snap, t)
+                    run.release(snap)
+                    H_next = self._before_event(t, H)
+                    if H_next is not None:
+                        H = H_next
+                    continue
             if m is None:  # discarded by an FMU: half the step
                 run.rejected += 1
                 self.after_reject, H = True, max(0.5 * H, self.control.min_step)
@@ -257,6 +267,34 @@ class Controller:
             self.last_worst = m.names[m.worst]
             self._kept(t, t_new, err, m.names[m.worst])
             return H, H_next
+
+    def _before_event(self, t, H):
+        """The step from ``t`` ends after ``H`` where an FMU returned early, and that FMU's checked values jump there
+        beyond the tolerance. A step ending just before (``H`` less ``1e-6 H``) tells whether they were smooth up
+        to the event: if so the step to the event is taken (it is marked verified); if not, a jump lies inside the
+        step, and the attempt counts as a rejected step the step control locates it from. Returns the step to
+        try next, or None for the step to the event again."""
+        run, control = self.run, self.control
+        h = H - max(1e-6 * H, control.min_step)
+        if h > 0:
+            try:
+                before, snap = self._attempt(t, h)
+            except _Early as early:  # an event before the one the step ended at (a rollback that moved it)
+                return self._replan(early, t)
+            except _Overshoot:  # an FMU on a grid of its own cannot stop this close before its event: no check
+                before = None
+            if before is not None:
+                run.restore(snap, t)
+                run.release(snap)
+                if before.err > 1.0:
+                    run.rejected += 1
+                    self.event = None
+                    if self.prev is None:
+                        self.prev = (t, h, before)
+                    self.after_reject = True
+                    return max(control.shrink(h, before.err, before.order), control.min_step)
+        self.verified = (t, H)
+        return None
 
     def _replan(self, early, t):
         """The step from ``t`` shortened to end at ``early.t_early``, where an FMU returned early (every FMU was
@@ -336,6 +374,8 @@ class Controller:
                 probe, snap = self._attempt(t, max(1e-6 * H, control.min_step))
             except _Early as early:  # an event within the tiny step: the next step ends at it
                 return self._replan(early, t)
+            except _Overshoot:  # (an FMU that cannot stop this close before an event of its own: no probe)
+                probe = None
             if probe is not None:  # (a discarded probe was rolled back already)
                 run.restore(snap, t)
                 run.release(snap)
