@@ -93,14 +93,7 @@ def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y
         (tmp / "sources").mkdir()
         shutil.copy(HERE / "linear_plant.c", tmp / "sources")
         shutil.copy(HERE / "plant_common.h", tmp / "sources")
-        out = dest / f"{name}.fmu"
-        partial = dest / f".{name}.fmu.part"
-        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
-            for f in sorted(tmp.rglob("*")):
-                if f.is_file():
-                    zf.write(f, f.relative_to(tmp).as_posix())
-        os.replace(partial, out)
-    return out
+        return _zip_dir(tmp, dest / f"{name}.fmu")
 
 
 
@@ -129,14 +122,7 @@ def _package(dest, name, source_file, defines, xml):
         (tmp / "sources").mkdir()
         shutil.copy(HERE / source_file, tmp / "sources")
         shutil.copy(HERE / "plant_common.h", tmp / "sources")  # the FMI functions the plants share
-        out = dest / f"{name}.fmu"
-        partial = dest / f".{name}.fmu.part"
-        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
-            for f in sorted(tmp.rglob("*")):
-                if f.is_file():
-                    zf.write(f, f.relative_to(tmp).as_posix())
-        os.replace(partial, out)
-    return out
+        return _zip_dir(tmp, dest / f"{name}.fmu")
 
 
 def _scalar_xml(name, description, variables, outputs, derivatives, interpolate, rollback, initial=None,
@@ -327,13 +313,17 @@ def build_event_source3(dest, name="EventSource", t_event=0.37, declare_early=Tr
 """)
         (tmp / "sources").mkdir()
         shutil.copy(HERE / "event_source3.c", tmp / "sources")
-        out = dest / f"{name}.fmu"
-        partial = dest / f".{name}.fmu.part"
-        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
-            for f in sorted(tmp.rglob("*")):
-                if f.is_file():
-                    zf.write(f, f.relative_to(tmp).as_posix())
-        os.replace(partial, out)
+        return _zip_dir(tmp, dest / f"{name}.fmu")
+
+
+def _zip_dir(folder, out):
+    """``folder``'s files zipped into ``out`` (written to a temporary file, then renamed: never a broken FMU)."""
+    partial = out.with_name(f".{out.name}.part")
+    with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
+        for f in sorted(folder.rglob("*")):
+            if f.is_file():
+                zf.write(f, f.relative_to(folder).as_posix())
+    os.replace(partial, out)
     return out
 
 
