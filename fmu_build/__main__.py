@@ -4,7 +4,6 @@ Each subcommand is one pair of functions: ``_add_<name>(sub)`` declares its
 arguments and ``_run_<name>(args)`` runs it and returns the exit status.
 """
 import argparse
-import math
 import os
 import subprocess
 import sys
@@ -479,60 +478,19 @@ def _add_cosim(sub):
     cosim.add_argument("--force", action="store_true", help="replace an existing output file that is not a result")
 
 
-def _write_csv(path, result):
-    """The result as CSV: numbers with 17 digits, integers exact, Booleans as 0/1, Strings quoted where needed,
-    Binary values as hexadecimal text."""
-    import csv
-
-    import numpy as np
-
-    def cell(x):
-        if isinstance(x, str):
-            return x
-        if isinstance(x, (bytes, bytearray)):
-            return bytes(x).hex()
-        if isinstance(x, (bool, np.bool_)) or isinstance(x, (int, np.integer)):
-            return str(int(x))
-        return format(float(x), ".17g")
-
-    names = result.dtype.names
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        writer = csv.writer(f, lineterminator="\n")
-        writer.writerow(names)
-        for row in result:
-            writer.writerow([cell(row[n]) for n in names])
-
-
-def _check_step_control(args):
-    """The step control's options: positive and finite, ``--min-step <= --step-size <= --max-step``, and only
-    with ``--step-control`` (a fixed-step run would ignore them)."""
-    from ._cli_checks import check_step
-
-    for option in ("--rtol", "--atol", "--min-step", "--max-step"):
-        value = getattr(args, option[2:].replace("-", "_"))
-        check_step(value, option)
-        if value is not None and option != "--rtol" and not args.step_control:
-            raise ValueError(f"`{option}` bounds the step control: it needs `--step-control` (found {value!r} "
-                             "without it; a fixed-step run takes --step-size).")
-    low = args.min_step if args.min_step is not None else 0.0
-    high = args.max_step if args.max_step is not None else math.inf
-    if not low <= args.step_size <= high:
-        raise ValueError(f"`--min-step` <= `--step-size` <= `--max-step` must hold; found {args.min_step!r}, "
-                         f"{args.step_size!r}, {args.max_step!r}.")
-
-
 def _run_cosim(args):
     """``lsc-fmu cosim``: run fmu_build.cosimulate and write CSV (and a plot)."""
     import warnings
     from pathlib import Path
 
     from ._cli_checks import assignments, check_output, check_span, check_step, check_system_file, check_time
+    from ._cli_cosim import check_step_control, plot_result, write_csv
     from .cosim import cosimulate
 
     try:
         check_span(0.0, check_time(args.stop_time, "--stop-time"), check_step(args.step_size, "--step-size"),
                    "--stop-time", "--step-size")
-        _check_step_control(args)
+        check_step_control(args)
         outputs = [Path(args.result)] + ([Path(args.result).with_suffix(".png")] if args.plot else [])
         if args.plot and outputs[1] == outputs[0]:
             raise ValueError(f"`--plot` writes the plot to the result's name with .png, which is the result "
@@ -563,24 +521,11 @@ def _run_cosim(args):
         print(f"lsc-fmu: error: could not read the system {args.system!r} ({type(exc).__name__}: {exc}); "
               "expected an SSP archive (.ssp) or a SystemStructure.ssd (see docs/cosimulation.md).", file=sys.stderr)
         return 2
-    names = result.dtype.names
     tmp = Path(args.result).with_name(f".{Path(args.result).name}.tmp{os.getpid()}")
-    _write_csv(tmp, result)
+    write_csv(tmp, result)
     os.replace(tmp, args.result)
     if args.plot:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, ax = plt.subplots(figsize=(7, 4))
-        for n in names[1:]:
-            if result.dtype[n].kind in "biuf":  # Strings and Binary values are in the CSV only
-                ax.plot(result["time"], result[n], label=n)
-        ax.set_xlabel("time")
-        ax.legend(fontsize=7)
-        fig.tight_layout()
-        fig.savefig(str(Path(args.result).with_suffix(".png")), dpi=110)
+        plot_result(result, Path(args.result).with_suffix(".png"))
     print(args.result)
     if not result.success:
         print(f"lsc-fmu: co-simulation stopped: {result.message}", file=sys.stderr)
