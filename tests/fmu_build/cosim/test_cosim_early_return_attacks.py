@@ -202,8 +202,8 @@ def test_two_fmus_returning_early_at_different_times_in_one_step(fmus, kwargs):
 
 @pytest.mark.parametrize("kwargs", ["algorithm='gauss-seidel', iterations=3", "algorithm='gauss-seidel'",
                                     "algorithm='jacobi'", "algorithm='jacobi', iterations=3",
-                                    "algorithm='gauss-seidel', step_control=True, rtol=1e-6",
-                                    "algorithm='jacobi', step_control=True, rtol=1e-6"])
+                                    "algorithm='gauss-seidel', step_control=True, rtol=1e-6, extrapolation=1",
+                                    "algorithm='jacobi', step_control=True, rtol=1e-6, extrapolation=1"])
 def test_two_fmus_returning_early_at_the_same_time(fmus, kwargs):
     """Two sources with their events at 0.37: the step is re-planned to end at the first one's early return, and
     the second reaches that end without returning early (its event is at the end of its step), reading its values
