@@ -87,7 +87,8 @@ class Run:
         self.rows, self.estimates, self.jumps, self.accepted, self.rejected = [], [], [], 0, 0
         self.early = [n for n in layout.names if getattr(comps[n], "early_return", False)]
         self.early_returns = []  # (t_e, component) of every step re-planned to end where an FMU returned early
-        self.event_end = None  # the FMU whose early return the step being taken ends at (its end values jumped)
+        # the FMUs whose values at the end of the step being taken may be those after an event (`ending_at`), or None
+        self.event_end = None
         names = [layout.name(s) for s in range(len(layout.sources))]
         self.checked_names = names + ["{}.{}".format(*layout.extra[k]) for k in layout.watched]
 
@@ -148,10 +149,10 @@ class Run:
         line = end_values is not None and self.p == 0  # the step iteration at p = 0: start and end values
         if end_values is not None:
             if self.event_end is not None:
-                # the values after an event at the step's end are no input over the step: the event FMU's slots
+                # the values after an event at the step's end are no input over the step: the event FMUs' slots
                 # are interpolated through their extrapolation there, as a step without iteration gives them
                 end_values = end_values.copy()
-                mine = np.array([a == self.event_end for a, _ in self.layout.sources], dtype=bool)
+                mine = np.array([a in self.event_end for a, _ in self.layout.sources], dtype=bool)
                 end_values[mine] = taylor(band.jet, H, self.p)[mine]
             # Integer and Boolean inputs hold the step-start value as in every other step (no polynomial);
             # the step iteration (iterations > 0) converges all of them
@@ -183,7 +184,7 @@ class Run:
                 coupling.set_inputs(n, t, jet_n, has_n, np.where(done, value, hold), higher)
             self.calls.do_step(n, t, H)
             self.loops.exchange({n}, t + H)
-            if n != self.event_end:  # values after an event at the step's end are no input over the step
+            if n not in (self.event_end or ()):  # values after an event at the step's end are no input over the step
                 done |= np.array([a == n for a, _ in self.layout.sources], dtype=bool)
         if self.exchange_needed:
             self.loops.exchange(None, t + H)
@@ -276,11 +277,20 @@ class Run:
         n = len(self.layout.sources)
         return self.layout.sources[i][0] if i < n else self.layout.extra[self.layout.watched[i - n]][0]
 
+    def ending_at(self, comp):
+        """The FMUs whose values at the end of a step re-planned to end where ``comp`` returned early may be those
+        after an event: ``comp``, and every FMU allowed to return early. Another such FMU with an event at that very
+        time reaches it without returning early (its event is at the end of its step) and reads its values after
+        the event there: no more an input over the step than ``comp``'s."""
+        return frozenset([comp, *self.early])
+
     def at_event(self, comp, m):
-        """The step ends where ``comp`` returned early (an event inside the step): its checked values are left out of the step's measure (what they read there is the value after the event); returns
-        that measure and ``(name, size)`` of the largest jump they made beyond the tolerance (None if none did:
-        the history is kept)."""
-        mine = [i for i in range(len(m.names)) if self.component_of(i) == comp]
+        """The step ends where ``comp`` returned early (an event inside the step): the checked values of the FMUs
+        `ending_at` it are left out of the step's measure (what they read there may be the value after an event);
+        returns that measure and ``(name, size)`` of the largest jump they made beyond the tolerance (None if none
+        did: the history is kept)."""
+        ending = self.ending_at(comp)
+        mine = [i for i in range(len(m.names)) if self.component_of(i) in ending]
         jump = None
         if mine:
             i = max(mine, key=lambda k: m.scaled[k])
@@ -399,7 +409,7 @@ class Run:
                 self.release(snap)
                 replans += 1
                 h, event = self.replan(early, t, replans), early.component
-                self.event_end = event
+                self.event_end = self.ending_at(event)
                 continue
             m = self.measure(band, t, h)
             if snap is not None and m.dropped:

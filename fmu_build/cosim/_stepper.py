@@ -195,7 +195,8 @@ class Controller:
         H_ref = H if self.jump is None else self.jump.H_ref
         self.event, self.replans = None, 0
         while True:
-            run.event_end = self.event[1] if self.event is not None and t + H == self.event[0] else None
+            run.event_end = (run.ending_at(self.event[1]) if self.event is not None and t + H == self.event[0]
+                             else None)
             try:
                 m, snap = self._attempt(t, H)
             except _Early as early:  # an event inside the step: the step is re-planned to end at it
