@@ -30,7 +30,8 @@ HERE = Path(__file__).parent
 _NAMES = ("a11", "a12", "a21", "a22", "b1", "b2", "x1_0", "x2_0", "substeps")
 
 
-def _fmpy_headers():
+def fmpy_headers():
+    """The FMI 2.0 headers fmpy ships (its c-code folder)."""
     import fmpy
 
     return Path(fmpy.__file__).parent / "c-code"
@@ -54,7 +55,7 @@ def build_linear_plant(dest, name, A, b, x0, substeps=20, output_names=("y1", "y
         defines = [f"-DPLANT_{key.upper()}={float(v)!r}" for key, v in zip(_NAMES, values)]
         defines.append(f"-DPLANT_FOLLOWER={int(bool(follower))}")
         subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra", "-Werror",
-                        "-DFMI2_FUNCTION_PREFIX=", f"-I{_fmpy_headers()}", *defines,
+                        "-DFMI2_FUNCTION_PREFIX=", f"-I{fmpy_headers()}", *defines,
                         str(HERE / "linear_plant.c"), "-o", str(tmp / "binaries" / "linux64" / f"{name}.so"), "-lm"],
                        check=True)
         units = units or {}
@@ -116,7 +117,7 @@ def _package(dest, name, source_file, defines, xml):
         tmp = Path(tmp)
         (tmp / "binaries" / "linux64").mkdir(parents=True)
         subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra", "-Werror",
-                        "-DFMI2_FUNCTION_PREFIX=", f"-I{_fmpy_headers()}", f"-I{HERE}", *defines, str(HERE / source_file),
+                        "-DFMI2_FUNCTION_PREFIX=", f"-I{fmpy_headers()}", f"-I{HERE}", *defines, str(HERE / source_file),
                         "-o", str(tmp / "binaries" / "linux64" / f"{name}.so"), "-lm"], check=True)
         (tmp / "modelDescription.xml").write_text(xml)
         (tmp / "sources").mkdir()
@@ -266,10 +267,24 @@ def build_lag_plant(dest, name="LagPlant", g=0.2, w0=1.0):
     return fmu
 
 
-_FMI3_IMPLEMENTED = {"fmi3InstantiateCoSimulation", "fmi3FreeInstance", "fmi3GetVersion", "fmi3SetDebugLogging",
-                     "fmi3EnterInitializationMode", "fmi3ExitInitializationMode", "fmi3Terminate", "fmi3Reset",
-                     "fmi3GetFloat64", "fmi3SetFloat64", "fmi3DoStep", "fmi3GetFMUState", "fmi3SetFMUState",
-                     "fmi3FreeFMUState"}
+FMI3_HEADERS = HERE.parent.parent / "fmu_build" / "templates" / "fmi3" / "headers"
+# what an FMI 3.0 Co-Simulation test FMU without Event Mode implements: the rest are stubs (``fmi3_stubs``)
+FMI3_IMPLEMENTED = frozenset({"fmi3InstantiateCoSimulation", "fmi3FreeInstance", "fmi3GetVersion",
+                              "fmi3SetDebugLogging", "fmi3EnterInitializationMode", "fmi3ExitInitializationMode",
+                              "fmi3Terminate", "fmi3Reset", "fmi3GetFloat64", "fmi3SetFloat64", "fmi3DoStep",
+                              "fmi3GetFMUState", "fmi3SetFMUState", "fmi3FreeFMUState"})
+
+
+def fmi3_stubs(path, implemented=FMI3_IMPLEMENTED):
+    """Write to ``path`` a C file defining every FMI 3.0 function not in ``implemented`` as a stub that returns
+    fmi3Error (3): fmpy binds every function of the standard when it loads an FMU. It is compiled as a translation
+    unit of its own, without the header's prototypes; returns ``path``."""
+    import re
+
+    names = set(re.findall(r"(fmi3\w+)TYPE", (FMI3_HEADERS / "fmi3FunctionTypes.h").read_text())) - set(implemented)
+    path = Path(path)
+    path.write_text("".join(f"int {n}(void) {{ return 3; }}\n" for n in sorted(names)))
+    return path
 
 
 def build_event_source3(dest, name="EventSource", t_event=0.37, declare_early=True):
@@ -279,20 +294,13 @@ def build_event_source3(dest, name="EventSource", t_event=0.37, declare_early=Tr
     Instantiated with ``earlyReturnAllowed`` it returns early at ``t_event`` from a step that would cross it;
     ``declare_early``: ``mightReturnEarlyFromDoStep`` (False: it never returns early). State get/set work.
     """
-    import re
-
-    headers = HERE.parent.parent / "fmu_build" / "templates" / "fmi3" / "headers"
-    names = set(re.findall(r"(fmi3\w+)TYPE", (headers / "fmi3FunctionTypes.h").read_text())) - _FMI3_IMPLEMENTED
     dest = Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         (tmp / "binaries" / "x86_64-linux").mkdir(parents=True)
-        # the functions a master without Event Mode never calls, as stubs returning fmi3Error, in a translation
-        # unit of their own (without the header's prototypes)
-        stubs = Path(tmp) / "stubs.c"
-        stubs.write_text("".join(f"int {n}(void) {{ return 3; }}\n" for n in sorted(names)))
-        subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra", "-Werror", f"-I{headers}",
+        stubs = fmi3_stubs(tmp / "stubs.c")  # the functions a master without Event Mode never calls
+        subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra", "-Werror", f"-I{FMI3_HEADERS}",
                         f"-DDECLARE_EARLY={int(bool(declare_early))}", f"-DT_EVENT={float(t_event)!r}",
                         str(HERE / "event_source3.c"), str(stubs), "-o", str(tmp / "binaries" / "x86_64-linux" / f"{name}.so"), "-lm"], check=True)
         stubs.unlink()

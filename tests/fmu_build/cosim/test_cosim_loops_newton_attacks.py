@@ -7,7 +7,6 @@ Inf, refused calls, derivatives right for one input and wrong for another, nonli
 missing symbols. Every run is compared with the loop's exact fixed point, in a subprocess.
 """
 import os
-import re
 import shutil
 import subprocess
 import sys
@@ -19,22 +18,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.fmu_build.cosim.test_cosim import ROOT, run
+from tests.fmu_build.cosim.test_cosim import run
+
+import plants  # noqa: E402  (examples/plants, on sys.path through test_cosim)
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="the test FMUs are compiled with gcc")
 
 HERE = Path(__file__).parent
-FMI3_HEADERS = ROOT / "fmu_build" / "templates" / "fmi3" / "headers"
-FMI3_IMPLEMENTED = {"fmi3InstantiateCoSimulation", "fmi3FreeInstance", "fmi3GetVersion", "fmi3SetDebugLogging",
-                    "fmi3EnterInitializationMode", "fmi3ExitInitializationMode", "fmi3Terminate", "fmi3Reset",
-                    "fmi3GetFloat64", "fmi3SetFloat64", "fmi3DoStep", "fmi3GetFMUState", "fmi3SetFMUState",
-                    "fmi3FreeFMUState", "fmi3GetDirectionalDerivative"}
-
-
-def _fmpy_headers():
-    import fmpy
-
-    return Path(fmpy.__file__).parent / "c-code"
 
 
 def map_fmu(dest, name, outs, partials=None, n_in=1, version=2, status=None, declare=True, symbol=True,
@@ -63,15 +53,12 @@ def map_fmu(dest, name, outs, partials=None, n_in=1, version=2, status=None, dec
         (tmp / "mapfmu_exprs.h").write_text("\n".join(lines) + "\n")
         sources = [str(HERE / "_mapfmu.c")]
         if version == 3:
-            names = set(re.findall(r"(fmi3\w+)TYPE", (FMI3_HEADERS / "fmi3FunctionTypes.h").read_text()))
-            missing = names - FMI3_IMPLEMENTED | (set() if symbol else {"fmi3GetDirectionalDerivative"})
-            stubs = tmp / "stubs.c"
-            stubs.write_text("".join(f"int {n}(void) {{ return 3; }}\n" for n in sorted(missing)
-                                     if symbol or n != "fmi3GetDirectionalDerivative"))
+            # fmi3GetDirectionalDerivative is _mapfmu.c's, or absent (DD_SYMBOL 0): never a stub
+            stubs = plants.fmi3_stubs(tmp / "stubs.c", plants.FMI3_IMPLEMENTED | {"fmi3GetDirectionalDerivative"})
             sources.append(str(stubs))
-            include = FMI3_HEADERS
+            include = plants.FMI3_HEADERS
         else:
-            include = _fmpy_headers()
+            include = plants.fmpy_headers()
         subprocess.run(["gcc", "-O1", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra", "-Werror",
                         "-DFMI2_FUNCTION_PREFIX=", f"-DFMI3={int(version == 3)}", f"-DNU={n_in}", f"-DNZ={len(outs)}",
                         f"-DDD_SYMBOL={int(symbol)}", f"-I{include}", f"-I{tmp}", *sources,
