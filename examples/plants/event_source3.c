@@ -39,11 +39,7 @@ typedef struct {
     fmi3LogMessageCallback log;
 } Instance;
 
-static void fail(Instance *inst, const char *text) {
-    if (inst->log) {
-        inst->log(inst->env, fmi3Error, "logStatusError", text);
-    }
-}
+#include "source3_common.h"
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
@@ -72,16 +68,6 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     return inst;
 }
 
-void fmi3FreeInstance(fmi3Instance instance) { free(instance); }
-
-const char *fmi3GetVersion(void) { return fmi3Version; }
-
-fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
-                               const fmi3String categories[]) {
-    (void)instance; (void)loggingOn; (void)nCategories; (void)categories;
-    return fmi3OK;
-}
-
 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined, fmi3Float64 tolerance,
                                        fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
     Instance *inst = instance;
@@ -90,10 +76,6 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
     inst->s.after = startTime >= inst->t_event;
     return fmi3OK;
 }
-
-fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) { (void)instance; return fmi3OK; }
-fmi3Status fmi3Terminate(fmi3Instance instance) { (void)instance; return fmi3OK; }
-fmi3Status fmi3Reset(fmi3Instance instance) { (void)instance; return fmi3Error; }
 
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, fmi3Float64 values[],
                           size_t nValues) {
@@ -153,29 +135,5 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
         inst->s.after = inst->s.after || end >= inst->t_event - rounding;
     }
     *lastSuccessfulTime = inst->s.time;
-    return fmi3OK;
-}
-
-fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-    Instance *inst = instance;
-    State *copy = *FMUState ? *FMUState : malloc(sizeof(State));
-    if (!copy) {
-        return fmi3Error;
-    }
-    *copy = inst->s;
-    *FMUState = copy;
-    return fmi3OK;
-}
-
-fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) {
-    Instance *inst = instance;
-    inst->s = *(State *)FMUState;
-    return fmi3OK;
-}
-
-fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-    (void)instance;
-    free(*FMUState);
-    *FMUState = NULL;
     return fmi3OK;
 }

@@ -301,7 +301,7 @@ def build_event_source3(dest, name="EventSource", t_event=0.37, declare_early=Tr
         (tmp / "binaries" / "x86_64-linux").mkdir(parents=True)
         stubs = fmi3_stubs(tmp / "stubs.c")  # the functions a master without Event Mode never calls
         subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra", "-Werror", f"-I{FMI3_HEADERS}",
-                        f"-DDECLARE_EARLY={int(bool(declare_early))}", f"-DT_EVENT={float(t_event)!r}",
+                        f"-I{HERE}", f"-DDECLARE_EARLY={int(bool(declare_early))}", f"-DT_EVENT={float(t_event)!r}",
                         str(HERE / "event_source3.c"), str(stubs), "-o", str(tmp / "binaries" / "x86_64-linux" / f"{name}.so"), "-lm"], check=True)
         stubs.unlink()
         (tmp / "modelDescription.xml").write_text(f"""<?xml version="1.0" encoding="UTF-8"?>
@@ -321,6 +321,7 @@ def build_event_source3(dest, name="EventSource", t_event=0.37, declare_early=Tr
 """)
         (tmp / "sources").mkdir()
         shutil.copy(HERE / "event_source3.c", tmp / "sources")
+        shutil.copy(HERE / "source3_common.h", tmp / "sources")  # the FMI functions the sources share
         return _zip_dir(tmp, dest / f"{name}.fmu")
 
 

@@ -52,14 +52,11 @@ typedef struct {
     fmi3LogMessageCallback log;
 } Instance;
 
+#define SOURCE3_AFTER_SET_STATE(inst) ((inst)->shift += BAD_ROLLBACK ? DRIFT : 0.0)
+#include "source3_common.h" /* examples/plants */
+
 static double event_time(const Instance *inst, int k) {
     return (ZENO ? 1.0 - ldexp(1.0, -(k + 1)) : events[k]) - inst->shift;
-}
-
-static void fail(Instance *inst, const char *text) {
-    if (inst->log) {
-        inst->log(inst->env, fmi3Error, "logStatusError", text);
-    }
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
@@ -85,14 +82,6 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     return inst;
 }
 
-void fmi3FreeInstance(fmi3Instance instance) { free(instance); }
-const char *fmi3GetVersion(void) { return fmi3Version; }
-fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
-                               const fmi3String categories[]) {
-    (void)instance; (void)loggingOn; (void)nCategories; (void)categories;
-    return fmi3OK;
-}
-
 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined, fmi3Float64 tolerance,
                                        fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
     Instance *inst = instance;
@@ -103,10 +92,6 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
     }
     return fmi3OK;
 }
-
-fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) { (void)instance; return fmi3OK; }
-fmi3Status fmi3Terminate(fmi3Instance instance) { (void)instance; return fmi3OK; }
-fmi3Status fmi3Reset(fmi3Instance instance) { (void)instance; return fmi3Error; }
 
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, fmi3Float64 values[],
                           size_t nValues) {
@@ -172,32 +157,5 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     } else if (*earlyReturn && REPORT == 3) {
         *lastSuccessfulTime = NAN;
     }
-    return fmi3OK;
-}
-
-fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-    Instance *inst = instance;
-    State *copy = *FMUState ? *FMUState : malloc(sizeof(State));
-    if (!copy) {
-        return fmi3Error;
-    }
-    *copy = inst->s;
-    *FMUState = copy;
-    return fmi3OK;
-}
-
-fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) {
-    Instance *inst = instance;
-    inst->s = *(State *)FMUState;
-    if (BAD_ROLLBACK) {
-        inst->shift += DRIFT;
-    }
-    return fmi3OK;
-}
-
-fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-    (void)instance;
-    free(*FMUState);
-    *FMUState = NULL;
     return fmi3OK;
 }

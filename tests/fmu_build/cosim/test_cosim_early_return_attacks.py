@@ -40,7 +40,7 @@ def build_attack(dest, name, events=(0.37,), declare_early=True, rollback=True, 
         tmp = Path(tmp)
         (tmp / "binaries" / "x86_64-linux").mkdir(parents=True)
         stubs = plants.fmi3_stubs(tmp / "stubs.c")
-        subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra", "-Werror", f"-I{plants.FMI3_HEADERS}",
+        subprocess.run(["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-Wextra", "-Werror", f"-I{plants.FMI3_HEADERS}", f"-I{PLANTS}",
                         *macros, str(HERE / "attack_source3.c"), str(stubs), "-o",
                         str(tmp / "binaries" / "x86_64-linux" / f"{name}.so"), "-lm"], check=True)
         stubs.unlink()
