@@ -6,6 +6,7 @@ it imports nothing beyond the standard library at module level for that reason.
 import contextlib
 import os
 import signal
+import sys
 from pathlib import Path
 
 REFERENCE_FMUS_HELP = ("set LSC_REFERENCE_FMUS to a folder of built Modelica Reference FMUs (the layout of their "
@@ -37,6 +38,21 @@ class ImportBlocker:
         if any(name == n or name.startswith(n + ".") for n in self.names):
             raise ImportError(f"import of {name!r} blocked by the test")
         return None
+
+
+def block_imports(names):
+    """Make ``import name`` fail for each of ``names`` in this process (``ImportBlocker``); returns
+    ``{name: whether the import is now refused}``, which a runner reports so the test can check the block held."""
+    if names:
+        sys.meta_path.insert(0, ImportBlocker(names))
+    blocked = {}
+    for name in names:
+        try:
+            __import__(name)
+            blocked[name] = False
+        except ImportError:
+            blocked[name] = True
+    return blocked
 
 
 @contextlib.contextmanager

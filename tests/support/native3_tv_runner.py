@@ -17,7 +17,7 @@ import json
 import sys
 from ctypes import byref, c_bool, c_double, c_int32, c_uint32
 
-from helpers import ImportBlocker
+from helpers import block_imports
 
 
 def _slave(path, logs, early_return_allowed=False):
@@ -173,15 +173,7 @@ def me_sequence(sc, logs):
 
 def main():
     sc = json.load(sys.stdin)
-    if sc.get("block"):
-        sys.meta_path.insert(0, ImportBlocker(sc["block"]))
-    blocked = {}
-    for name in sc.get("block", []):
-        try:
-            __import__(name)
-            blocked[name] = False
-        except ImportError:
-            blocked[name] = True
+    blocked = block_imports(sc.get("block", []))
     logs = []
     out = {"simulate": simulate, "steps": steps, "discard_twice": discard_twice,
            "me_sequence": me_sequence}[sc["kind"]](sc, logs)

@@ -10,20 +10,12 @@ and prints {"time", "values", "status", "logs", ...}.
 import json
 import sys
 
-from helpers import ImportBlocker
+from helpers import block_imports
 
 
 def main():
     sc = json.load(sys.stdin)
-    if sc.get("block"):
-        sys.meta_path.insert(0, ImportBlocker(sc["block"]))
-    blocked = {}
-    for name in sc.get("block", []):
-        try:
-            __import__(name)
-            blocked[name] = False
-        except ImportError:
-            blocked[name] = True
+    blocked = block_imports(sc.get("block", []))
     from ctypes import byref
 
     from fmpy import extract, read_model_description

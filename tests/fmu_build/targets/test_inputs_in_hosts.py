@@ -193,31 +193,18 @@ def test_an_fmi3_build_converges_in_fmusim_alike(fmusim, path_input_fmi3):
     assert abs(result["time"][-1] - STOP) < 1e-9 and u_error(result) < 1e-4, u_error(result)
 
 
-_FMPY_ME = """
-import json, sys
-import numpy as np
-from fmpy import simulate_fmu
-fmu, table, solver, h = sys.argv[1:5]
-rows = np.loadtxt(table, delimiter=",", skiprows=1)
-signal = np.array([tuple(r) for r in rows], dtype=[("time", float), ("p", float)])
-r = simulate_fmu(fmu, fmi_type="ModelExchange", input=signal, output=["u"], output_interval=float(h),
-                 step_size=float(h), solver=solver, relative_tolerance=1e-8, stop_time=10.0)
-print(json.dumps({"time": r["time"].tolist(), "u": r["u"].tolist()}))
-"""
-
-
 @pytest.mark.parametrize("solver", ["Euler", "CVode"])
 def test_model_exchange_in_fmpy_error_does_not_grow_as_the_step_shrinks(solver, path_input):
     # fmpy's simulate_fmu interpolates the table linearly too; its CVode restarts at the step events (measured:
     # Euler 1.1e-3/5.2e-4/3.1e-4, CVode 2.4e-5/1.3e-4/1.1e-4: below the spacing the estimate's error)
-    import json
+    sys.path.insert(0, str(ROOT / "examples"))
+    from inputs_in_hosts import PATH_TABLE, fmpy_me  # the example's run, as its table shows it
 
+    assert PATH_TABLE == TABLE
     errors = []
     for h in STEPS:
-        proc = subprocess.run([sys.executable, "-c", _FMPY_ME, str(path_input), str(TABLE), solver, repr(h)],
-                              capture_output=True, text=True, timeout=300)
-        assert proc.returncode == 0, proc.stderr[-2000:]
-        result = {name: np.array(values) for name, values in json.loads(proc.stdout).items()}
+        result, reason = fmpy_me(path_input, h, solver)
+        assert result is not None, reason
         errors.append(u_error(result))
     if solver == "Euler":
         assert _non_increasing(errors) and errors[0] < 2e-3, errors
